@@ -1,0 +1,42 @@
+"""The one exception hierarchy of gait_nodes.
+
+Every error raised on bad input derives from :class:`GaitNodesError` and says what was wrong and,
+where there is one, the allowed range, so that a command-line entry point can print it on one line
+and exit with status 2.
+"""
+
+
+class GaitNodesError(Exception):
+    """Base class of every error gait_nodes raises on purpose."""
+
+
+class InterfaceError(GaitNodesError):
+    """A message definition could not be parsed, or a message type is unknown."""
+
+
+class SerializationError(GaitNodesError):
+    """A message could not be converted to or from CDR bytes."""
+
+
+class ArgumentError(GaitNodesError):
+    """Command-line arguments (including ``--ros-args``) are malformed."""
+
+
+class RuntimeSelectionError(GaitNodesError):
+    """The requested runtime does not exist or cannot run on this machine."""
+
+
+class ParameterError(GaitNodesError):
+    """A ROS parameter declaration, override or params file is invalid."""
+
+
+class ParameterNotDeclaredError(ParameterError):
+    """A parameter was used or overridden without having been declared."""
+
+
+class InvalidParameterTypeError(ParameterError):
+    """A parameter value does not have the type fixed by its declaration."""
+
+
+class ConfigError(GaitNodesError):
+    """A configuration file (YAML, URDF, params file) was refused at load."""

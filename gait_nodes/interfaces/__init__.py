@@ -1,0 +1,179 @@
+"""ROS 2 message classes, with or without ROS.
+
+``get_message('sensor_msgs/msg/JointState')`` returns the class to use in this process: the real
+rclpy class when the ``rclpy`` runtime is active, otherwise the class generated from the Jazzy
+definitions in ``msgs_schema/``. Package attributes mirror the ROS import style::
+
+    from gait_nodes.interfaces import sensor_msgs
+    msg = sensor_msgs.msg.JointState(name=['hip'], position=[0.1])
+
+``serialize_message`` / ``deserialize_message`` have the signatures of ``rclpy.serialization``.
+"""
+
+from __future__ import annotations
+
+import threading
+
+from gait_nodes.errors import InterfaceError
+from gait_nodes.interfaces.msgdef import MsgDef, available_types, load_msg
+
+__all__ = [
+    'available_types', 'definition_text', 'deserialize_message', 'get_message', 'is_message',
+    'message_type_name', 'msgdef', 'serialize_message', 'type_hash',
+]
+
+_lock = threading.RLock()
+_definitions: dict[str, MsgDef] = {}
+_classes: dict[str, type] = {}
+
+SCHEMA_SEPARATOR = '=' * 80
+
+
+def msgdef(type_name: str) -> MsgDef:
+    """Parsed definition of ``pkg/msg/Name``."""
+    with _lock:
+        definition = _definitions.get(type_name)
+        if definition is None:
+            definition = _definitions[type_name] = load_msg(type_name)
+        return definition
+
+
+def _closure(type_name: str) -> list[str]:
+    """``type_name`` and its dependencies, dependencies first, each once."""
+    order: list[str] = []
+
+    def visit(name: str, path: tuple[str, ...]) -> None:
+        if name in order:
+            return
+        if name in path:
+            raise InterfaceError(f'recursive message definition: {" -> ".join(path + (name,))}')
+        for dependency in msgdef(name).dependencies:
+            visit(dependency, path + (name,))
+        order.append(name)
+
+    visit(type_name, ())
+    return order
+
+
+def generated_class(type_name: str) -> type:
+    """The class generated from the shipped definition (never the rclpy one)."""
+    with _lock:
+        cls = _classes.get(type_name)
+        if cls is not None:
+            return cls
+        from gait_nodes.interfaces.generate import make_class
+
+        for name in _closure(type_name):
+            if name not in _classes:
+                make_class(msgdef(name), _definitions, _classes)
+        return _classes[type_name]
+
+
+def _rclpy_active() -> bool:
+    from gait_nodes.runtime.selection import active_runtime
+
+    return active_runtime() == 'rclpy'
+
+
+def get_message(type_name: str) -> type:
+    """Message class for ``pkg/msg/Name`` (also accepts ``pkg/Name``) in the active runtime."""
+    parts = type_name.split('/')
+    if len(parts) == 2:
+        type_name = f'{parts[0]}/msg/{parts[1]}'
+    if _rclpy_active():
+        import importlib
+
+        package, _, name = type_name.split('/')
+        try:
+            return getattr(importlib.import_module(f'{package}.msg'), name)
+        except (ImportError, AttributeError) as exc:
+            raise InterfaceError(f'message type {type_name!r} not found in ROS: {exc}') from exc
+    return generated_class(type_name)
+
+
+def is_message(obj: object) -> bool:
+    """Whether ``obj`` is an instance of a ROS message class (ours or rclpy's)."""
+    cls = type(obj)
+    return hasattr(cls, '__ros_type__') or hasattr(cls, '_TYPE_SUPPORT')
+
+
+def message_type_name(msg_or_cls) -> str:
+    """``pkg/msg/Name`` of a message class or instance (ours or rclpy's)."""
+    cls = msg_or_cls if isinstance(msg_or_cls, type) else type(msg_or_cls)
+    name = getattr(cls, '__ros_type__', None)
+    if name:
+        return name
+    module = getattr(cls, '__module__', '')
+    package = module.split('.')[0]
+    if '.msg' in module and hasattr(cls, '_TYPE_SUPPORT'):
+        return f'{package}/msg/{cls.__name__}'
+    raise InterfaceError(f'{cls!r} is not a ROS message class')
+
+
+def serialize_message(message) -> bytes:
+    """CDR bytes (with encapsulation header) of ``message``, as rclpy.serialization does."""
+    if hasattr(type(message), '__ros_type__'):
+        return message.serialize()
+    from rclpy.serialization import serialize_message as rclpy_serialize
+
+    return rclpy_serialize(message)
+
+
+def deserialize_message(serialized_message: bytes, message_type: type):
+    """Message of class ``message_type`` from CDR bytes, as rclpy.serialization does."""
+    if hasattr(message_type, '__ros_type__'):
+        return message_type.deserialize(serialized_message)
+    from rclpy.serialization import deserialize_message as rclpy_deserialize
+
+    return rclpy_deserialize(serialized_message, message_type)
+
+
+def definition_text(type_name: str) -> str:
+    """Full ``ros2msg`` schema: the definition, then each dependency after a separator line.
+
+    This is the text rosbag2 stores in MCAP schemas and ``ros2 bag`` / Foxglove parse.
+    """
+    parts = [msgdef(type_name).text.rstrip('\n')]
+    for dependency in reversed(_closure(type_name)[:-1]):
+        package, _, name = dependency.split('/')
+        parts.append(f'{SCHEMA_SEPARATOR}\nMSG: {package}/{name}\n'
+                     f'{msgdef(dependency).text.rstrip(chr(10))}')
+    return '\n'.join(parts) + '\n'
+
+
+def type_hash(type_name: str) -> str:
+    """ROS 2 type hash ``RIHS01_<sha256>`` of a message type (as Jazzy computes it)."""
+    from rosbags.typesys import Stores, get_typestore
+
+    global _typestore
+    with _lock:
+        if _typestore is None:
+            _typestore = get_typestore(Stores.ROS2_JAZZY)
+        return _typestore.hash_rihs01(type_name)
+
+
+_typestore = None
+
+
+class _MsgNamespace:
+    def __init__(self, package: str):
+        self._package = package
+
+    def __getattr__(self, name: str) -> type:
+        if name.startswith('_'):
+            raise AttributeError(name)
+        return get_message(f'{self._package}/msg/{name}')
+
+    def __repr__(self) -> str:
+        return f'<messages of {self._package}>'
+
+
+class _Package:
+    def __init__(self, package: str):
+        self.msg = _MsgNamespace(package)
+
+
+def __getattr__(name: str) -> _Package:
+    if name.endswith('_msgs') or name in ('builtin_interfaces',):
+        return _Package(name)
+    raise AttributeError(f'module {__name__!r} has no attribute {name!r}')
