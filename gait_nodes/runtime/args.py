@@ -1,0 +1,264 @@
+"""ROS 2 command-line arguments (``--ros-args ... [--]``) and params files, parsed as rcl does.
+
+Supported inside ``--ros-args``: ``-p/--param [node:]name:=value``, ``--params-file FILE``,
+``-r/--remap [node:]from:=to`` (topics and ``__node``/``__ns``), ``--log-level [logger:=]LEVEL``,
+and the flags rcl accepts without effect here (``--enclave``, ``--disable-*-logs``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import re
+from pathlib import Path
+
+import yaml
+
+from gait_nodes.errors import ArgumentError, ParameterError
+
+LOG_LEVELS = ('debug', 'info', 'warn', 'error', 'fatal')
+
+
+@dataclasses.dataclass
+class RosArguments:
+    """What ``--ros-args`` sections said, in command-line order."""
+
+    params: list[tuple[str | None, str, object]] = dataclasses.field(default_factory=list)
+    params_files: list[Path] = dataclasses.field(default_factory=list)
+    remaps: list[tuple[str | None, str, str]] = dataclasses.field(default_factory=list)
+    log_level: str | None = None
+    file_params: list[tuple[str, dict[str, object]]] = dataclasses.field(default_factory=list)
+
+    def node_name(self, default: str) -> str:
+        """Node name after ``__node:=`` remapping."""
+        for node, source, target in self.remaps:
+            if source in ('__node', '__name') and node in (None, default):
+                return target
+        return default
+
+    def namespace(self, default: str | None) -> str:
+        """Namespace after ``__ns:=`` remapping, always absolute."""
+        namespace = default or '/'
+        for node, source, target in self.remaps:
+            if source == '__ns' and node is None:
+                namespace = target
+        return namespace if namespace.startswith('/') else '/' + namespace
+
+    def topic_remaps(self, node_name: str) -> dict[str, str]:
+        """Topic remapping rules that apply to ``node_name``."""
+        rules = {}
+        for node, source, target in self.remaps:
+            if source.startswith('__') or node not in (None, node_name):
+                continue
+            rules[source] = target
+        return rules
+
+    def overrides_for(self, node_name: str, namespace: str = '/'
+                      ) -> tuple[dict[str, object], set[str]]:
+        """Parameter overrides of one node: params files in order, then ``-p`` values.
+
+        Returns:
+            The overrides, and the names among them that were addressed to this node in
+            particular (``-p`` and params-file sections without wildcards): those must be
+            declared by the node, while wildcard sections may hold other nodes' parameters.
+        """
+        full_name = (namespace.rstrip('/') + '/' + node_name) if namespace != '/' else (
+            '/' + node_name)
+        overrides: dict[str, object] = {}
+        addressed: set[str] = set()
+        for pattern, values in self.file_params:
+            if node_pattern_matches(pattern, full_name):
+                overrides.update(values)
+                if '*' not in pattern:
+                    addressed.update(values)
+        for node, name, value in self.params:
+            if node in (None, node_name):
+                overrides[name] = value
+                addressed.add(name)
+        return overrides, addressed
+
+
+def parse_value(text: str) -> object:
+    """A parameter value from its command-line text, read as YAML the way rcl reads it."""
+    try:
+        value = yaml.safe_load(text) if text.strip() else ''
+    except yaml.YAMLError as exc:
+        raise ArgumentError(f'cannot parse parameter value {text!r}: {exc}') from exc
+    if value is None:
+        return text
+    return value
+
+
+def _split_assignment(text: str, flag: str) -> tuple[str | None, str, str]:
+    if ':=' not in text:
+        raise ArgumentError(f'{flag} expects [node:]name:=value, got {text!r}')
+    left, right = text.split(':=', 1)
+    node = None
+    if ':' in left:
+        node, left = left.split(':', 1)
+    if not left:
+        raise ArgumentError(f'{flag} expects [node:]name:=value, got {text!r}')
+    return node, left, right
+
+
+def split_ros_args(argv: list[str]) -> tuple[list[str], list[str]]:
+    """Separate ROS arguments (``--ros-args`` sections) from the rest, like rcl does."""
+    user, ros = [], []
+    in_ros = False
+    for arg in argv:
+        if arg == '--ros-args':
+            in_ros = True
+            continue
+        if in_ros and arg == '--':
+            in_ros = False
+            continue
+        (ros if in_ros else user).append(arg)
+    return user, ros
+
+
+def parse_ros_args(ros: list[str]) -> RosArguments:
+    """Parse the contents of ``--ros-args`` sections; raise ArgumentError on anything unknown."""
+    parsed = RosArguments()
+    i = 0
+
+    def operand(flag: str) -> str:
+        nonlocal i
+        i += 1
+        if i >= len(ros):
+            raise ArgumentError(f'{flag} expects an argument')
+        return ros[i]
+
+    while i < len(ros):
+        arg = ros[i]
+        if arg in ('-p', '--param'):
+            node, name, text = _split_assignment(operand(arg), arg)
+            parsed.params.append((node, name, parse_value(text)))
+        elif arg == '--params-file':
+            path = Path(operand(arg))
+            parsed.params_files.append(path)
+            parsed.file_params.extend(load_params_file(path))
+        elif arg in ('-r', '--remap'):
+            node, source, target = _split_assignment(operand(arg), arg)
+            parsed.remaps.append((node, source, target))
+        elif arg == '--log-level':
+            level = operand(arg)
+            if ':=' in level:
+                level = level.split(':=', 1)[1]
+            if level.lower() not in LOG_LEVELS:
+                raise ArgumentError(
+                    f'--log-level {level!r}: choose one of {", ".join(LOG_LEVELS)}')
+            parsed.log_level = level.lower()
+        elif arg in ('-e', '--enclave'):
+            operand(arg)
+        elif arg in ('--disable-rosout-logs', '--disable-stdout-logs',
+                     '--disable-external-lib-logs', '--enable-rosout-logs',
+                     '--enable-stdout-logs', '--enable-external-lib-logs'):
+            pass
+        else:
+            raise ArgumentError(
+                f'unknown ROS argument {arg!r}: expected -p, --params-file, -r, --log-level')
+        i += 1
+    return parsed
+
+
+def _flatten(prefix: str, values: dict, where: str) -> dict[str, object]:
+    flat: dict[str, object] = {}
+    for key, value in values.items():
+        if not isinstance(key, str) or not re.fullmatch(r'[A-Za-z_][\w]*', key):
+            raise ParameterError(f'{where}: invalid parameter name {key!r}')
+        name = f'{prefix}.{key}' if prefix else key
+        if isinstance(value, dict):
+            flat.update(_flatten(name, value, where))
+            continue
+        _check_value(name, value, where)
+        flat[name] = value
+    return flat
+
+
+def _check_value(name: str, value: object, where: str) -> None:
+    if value is None:
+        raise ParameterError(f'{where}: parameter {name!r} has no value')
+    if isinstance(value, list):
+        if not value:
+            return
+        kinds = {type(v) for v in value}
+        if len(kinds) != 1 or kinds.pop() not in (bool, int, float, str):
+            raise ParameterError(
+                f'{where}: parameter {name!r}: a list must hold values of one type '
+                f'(bool, int, float or str), got {value!r}')
+    elif not isinstance(value, (bool, int, float, str)):
+        raise ParameterError(
+            f'{where}: parameter {name!r}: unsupported value {value!r} '
+            '(bool, int, float, str or a list of one of them)')
+    if isinstance(value, float) and math.isnan(value):
+        return
+
+
+def load_params_file(path: Path) -> list[tuple[str, dict[str, object]]]:
+    """Read a ROS 2 params file: ``node_name: {ros__parameters: {...}}`` (``/**`` allowed).
+
+    Returns:
+        ``(node pattern, flattened parameters)`` in file order.
+
+    Raises:
+        ParameterError: With the path and the reason, when the file is unreadable or malformed.
+    """
+    where = f'params file {path}'
+    try:
+        text = Path(path).read_text(encoding='utf-8')
+    except OSError as exc:
+        raise ParameterError(f'{where}: cannot read: {exc.strerror or exc}') from exc
+    try:
+        document = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, 'problem_mark', None)
+        at = f' at line {mark.line + 1}' if mark is not None else ''
+        raise ParameterError(f'{where}: not valid YAML{at}: '
+                             f'{getattr(exc, "problem", None) or exc}') from exc
+    if not isinstance(document, dict) or not document:
+        raise ParameterError(f'{where}: expected a mapping of node names to '
+                             "{ros__parameters: {...}}, got " + type(document).__name__)
+    sections = []
+    for node, body in _node_sections(document, '', where):
+        sections.append((node, body))
+    return sections
+
+
+def _node_sections(document: dict, prefix: str, where: str):
+    for key, body in document.items():
+        if not isinstance(key, str):
+            raise ParameterError(f'{where}: node name must be a string, got {key!r}')
+        name = f'{prefix}/{key.lstrip("/")}' if prefix else key
+        if not isinstance(body, dict):
+            raise ParameterError(f'{where}: section {name!r} must be a mapping containing '
+                                 f'ros__parameters, got {body!r}')
+        if 'ros__parameters' in body:
+            params = body['ros__parameters']
+            if params is None:
+                params = {}
+            if not isinstance(params, dict):
+                raise ParameterError(
+                    f'{where}: {name}.ros__parameters must be a mapping, got {params!r}')
+            extra = set(body) - {'ros__parameters'}
+            if extra:
+                raise ParameterError(
+                    f'{where}: section {name!r} has keys {sorted(extra)} beside ros__parameters')
+            yield name, _flatten('', params, f'{where}: {name}')
+        else:
+            # A namespace level: /ns: {node: {ros__parameters: ...}}
+            yield from _node_sections(body, name, where)
+
+
+def node_pattern_matches(pattern: str, full_name: str) -> bool:
+    """Whether a params-file node key (``/**``, ``node``, ``/ns/node``, ``/*/node``) names a node."""
+    if not pattern.startswith('/'):
+        pattern = '/' + pattern if '/' in pattern else '/**/' + pattern
+    regex = ''
+    for part in re.split(r'(/\*\*|\*)', pattern):
+        if part == '/**':
+            regex += r'(/[^/]+)*'
+        elif part == '*':
+            regex += r'[^/]*'
+        else:
+            regex += re.escape(part)
+    return re.fullmatch(regex, full_name) is not None

@@ -1,0 +1,174 @@
+"""Executors with rclpy's interface: ``add_node``, ``spin``, ``spin_once``, ``shutdown``.
+
+Under ``dds`` an executor waits on the transport's WaitSet and on the next timer deadline. Under
+``inproc`` it drives the simulated clock in lockstep (see :mod:`gait_nodes.runtime.inproc`).
+Under ``rclpy`` it wraps rclpy's own SingleThreadedExecutor.
+"""
+
+from __future__ import annotations
+
+from gait_nodes.runtime import context as context_module
+from gait_nodes.runtime.clock import NS_PER_S
+
+
+def _deliver(subscription, msg) -> None:
+    subscription.callback(msg.serialize() if subscription.raw else msg)
+
+
+class SingleThreadedExecutor:
+    """Runs the callbacks of its nodes one at a time, in the calling thread."""
+
+    def __init__(self, *, context=None):
+        self.context = context or context_module.default_context()
+        self._nodes: list = []
+        self._rclpy_executor = None
+        if self.context.runtime == 'rclpy':
+            from rclpy.executors import SingleThreadedExecutor as RclpyExecutor
+
+            self._rclpy_executor = RclpyExecutor(context=self.context.rclpy_context)
+
+    @property
+    def inproc(self) -> bool:
+        """Whether this executor drives simulated time."""
+        return self.context.runtime == 'inproc'
+
+    def add_node(self, node) -> bool:
+        """Add a node; its parameter overrides must all name declared parameters."""
+        node.check_parameter_overrides()
+        if node in self._nodes:
+            return False
+        self._nodes.append(node)
+        if self._rclpy_executor is not None:
+            self._rclpy_executor.add_node(node.rclpy_node)
+        return True
+
+    def remove_node(self, node) -> None:
+        """Stop running the node's callbacks."""
+        if node in self._nodes:
+            self._nodes.remove(node)
+            if self._rclpy_executor is not None:
+                self._rclpy_executor.remove_node(node.rclpy_node)
+
+    def get_nodes(self) -> list:
+        """Nodes of this executor."""
+        return list(self._nodes)
+
+    def _running(self) -> bool:
+        return self.context.ok() and not self.context.shutdown_requested.is_set()
+
+    def _timers(self):
+        for node in self._nodes:
+            yield from node._timers
+
+    def _next_timer(self):
+        best = None
+        for timer in self._timers():
+            if timer.is_canceled():
+                continue
+            if best is None or timer.next_call_ns < best.next_call_ns:
+                best = timer
+        return best
+
+    # --- one unit of work -----------------------------------------------------------------
+
+    def spin_once(self, timeout_sec: float | None = None) -> None:
+        """Run at most one timer callback or one batch of received messages."""
+        if self._rclpy_executor is not None:
+            self._rclpy_executor.spin_once(timeout_sec=timeout_sec)
+        elif self.inproc:
+            self._inproc_step(None)
+        else:
+            self._dds_step(timeout_sec)
+
+    def _dds_step(self, timeout_sec: float | None) -> bool:
+        transport = self.context.transport
+        timer = self._next_timer()
+        if timer is not None and timer.is_ready():
+            timer.call()
+            return True
+        wait_ns = None if timeout_sec is None else int(timeout_sec * NS_PER_S)
+        if timer is not None and not timer.clock.ros_time_is_active:
+            until = max(timer.time_until_next_call(), 0)
+            wait_ns = until if wait_ns is None else min(wait_ns, until)
+        ready = transport.wait(wait_ns if wait_ns is not None else 10 * NS_PER_S)
+        for subscription, msg in ready:
+            if subscription._node in self._nodes:
+                _deliver(subscription, msg)
+        return bool(ready)
+
+    def _inproc_step(self, end_ns: int | None) -> bool:
+        """Deliver what is queued, else advance to the next timer and run it.
+
+        Returns False when there is nothing left to do before ``end_ns``.
+        """
+        transport = self.context.transport
+        if transport.queue:
+            self._drain()
+            return True
+        timer = self._next_timer()
+        if timer is None or (end_ns is not None and timer.next_call_ns > end_ns):
+            return False
+        transport.now_ns = max(transport.now_ns, timer.next_call_ns)
+        timer.call()
+        self._drain()
+        return True
+
+    def _drain(self) -> None:
+        transport = self.context.transport
+        queue = transport.queue
+        while queue:
+            subscription, msg = queue.popleft()
+            transport.delivered += 1
+            _deliver(subscription, msg)
+
+    # --- loops ------------------------------------------------------------------------------
+
+    def spin(self) -> None:
+        """Run callbacks until shutdown (under inproc: until no timer is left)."""
+        if self._rclpy_executor is not None:
+            self._spin_rclpy(None)
+            return
+        while self._running():
+            if self.inproc:
+                if not self._inproc_step(None):
+                    break
+            else:
+                self._dds_step(None)
+
+    def spin_for(self, duration_sec: float) -> None:
+        """Run callbacks for ``duration_sec`` of ROS time (simulated under inproc)."""
+        if self._rclpy_executor is not None:
+            self._spin_rclpy(duration_sec)
+            return
+        if self.inproc:
+            transport = self.context.transport
+            end_ns = transport.now_ns + int(round(duration_sec * NS_PER_S))
+            while self._running() and self._inproc_step(end_ns):
+                pass
+            if self._running():
+                transport.now_ns = max(transport.now_ns, end_ns)
+            return
+        import time
+
+        deadline = time.monotonic() + duration_sec
+        while self._running():
+            left = deadline - time.monotonic()
+            if left <= 0:
+                break
+            self._dds_step(left)
+
+    def _spin_rclpy(self, duration_sec: float | None) -> None:
+        import time
+
+        deadline = None if duration_sec is None else time.monotonic() + duration_sec
+        while self._running():
+            if deadline is not None and time.monotonic() >= deadline:
+                break
+            self._rclpy_executor.spin_once(timeout_sec=0.05)
+
+    def shutdown(self, timeout_sec: float | None = None) -> bool:
+        """Stop and forget the nodes."""
+        if self._rclpy_executor is not None:
+            self._rclpy_executor.shutdown(timeout_sec)
+        self._nodes.clear()
+        return True

@@ -1,0 +1,128 @@
+"""The ``inproc`` runtime: every node in one process, one deterministic lockstep executor.
+
+Time is simulated: the executor jumps to the next timer deadline, runs the due timers in creation
+order and, after each, delivers every message that callback caused (and the messages those
+deliveries cause, first in first out) before time moves on. The same inputs therefore give the
+same sequence of callbacks and byte-identical outputs, as fast as the CPU allows.
+
+Messages are handed to subscribers by reference, without serialization: a callback must treat a
+received message as read-only, as rclpy's intra-process communication also requires.
+"""
+
+from __future__ import annotations
+
+import collections
+
+from gait_nodes.runtime.qos import DurabilityPolicy, ReliabilityPolicy
+
+
+class _Topic:
+    def __init__(self, name: str):
+        self.name = name
+        self.publishers: list[_InprocPublisher] = []
+        self.subscriptions: list = []
+        self.type_name: str | None = None
+
+
+class _InprocPublisher:
+    def __init__(self, transport: InprocTransport, topic: _Topic, msg_type: type, profile):
+        self.transport = transport
+        self.topic = topic
+        self.msg_type = msg_type
+        self.profile = profile
+        latched = profile.durability == DurabilityPolicy.TRANSIENT_LOCAL
+        self.history = collections.deque(maxlen=profile.depth) if latched else None
+
+    def publish(self, msg) -> None:
+        if self.history is not None:
+            self.history.append(msg)
+        self.transport.deliver(self, msg)
+
+    def publish_raw(self, data: bytes) -> None:
+        self.publish(self.msg_type.deserialize(data))
+
+    def subscription_count(self) -> int:
+        return sum(1 for s in self.topic.subscriptions if _compatible(self, s))
+
+    def destroy(self) -> None:
+        if self in self.topic.publishers:
+            self.topic.publishers.remove(self)
+
+
+class _InprocSubscription:
+    def __init__(self, transport: InprocTransport, topic: _Topic, subscription):
+        self.transport = transport
+        self.topic = topic
+        self.subscription = subscription
+
+    def destroy(self) -> None:
+        if self.subscription in self.topic.subscriptions:
+            self.topic.subscriptions.remove(self.subscription)
+
+
+def _compatible(publisher: _InprocPublisher, subscription) -> bool:
+    """Whether DDS would match this pair: same type and compatible QoS."""
+    if publisher.msg_type.__ros_type__ != subscription.msg_type.__ros_type__:
+        return False
+    if (subscription.qos_profile.reliability == ReliabilityPolicy.RELIABLE
+            and publisher.profile.reliability == ReliabilityPolicy.BEST_EFFORT):
+        return False
+    return not (subscription.qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL
+                and publisher.profile.durability != DurabilityPolicy.TRANSIENT_LOCAL)
+
+
+class InprocTransport:
+    """Topics, a FIFO of pending deliveries and the simulated clock of one process."""
+
+    def __init__(self, context):
+        self.context = context
+        self.now_ns = 0
+        self.topics: dict[str, _Topic] = {}
+        self.queue: collections.deque = collections.deque()
+        self.delivered = 0
+        self.sim_time_source = self._now
+
+    def _now(self) -> int:
+        return self.now_ns
+
+    def _topic(self, name: str, msg_type: type) -> _Topic:
+        topic = self.topics.get(name)
+        if topic is None:
+            topic = self.topics[name] = _Topic(name)
+        if topic.type_name is None:
+            topic.type_name = msg_type.__ros_type__
+        return topic
+
+    def create_publisher(self, node, msg_type: type, name: str, profile) -> _InprocPublisher:
+        topic = self._topic(name, msg_type)
+        publisher = _InprocPublisher(self, topic, msg_type, profile)
+        topic.publishers.append(publisher)
+        return publisher
+
+    def create_subscription(self, node, subscription) -> _InprocSubscription:
+        topic = self._topic(subscription.topic_name, subscription.msg_type)
+        topic.subscriptions.append(subscription)
+        if subscription.qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL:
+            for publisher in topic.publishers:
+                if publisher.history and _compatible(publisher, subscription):
+                    depth = subscription.qos_profile.depth
+                    for msg in list(publisher.history)[-depth:]:
+                        self.queue.append((subscription, msg))
+        return _InprocSubscription(self, topic, subscription)
+
+    def deliver(self, publisher: _InprocPublisher, msg) -> None:
+        for subscription in publisher.topic.subscriptions:
+            if _compatible(publisher, subscription):
+                self.queue.append((subscription, msg))
+
+    def count(self, name: str, kind: str) -> int:
+        topic = self.topics.get(name)
+        return len(getattr(topic, kind)) if topic else 0
+
+    def notify(self) -> None:
+        """Nothing waits in inproc; present for the transport interface."""
+
+    def close(self) -> None:
+        self.queue.clear()
+        self.topics.clear()
+
