@@ -1,0 +1,265 @@
+"""``python -m gait_nodes run ...``: start the whole gait graph, stop it cleanly, print a summary.
+
+With ``--runtime dds`` every node is its own process (``python -m gait_nodes.<node>``), as on a
+robot; with ``--runtime inproc`` all nodes share one process and one lockstep executor, and the
+duration is simulated time. The command starts whichever contract nodes are installed.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import yaml
+
+from gait_nodes import graph
+from gait_nodes.cli import ArgumentParser, fail, split_args
+from gait_nodes.errors import ArgumentError, GaitNodesError
+from gait_nodes.runtime.args import parse_ros_args
+
+PROG = 'python -m gait_nodes'
+STOP_TIMEOUT_S = 10.0
+
+
+def _positive_float(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise ArgumentError(f'expected a number of seconds, got {text!r}') from None
+    if not math.isfinite(value) or value <= 0:
+        raise ArgumentError(f'duration must be a finite number > 0 s, got {text!r}')
+    return value
+
+
+def build_parser() -> ArgumentParser:
+    """The ``run`` command line."""
+    parser = ArgumentParser(prog=PROG, description=__doc__.split('\n\n')[0])
+    commands = parser.add_subparsers(dest='command', required=True, metavar='run')
+    run = commands.add_parser('run', help='start the node graph', description=__doc__,
+                              epilog=parser.epilog)
+    run.error = parser.error
+    run.add_argument('--runtime', choices=['dds', 'inproc', 'rclpy'], default=None,
+                     help='dds: one process per node; inproc: one process, simulated time '
+                          '(default: GAIT_NODES_RUNTIME, else rclpy when importable, else dds)')
+    run.add_argument('--duration', type=str, default='20',
+                     help='seconds to run, wall time (dds) or simulated time (inproc); '
+                          'default 20')
+    run.add_argument('--record', metavar='DIR', default=None,
+                     help='record every contract topic to a rosbag2 MCAP directory')
+    run.add_argument('--robot', default='robosimian', help='robot name in config/robots/')
+    run.add_argument('--gait', default=None, help='gait: biped | crawl | trot | auto')
+    run.add_argument('--nodes', default=None,
+                     help=f'comma-separated subset of {",".join(graph.NODES)}')
+    run.add_argument('--json', action='store_true', help='print the summary as JSON')
+    return parser
+
+
+def _graph_params(options) -> dict:
+    values = {'robot': options.robot}
+    if options.gait:
+        values['gait'] = options.gait
+    return {'/**': {'ros__parameters': values}}
+
+
+def _selected_nodes(options) -> list[str]:
+    available = graph.available_nodes()
+    if options.nodes is None:
+        return available
+    wanted = [name.strip() for name in options.nodes.split(',') if name.strip()]
+    for name in wanted:
+        if name not in graph.NODES:
+            raise ArgumentError(f'unknown node {name!r}: choose from {", ".join(graph.NODES)}')
+        if name not in available:
+            raise ArgumentError(f'node {name!r} is not installed in this version')
+    return wanted
+
+
+class TopicCounter:
+    """Counts the messages on every contract topic, from inside the graph."""
+
+    def __init__(self, node):
+        from gait_nodes.interfaces import get_message
+
+        self.counts = {topic: 0 for topic in graph.TOPICS}
+        self.first_ns: dict[str, int] = {}
+        self.last_ns: dict[str, int] = {}
+        self._clock = node.get_clock()
+        for topic, type_name in graph.TOPICS.items():
+            node.create_subscription(get_message(type_name), topic, self._counter(topic), 100,
+                                     raw=True)
+
+    def _counter(self, topic: str):
+        def count(_data) -> None:
+            now = self._clock.now_ns()
+            self.counts[topic] += 1
+            self.first_ns.setdefault(topic, now)
+            self.last_ns[topic] = now
+
+        return count
+
+    def table(self) -> dict[str, dict]:
+        rows = {}
+        for topic, count in self.counts.items():
+            if not count:
+                continue
+            span = (self.last_ns[topic] - self.first_ns[topic]) / 1e9
+            rows[topic] = {'messages': count,
+                           'rate_hz': round((count - 1) / span, 2) if span > 0 else None}
+        return rows
+
+
+def _record_args(options) -> list[str]:
+    return ['-o', options.record] if options.record else []
+
+
+def run_inproc(options, names: list[str], ros: list[str]) -> dict:
+    """All nodes in this process under one lockstep executor."""
+    from gait_nodes import runtime
+
+    runtime.init(args=[PROG, *ros], runtime='inproc')
+    try:
+        executor = runtime.SingleThreadedExecutor()
+        for name in names:
+            executor.add_node(graph.load_class(graph.NODES[name])())
+        if options.record:
+            recorder_class = graph.load_class(graph.RECORDER)
+            executor.add_node(recorder_class(output=options.record))
+        monitor = runtime.Node('gait_run_monitor')
+        counter = TopicCounter(monitor)
+        executor.add_node(monitor)
+        start = time.perf_counter()
+        executor.spin_for(options.duration)
+        wall = time.perf_counter() - start
+        sim = runtime.default_context().transport.now_ns / 1e9
+    finally:
+        runtime.shutdown()
+    return {
+        'runtime': 'inproc', 'nodes': names, 'simulated_s': sim, 'wall_s': round(wall, 3),
+        'real_time_factor': round(sim / wall, 1) if wall > 0 else None,
+        'topics': counter.table(), 'exit_codes': {},
+    }
+
+
+def run_processes(options, names: list[str], ros: list[str], runtime_name: str) -> dict:
+    """One process per node; this process counts the traffic and stops them cleanly."""
+    from gait_nodes import runtime
+
+    commands = {name: [sys.executable, '-m', f'gait_nodes.{name}', '--runtime', runtime_name,
+                       *ros] for name in names}
+    if options.record:
+        commands['recorder'] = [sys.executable, '-m', 'gait_nodes.recorder', '--runtime',
+                                runtime_name, *_record_args(options)]
+    runtime.init(args=[PROG], runtime=runtime_name)
+    processes: dict[str, subprocess.Popen] = {}
+    exit_codes: dict[str, int] = {}
+    try:
+        monitor = runtime.Node('gait_run_monitor')
+        counter = TopicCounter(monitor)
+        executor = runtime.SingleThreadedExecutor()
+        executor.add_node(monitor)
+        for name, command in commands.items():
+            processes[name] = subprocess.Popen(command)
+        start = time.perf_counter()
+        deadline = start + options.duration
+        while time.perf_counter() < deadline and runtime.ok() and \
+                not runtime.default_context().shutdown_requested.is_set():
+            executor.spin_once(timeout_sec=min(0.1, max(deadline - time.perf_counter(), 0)))
+            for name, process in processes.items():
+                if process.poll() is not None and name not in exit_codes:
+                    exit_codes[name] = process.returncode
+                    print(f'{PROG}: node {name} exited early with status {process.returncode}',
+                          file=sys.stderr)
+        wall = time.perf_counter() - start
+    finally:
+        exit_codes.update(_stop(processes, exit_codes))
+        runtime.shutdown()
+    return {
+        'runtime': runtime_name, 'nodes': names, 'simulated_s': None, 'wall_s': round(wall, 3),
+        'real_time_factor': None, 'topics': counter.table(), 'exit_codes': exit_codes,
+    }
+
+
+def _stop(processes: dict[str, subprocess.Popen], done: dict[str, int]) -> dict[str, int]:
+    """SIGINT every node, as Ctrl-C would; SIGKILL only what ignores it for STOP_TIMEOUT_S."""
+    for name, process in processes.items():
+        if name not in done and process.poll() is None:
+            process.send_signal(signal.SIGINT)
+    codes = {}
+    deadline = time.monotonic() + STOP_TIMEOUT_S
+    for name, process in processes.items():
+        try:
+            codes[name] = process.wait(timeout=max(deadline - time.monotonic(), 0.1))
+        except subprocess.TimeoutExpired:
+            process.kill()
+            codes[name] = process.wait()
+            print(f'{PROG}: node {name} ignored SIGINT for {STOP_TIMEOUT_S} s and was killed',
+                  file=sys.stderr)
+    return codes
+
+
+def print_summary(summary: dict, as_json: bool) -> None:
+    """Human-readable (or JSON) account of the run."""
+    if as_json:
+        print(json.dumps(summary, indent=2, sort_keys=True))
+        return
+    nodes = ', '.join(summary['nodes']) or 'none'
+    print(f'gait_nodes run: runtime {summary["runtime"]}, nodes: {nodes}')
+    if not summary['nodes']:
+        print('  no gait nodes are installed in this version yet; the graph ran empty')
+    timing = f'  wall time {summary["wall_s"]:.2f} s'
+    if summary['simulated_s'] is not None:
+        timing += (f', simulated {summary["simulated_s"]:.2f} s, '
+                   f'real-time factor {summary["real_time_factor"]}x')
+    print(timing)
+    for topic, row in summary['topics'].items():
+        rate = f'{row["rate_hz"]:.1f} Hz' if row['rate_hz'] else '-'
+        print(f'  {topic:28s} {row["messages"]:8d} msgs  {rate}')
+    if not summary['topics']:
+        print('  no messages on the contract topics')
+    for name, code in summary['exit_codes'].items():
+        if code != 0:
+            print(f'  node {name} exited with status {code}')
+    if summary.get('bag'):
+        print(f'  recorded: {summary["bag"]}')
+
+
+def main(args: list[str] | None = None) -> int:
+    """Entry point of ``python -m gait_nodes``."""
+    user, ros = split_args(args)
+    options = build_parser().parse_args(user)
+    try:
+        from gait_nodes.runtime.selection import select_runtime
+
+        options.duration = _positive_float(options.duration)
+        parse_ros_args(ros[1:])  # refuse a bad --params-file or -p before starting anything
+        runtime_name = select_runtime(options.runtime)
+        names = _selected_nodes(options)
+        if options.record and not graph.module_exists(graph.RECORDER):
+            raise ArgumentError('--record needs the recorder node, not installed in this '
+                                'version')
+        with tempfile.TemporaryDirectory(prefix='gait_nodes_run_') as tmp:
+            params_file = Path(tmp) / 'graph_params.yaml'
+            params_file.write_text(yaml.safe_dump(_graph_params(options)))
+            ros = ['--ros-args', '--params-file', str(params_file), *ros[1:]]
+            if runtime_name == 'inproc':
+                summary = run_inproc(options, names, ros)
+            else:
+                summary = run_processes(options, names, ros, runtime_name)
+    except GaitNodesError as exc:
+        return fail(PROG, exc)
+    if options.record:
+        summary['bag'] = os.path.abspath(options.record)
+    print_summary(summary, options.json)
+    failed = [name for name, code in summary['exit_codes'].items() if code != 0]
+    return 1 if failed else 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

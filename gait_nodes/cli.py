@@ -1,0 +1,93 @@
+"""Command-line plumbing shared by every node and tool: ``--runtime``, ``--ros-args``, exit codes.
+
+Exit status: 0 on success and on a clean stop (Ctrl-C, SIGTERM), 2 on bad input (one line on
+stderr, no traceback), 1 when a tool reports a negative outcome (e.g. a rejected command).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from gait_nodes.errors import GaitNodesError
+from gait_nodes.runtime.args import split_ros_args
+from gait_nodes.runtime.selection import RUNTIMES
+
+ROS_ARGS_EPILOG = (
+    'ROS arguments (after --ros-args, as with any ROS 2 node): -p name:=value, '
+    '--params-file FILE (node_name: {ros__parameters: ...}, /** for every node), '
+    '-r from:=to, --log-level LEVEL. Runtime: --runtime or GAIT_NODES_RUNTIME '
+    f'({"|".join(RUNTIMES)}; default rclpy when importable, else dds).'
+)
+
+
+class ArgumentParser(argparse.ArgumentParser):
+    """argparse with one-line errors (exit 2) and the ROS-args epilog."""
+
+    def __init__(self, *args, **kwargs):
+        kwargs.setdefault('epilog', ROS_ARGS_EPILOG)
+        super().__init__(*args, **kwargs)
+
+    def error(self, message: str):
+        """Print ``prog: error: message`` on one line and exit 2."""
+        self.exit(2, f'{self.prog}: error: {message}\n')
+
+
+def add_runtime_argument(parser: argparse.ArgumentParser) -> None:
+    """``--runtime NAME`` (validated at init, so that the error names the allowed values)."""
+    parser.add_argument('--runtime', metavar='|'.join(RUNTIMES), default=None,
+                        help='runtime to use (default: GAIT_NODES_RUNTIME, else rclpy when '
+                             'importable, else dds)')
+
+
+def fail(prog: str, error: BaseException) -> int:
+    """Report a bad-input error on one line; exit status 2."""
+    print(f'{prog}: error: {error}', file=sys.stderr)
+    return 2
+
+
+def split_args(args: list[str] | None) -> tuple[list[str], list[str]]:
+    """``(user arguments, ['--ros-args', ...])`` from ``args`` (default ``sys.argv[1:]``)."""
+    argv = sys.argv[1:] if args is None else list(args)
+    user, ros = split_ros_args(argv)
+    return user, (['--ros-args', *ros] if ros else [])
+
+
+def run_node(node_factory, args: list[str] | None = None, *, prog: str,
+             description: str, add_arguments=None) -> int:
+    """Entry point of a node: parse, init the runtime, spin until stopped, shut down cleanly.
+
+    Args:
+        node_factory: ``factory(options) -> Node``; ``options`` is the argparse namespace.
+        args: Command-line arguments without the program name (default ``sys.argv[1:]``).
+        prog: Program name for messages.
+        description: One-paragraph help text.
+        add_arguments: Optional ``f(parser)`` adding node-specific options.
+
+    Returns:
+        The process exit status.
+    """
+    from gait_nodes import runtime
+
+    user, ros = split_args(args)
+    parser = ArgumentParser(prog=prog, description=description)
+    add_runtime_argument(parser)
+    if add_arguments is not None:
+        add_arguments(parser)
+    options = parser.parse_args(user)
+    try:
+        runtime.init(args=[prog, *ros], runtime=options.runtime)
+    except GaitNodesError as exc:
+        return fail(prog, exc)
+    try:
+        node = node_factory(options)
+        executor = runtime.SingleThreadedExecutor()
+        executor.add_node(node)
+        executor.spin()
+    except GaitNodesError as exc:
+        return fail(prog, exc)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        runtime.shutdown()
+    return 0
