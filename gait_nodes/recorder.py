@@ -1,0 +1,99 @@
+"""recorder node: every contract topic (or the chosen ones) into a rosbag2 MCAP directory.
+
+``python -m gait_nodes.recorder -o DIR [-t TOPIC[:pkg/msg/Type] ...]``. A clean stop (Ctrl-C,
+SIGTERM) writes the MCAP summary and ``metadata.yaml``; a SIGKILL loses at most the last
+``flush_period_s`` of data (the rest stays readable).
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+
+from gait_nodes import graph
+from gait_nodes.bag.writer import BagWriter
+from gait_nodes.cli import run_node
+from gait_nodes.errors import ArgumentError
+from gait_nodes.interfaces import get_message
+from gait_nodes.runtime import DurabilityPolicy, Node, QoSProfile
+from gait_nodes.runtime.qos import offered_qos_yaml
+
+#: Topics whose publishers are latched (transient local) in the contract.
+LATCHED_TOPICS = ('/gait/footsteps',)
+
+
+def parse_topics(specs: list[str]) -> dict[str, str]:
+    """``['/a', '/b:pkg/msg/T']`` -> ``{topic: type}``; contract topics need no type."""
+    topics = {}
+    for spec in specs:
+        name, _, type_name = spec.partition(':')
+        if not name.startswith('/'):
+            name = '/' + name
+        if not type_name:
+            if name not in graph.TOPICS:
+                raise ArgumentError(f'topic {name} is not in the contract: give its type as '
+                                    f'{name}:pkg/msg/Type')
+            type_name = graph.TOPICS[name]
+        topics[name] = type_name
+    return topics
+
+
+class Recorder(Node):
+    """Subscribes to topics without deserializing and writes what arrives to a bag."""
+
+    def __init__(self, output: str | None = None, topics: dict[str, str] | None = None):
+        super().__init__('recorder')
+        default_output = time.strftime('bags/gait_%Y_%m_%d-%H_%M_%S')
+        output = self.declare_parameter('output', output or default_output).value
+        flush_period_s = self.declare_parameter('flush_period_s', 0.5).value
+        if not 0 < flush_period_s <= 1.0:
+            raise ArgumentError(f'flush_period_s must be in (0, 1] s, got {flush_period_s}')
+        topics = topics or dict(graph.TOPICS)
+        self.writer = BagWriter(output, flush_period_s=flush_period_s)
+        for name, type_name in topics.items():
+            latched = name in LATCHED_TOPICS
+            profile = QoSProfile(depth=100, durability=DurabilityPolicy.TRANSIENT_LOCAL
+                                 if latched else DurabilityPolicy.VOLATILE)
+            publisher_qos = QoSProfile(depth=1 if latched else 10,
+                                       durability=profile.durability)
+            self.writer.add_topic(name, type_name, [offered_qos_yaml(publisher_qos)])
+            self.create_subscription(get_message(type_name), name, self._writer_for(name),
+                                     profile, raw=True)
+        self.get_logger().info(f'recording {len(topics)} topics to {self.writer.path}')
+
+    def _writer_for(self, topic: str):
+        clock = self.get_clock()
+
+        def write(data: bytes) -> None:
+            self.writer.write(topic, bytes(data), clock.now().nanoseconds)
+
+        return write
+
+    def destroy_node(self) -> None:
+        """Finish the bag, then release the node."""
+        self.writer.close()
+        self.get_logger().info(f'bag closed: {self.writer.message_count} messages in '
+                               f'{self.writer.path}')
+        super().destroy_node()
+
+
+def main(args: list[str] | None = None) -> int:
+    """Entry point: ``python -m gait_nodes.recorder -o DIR [-t TOPIC ...]``."""
+
+    def add_arguments(parser):
+        parser.add_argument('-o', '--output', default=None,
+                            help='bag directory to create (default bags/gait_<date-time>)')
+        parser.add_argument('-t', '--topics', nargs='+', default=None, metavar='TOPIC',
+                            help='topics to record (default: every contract topic); '
+                                 'non-contract topics as /name:pkg/msg/Type')
+
+    def factory(options):
+        topics = parse_topics(options.topics) if options.topics else None
+        return Recorder(output=options.output, topics=topics)
+
+    return run_node(factory, args, prog='python -m gait_nodes.recorder',
+                    description=__doc__.split('\n\n')[0], add_arguments=add_arguments)
+
+
+if __name__ == '__main__':
+    sys.exit(main())
