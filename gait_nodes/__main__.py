@@ -51,8 +51,9 @@ def build_parser() -> ArgumentParser:
     run.add_argument('--duration', type=str, default='20',
                      help='seconds to run, wall time (dds) or simulated time (inproc); '
                           'default 20')
-    run.add_argument('--record', metavar='DIR', default=None,
-                     help='record every contract topic to a rosbag2 MCAP directory')
+    run.add_argument('--record', metavar='DIR', nargs='?', const='', default=None,
+                     help='record every contract topic to a rosbag2 MCAP directory '
+                          '(default name bags/gait_<date-time>)')
     run.add_argument('--robot', default='robosimian', help='robot name in config/robots/')
     run.add_argument('--gait', default=None, help='gait: biped | crawl | trot | auto')
     run.add_argument('--nodes', default=None,
@@ -116,7 +117,7 @@ class TopicCounter:
 
 
 def _record_args(options) -> list[str]:
-    return ['-o', options.record] if options.record else []
+    return ['-o', options.record]
 
 
 def run_inproc(options, names: list[str], ros: list[str]) -> dict:
@@ -241,6 +242,8 @@ def main(args: list[str] | None = None) -> int:
         parse_ros_args(ros[1:])  # refuse a bad --params-file or -p before starting anything
         runtime_name = select_runtime(options.runtime)
         names = _selected_nodes(options)
+        if options.record == '':
+            options.record = time.strftime('bags/gait_%Y_%m_%d-%H_%M_%S')
         if options.record and not graph.module_exists(graph.RECORDER):
             raise ArgumentError('--record needs the recorder node, not installed in this '
                                 'version')

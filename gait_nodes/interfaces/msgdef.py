@@ -233,15 +233,13 @@ def _parse_constant(match: re.Match, where: str) -> ConstantDef:
 
 def schema_dir() -> Path:
     """Directory holding ``msg/<pkg>/<Name>.msg`` (installed copy first, then the source tree)."""
-    installed = Path(__file__).resolve().parent.parent / 'msgs_schema'
-    if (installed / 'msg').is_dir():
-        return installed
-    source = Path(__file__).resolve().parent.parent.parent / 'msgs_schema'
-    if (source / 'msg').is_dir():
-        return source
-    raise InterfaceError(
-        f'message definitions not found: looked in {installed} and {source}'
-    )
+    from gait_nodes.errors import ConfigError
+    from gait_nodes.paths import data_dir
+
+    try:
+        return data_dir('msgs_schema')
+    except ConfigError as exc:
+        raise InterfaceError(f'message definitions not found: {exc}') from exc
 
 
 def load_msg(type_name: str, root: Path | None = None) -> MsgDef:

@@ -21,7 +21,9 @@ _MAX_BLOCKING_NS = 100_000_000
 
 
 def _localhost_config() -> Path:
-    return Path(__file__).resolve().parent / 'cyclonedds_localhost.xml'
+    from gait_nodes.paths import config_file
+
+    return config_file('cyclonedds_localhost.xml')
 
 
 def configure_cyclonedds() -> str:
