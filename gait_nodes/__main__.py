@@ -106,6 +106,7 @@ class TopicCounter:
         return count
 
     def table(self) -> dict[str, dict]:
+        """Per topic: message count and mean rate [Hz]."""
         rows = {}
         for topic, count in self.counts.items():
             if not count:

@@ -1,23 +1,23 @@
 """Message classes and their CDR code, generated from the ROS 2 ``.msg`` definitions.
 
-Each message becomes a Cyclone DDS ``IdlStruct`` dataclass, ``@final`` (plain CDR, XCDR1) and named
-the ROS 2 way on the wire (``sensor_msgs::msg::dds_::JointState_``), so that the ``dds`` runtime can
-publish it as it is. Its ``serialize``/``deserialize`` are replaced by Python source generated per
-type: straight-line ``struct`` calls over the known field layout, which produce exactly the bytes of
-ROS 2 (rosbags' Jazzy typestore is the reference in the tests) several times faster than the
-generic interpreter of cyclonedds-python.
+Each message becomes a Cyclone DDS ``IdlStruct`` dataclass, ``@final`` (plain CDR, XCDR1) and
+named the ROS 2 way on the wire (``sensor_msgs::msg::dds_::JointState_``), so that the ``dds``
+runtime can publish it as it is. Its ``serialize``/``deserialize`` are replaced by Python source
+generated per type: straight-line ``struct`` calls over the known field layout, which produce
+exactly the bytes of ROS 2 (rosbags' Jazzy typestore is the reference in the tests) several times
+faster than the generic interpreter of cyclonedds-python.
 
 CDR rules applied (OMG CDR / XCDR1 as ROS 2 uses it): a 4-byte encapsulation header
-(``00 01 00 00`` little endian), every primitive aligned to its own size counted from the end of the
-header, strings as uint32 length including the NUL terminator, sequences as a uint32 count followed
-by the elements, no padding after the last field.
+(``00 01 00 00`` little endian), every primitive aligned to its own size counted from the end of
+the header, strings as uint32 length including the NUL terminator, sequences as a uint32 count
+followed by the elements, no padding after the last field.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import struct
-from typing import Callable
+from collections.abc import Callable
 
 import cyclonedds.idl.types as idl_types
 from cyclonedds.idl import IdlMeta, IdlStruct
@@ -387,7 +387,8 @@ def _field_default(field: FieldDef, classes: dict[str, type]) -> dataclasses.Fie
             return dataclasses.field(default_factory=lambda: list(values))
         element = _scalar_default(field, classes)
         if isinstance(element, type):
-            return dataclasses.field(default_factory=lambda: [element() for _ in range(field.size)])
+            size = field.size
+            return dataclasses.field(default_factory=lambda: [element() for _ in range(size)])
         return dataclasses.field(default_factory=lambda: [element] * field.size)
     if field.base_type == 'uint8':
         initial = bytes(field.default or b'')
@@ -426,7 +427,8 @@ def make_class(msgdef: MsgDef, definitions: dict[str, MsgDef], classes: dict[str
         """CDR bytes of this message with the 4-byte encapsulation header."""
         try:
             return serialize_fn(self)
-        except (struct.error, ValueError, TypeError, AttributeError, UnicodeError) as exc:
+        except (struct.error, ValueError, TypeError, AttributeError, UnicodeError,
+                OverflowError) as exc:
             raise SerializationError(f'cannot serialize {msgdef.type_name}: {exc}') from exc
 
     @classmethod

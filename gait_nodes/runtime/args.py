@@ -250,7 +250,7 @@ def _node_sections(document: dict, prefix: str, where: str):
 
 
 def node_pattern_matches(pattern: str, full_name: str) -> bool:
-    """Whether a params-file node key (``/**``, ``node``, ``/ns/node``, ``/*/node``) names a node."""
+    """Whether a params-file key (``/**``, ``node``, ``/ns/node``, ``/*/node``) names a node."""
     if not pattern.startswith('/'):
         pattern = '/' + pattern if '/' in pattern else '/**/' + pattern
     regex = ''

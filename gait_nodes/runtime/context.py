@@ -65,9 +65,11 @@ class Context:
         self._on_shutdown.append(callback)
 
     def register_node(self, node) -> None:
+        """Remember a node, to destroy it at shutdown."""
         self.nodes.append(node)
 
     def unregister_node(self, node) -> None:
+        """Forget a destroyed node."""
         if node in self.nodes:
             self.nodes.remove(node)
 

@@ -152,6 +152,7 @@ class DdsTransport:
         return f'typehash={type_hash(message_type_name(msg_type))};'.encode()
 
     def create_publisher(self, node, msg_type: type, name: str, profile) -> _DdsPublisher:
+        """DataWriter for a publisher, with ROS 2 QoS and type hash."""
         from cyclonedds.pub import DataWriter
 
         writer = DataWriter(self.participant, self._topic(name, msg_type),
@@ -160,6 +161,7 @@ class DdsTransport:
         return _DdsPublisher(self, writer)
 
     def create_subscription(self, node, subscription) -> _DdsSubscription:
+        """DataReader for a subscription, watched by the WaitSet."""
         from cyclonedds.core import InstanceState, ReadCondition, SampleState, ViewState
         from cyclonedds.sub import DataReader
 
@@ -173,6 +175,7 @@ class DdsTransport:
         return entry
 
     def remove_reader(self, entry: _DdsSubscription) -> None:
+        """Detach and delete a subscription's reader."""
         if entry in self.readers:
             self.readers.remove(entry)
             self.waitset.detach(entry.condition)
@@ -181,6 +184,7 @@ class DdsTransport:
 
     @staticmethod
     def delete_entity(entity) -> None:
+        """Delete a Cyclone entity now rather than at garbage collection."""
         entity.__del__()
 
     def wait(self, timeout_ns: int) -> list[tuple[object, object]]:
@@ -201,6 +205,7 @@ class DdsTransport:
         return ready
 
     def count(self, name: str, kind: str) -> int:
+        """Endpoints of this process on a topic (``kind``: publishers or subscriptions)."""
         if kind == 'subscriptions':
             return sum(1 for e in self.readers if e.subscription.topic_name == name)
         return sum(1 for w in self.writers if w.topic.name == dds_topic_name(name))

@@ -94,12 +94,14 @@ class InprocTransport:
         return topic
 
     def create_publisher(self, node, msg_type: type, name: str, profile) -> _InprocPublisher:
+        """Publisher on a topic of this process."""
         topic = self._topic(name, msg_type)
         publisher = _InprocPublisher(self, topic, msg_type, profile)
         topic.publishers.append(publisher)
         return publisher
 
     def create_subscription(self, node, subscription) -> _InprocSubscription:
+        """Subscription; a transient-local one gets the latched history at once."""
         topic = self._topic(subscription.topic_name, subscription.msg_type)
         topic.subscriptions.append(subscription)
         if subscription.qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL:
@@ -111,11 +113,13 @@ class InprocTransport:
         return _InprocSubscription(self, topic, subscription)
 
     def deliver(self, publisher: _InprocPublisher, msg) -> None:
+        """Queue ``msg`` for every compatible subscription of the topic."""
         for subscription in publisher.topic.subscriptions:
             if _compatible(publisher, subscription):
                 self.queue.append((subscription, msg))
 
     def count(self, name: str, kind: str) -> int:
+        """Endpoints on a topic (``kind``: publishers or subscriptions)."""
         topic = self.topics.get(name)
         return len(getattr(topic, kind)) if topic else 0
 
@@ -123,6 +127,7 @@ class InprocTransport:
         """Nothing waits in inproc; present for the transport interface."""
 
     def close(self) -> None:
+        """Drop pending deliveries and topics."""
         self.queue.clear()
         self.topics.clear()
 

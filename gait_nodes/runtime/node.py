@@ -195,7 +195,13 @@ class Node:
             ros_args = RosArguments()
         self._name = ros_args.node_name(node_name)
         self._namespace = ros_args.namespace(namespace)
-        self._remaps = ros_args.topic_remaps(self._name)
+        # rcl expands both sides of a rule in the node's namespace before matching, so that
+        # `chatter:=other` also remaps `/chatter` and always yields an absolute name.
+        self._remaps = {
+            expand_topic_name(source, self._name, self._namespace):
+                expand_topic_name(target, self._name, self._namespace)
+            for source, target in ros_args.topic_remaps(self._name).items()
+        }
         overrides, addressed = ros_args.overrides_for(self._name, self._namespace)
         for parameter in parameter_overrides or []:
             overrides[parameter.name] = parameter.value
@@ -276,7 +282,7 @@ class Node:
 
     def _resolve(self, topic: str) -> str:
         name = expand_topic_name(topic, self._name, self._namespace)
-        return self._remaps.get(name, self._remaps.get(topic, name))
+        return self._remaps.get(name, name)
 
     @_rclpy_forward
     def create_publisher(self, msg_type, topic: str, qos_profile, *, callback_group=None,

@@ -13,7 +13,7 @@ from gait_nodes.errors import (
 
 
 class ParameterValueError(ParameterError):
-    """An on-set callback rejected a value at declaration (rclpy's InvalidParameterValueException)."""
+    """An on-set callback rejected a value at declaration (InvalidParameterValueException)."""
 
 
 class ParameterAlreadyDeclaredError(ParameterError):
@@ -44,6 +44,10 @@ class Parameter:
         INTEGER_ARRAY = 7
         DOUBLE_ARRAY = 8
         STRING_ARRAY = 9
+
+        def __str__(self) -> str:
+            # As rclpy's (an Enum there): 'Type.DOUBLE', not IntEnum's bare number.
+            return f'Type.{self.name}'
 
         @classmethod
         def from_parameter_value(cls, value) -> Parameter.Type:
@@ -132,6 +136,7 @@ class ParameterStore:
 
     def declare(self, name: str, value=None, descriptor: ParameterDescriptor | None = None,
                 ignore_override: bool = False) -> Parameter:
+        """Declare a parameter (see ``Node.declare_parameter``)."""
         if name in self.parameters:
             raise ParameterAlreadyDeclaredError(
                 f'{self.node_name}: parameter {name!r} is already declared')
@@ -185,6 +190,7 @@ class ParameterStore:
         return SetParametersResult(True)
 
     def get(self, name: str) -> Parameter:
+        """A declared parameter; raise when undeclared."""
         if name not in self.parameters:
             if self.allow_undeclared:
                 return Parameter(name, Parameter.Type.NOT_SET, None)
@@ -194,6 +200,7 @@ class ParameterStore:
         return self.parameters[name]
 
     def set_atomically(self, parameters: list[Parameter]) -> SetParametersResult:
+        """Apply all parameters or none; the result says why not."""
         for parameter in parameters:
             if parameter.name not in self.parameters and not self.allow_undeclared:
                 raise ParameterNotDeclaredError(

@@ -43,7 +43,8 @@ class QoSProfile:
 
     def __post_init__(self):
         if self.history == HistoryPolicy.KEEP_LAST and self.depth < 1:
-            raise GaitNodesError(f'QoS depth must be >= 1 with keep-last history, got {self.depth}')
+            raise GaitNodesError(
+                f'QoS depth must be >= 1 with keep-last history, got {self.depth}')
 
 
 qos_profile_system_default = QoSProfile()
@@ -53,7 +54,7 @@ qos_profile_latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_
 
 
 def as_profile(qos_or_depth) -> QoSProfile:
-    """rclpy's rule: an int is a keep-last depth with the default profile."""
+    """Rclpy's rule: an int is a keep-last depth with the default profile."""
     if isinstance(qos_or_depth, QoSProfile):
         return qos_or_depth
     if isinstance(qos_or_depth, int) and not isinstance(qos_or_depth, bool):
