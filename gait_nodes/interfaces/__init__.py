@@ -19,7 +19,7 @@ from gait_nodes.interfaces.msgdef import MsgDef, available_types, load_msg
 
 __all__ = [
     'available_types', 'definition_text', 'deserialize_message', 'get_message', 'is_message',
-    'message_type_name', 'msgdef', 'serialize_message', 'type_hash',
+    'message_type_name', 'msgdef', 'serialize_message', 'type_hash', 'validate_message',
 ]
 
 _lock = threading.RLock()
@@ -177,3 +177,74 @@ def __getattr__(name: str) -> _Package:
     if name.endswith('_msgs') or name in ('builtin_interfaces',):
         return _Package(name)
     raise AttributeError(f'module {__name__!r} has no attribute {name!r}')
+
+
+_INT_RANGES = {
+    'byte': (0, 255), 'char': (0, 255), 'int8': (-128, 127), 'uint8': (0, 255),
+    'int16': (-(1 << 15), (1 << 15) - 1), 'uint16': (0, (1 << 16) - 1),
+    'int32': (-(1 << 31), (1 << 31) - 1), 'uint32': (0, (1 << 32) - 1),
+    'int64': (-(1 << 63), (1 << 63) - 1), 'uint64': (0, (1 << 64) - 1),
+}
+
+
+def _check_scalar(base_type: str, value, where: str) -> None:
+    import numbers
+
+    if base_type in ('float32', 'float64'):
+        ok = isinstance(value, float) or (isinstance(value, numbers.Real)
+                                          and not isinstance(value, (bool, numbers.Integral)))
+        expected = 'float'
+    elif base_type == 'bool':
+        ok, expected = isinstance(value, bool), 'bool'
+    elif base_type in _INT_RANGES:
+        low, high = _INT_RANGES[base_type]
+        ok = (isinstance(value, numbers.Integral) and not isinstance(value, bool)
+              and low <= value <= high)
+        expected = f'int in [{low}, {high}]'
+    elif base_type in ('string', 'wstring'):
+        ok, expected = isinstance(value, str), 'str'
+    else:
+        cls = generated_class(base_type)
+        if not isinstance(value, cls):
+            raise InterfaceError(f'{where} must be a {base_type}, got {type(value).__name__}')
+        validate_message(value, where)
+        return
+    if not ok:
+        raise InterfaceError(f'{where} must be {expected} ({base_type}), got {value!r}')
+
+
+def validate_message(msg, where: str | None = None) -> None:
+    """Check every field the way rclpy's message setters do (types, ranges, array sizes).
+
+    Our generated classes accept any value and only fail when serialized; rclpy refuses a wrong
+    type at assignment (``msg.x = 1`` into a float64 fails). Tests run with this check on every
+    inproc publish (``GAIT_NODES_STRICT_MESSAGES=1``) so that node code working here also works
+    on a real ROS 2 install.
+
+    Raises:
+        InterfaceError: Naming the field path, the expected type and the value.
+    """
+    definition = type(msg).__msgdef__
+    where = where or definition.type_name
+    for field in definition.fields:
+        value = getattr(msg, field.name)
+        path = f'{where}.{field.name}'
+        if field.container is None:
+            _check_scalar(field.base_type, value, path)
+            continue
+        if isinstance(value, str):
+            raise InterfaceError(f'{path} must be a sequence of {field.base_type}, got a str')
+        if field.base_type == 'uint8' and isinstance(value, (bytes, bytearray)):
+            items = list(value)
+        else:
+            try:
+                items = list(value)
+            except TypeError:
+                raise InterfaceError(f'{path} must be a sequence, got {value!r}') from None
+        if field.container == 'array' and len(items) != field.size:
+            raise InterfaceError(f'{path} must have exactly {field.size} elements, '
+                                 f'got {len(items)}')
+        if field.container == 'sequence' and field.size and len(items) > field.size:
+            raise InterfaceError(f'{path} has {len(items)} elements, at most {field.size}')
+        for index, item in enumerate(items):
+            _check_scalar(field.base_type, item, f'{path}[{index}]')

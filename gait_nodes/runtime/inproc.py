@@ -12,7 +12,9 @@ received message as read-only, as rclpy's intra-process communication also requi
 from __future__ import annotations
 
 import collections
+import os
 
+from gait_nodes.interfaces import validate_message
 from gait_nodes.runtime.qos import DurabilityPolicy, ReliabilityPolicy
 
 
@@ -34,6 +36,8 @@ class _InprocPublisher:
         self.history = collections.deque(maxlen=profile.depth) if latched else None
 
     def publish(self, msg) -> None:
+        if self.transport.strict:
+            validate_message(msg)
         if self.history is not None:
             self.history.append(msg)
         self.transport.deliver(self, msg)
@@ -81,6 +85,8 @@ class InprocTransport:
         self.queue: collections.deque = collections.deque()
         self.delivered = 0
         self.sim_time_source = self._now
+        #: Check every published message as rclpy's setters would (see validate_message).
+        self.strict = os.environ.get('GAIT_NODES_STRICT_MESSAGES', '') not in ('', '0')
 
     def _now(self) -> int:
         return self.now_ns
