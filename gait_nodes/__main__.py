@@ -133,7 +133,9 @@ def run_inproc(options, names: list[str], ros: list[str]) -> dict:
         if options.record:
             recorder_class = graph.load_class(graph.RECORDER)
             executor.add_node(recorder_class(output=options.record))
-        monitor = runtime.Node('gait_run_monitor')
+        # The monitor is ours, not the user's: the graph's -p/-r do not address it (as in
+        # run_processes, where it never sees them).
+        monitor = runtime.Node('gait_run_monitor', use_global_arguments=False)
         counter = TopicCounter(monitor)
         executor.add_node(monitor)
         start = time.perf_counter()

@@ -19,6 +19,23 @@ from gait_nodes.errors import ArgumentError, ParameterError
 LOG_LEVELS = ('debug', 'info', 'warn', 'error', 'fatal')
 
 
+class _RclYamlLoader(yaml.SafeLoader):
+    """YAML as rcl reads parameter values: no timestamps (``2024-01-01`` stays a string)."""
+
+
+_RclYamlLoader.yaml_implicit_resolvers = {
+    first: [(tag, regex) for tag, regex in resolvers if tag != 'tag:yaml.org,2002:timestamp']
+    for first, resolvers in yaml.SafeLoader.yaml_implicit_resolvers.items()
+}
+
+
+def _yaml_problem(exc: yaml.YAMLError) -> str:
+    """One line saying what is wrong with a YAML text and where."""
+    mark = getattr(exc, 'problem_mark', None)
+    at = f' at line {mark.line + 1}, column {mark.column + 1}' if mark is not None else ''
+    return f'{getattr(exc, "problem", None) or exc}{at}'
+
+
 @dataclasses.dataclass
 class RosArguments:
     """What ``--ros-args`` sections said, in command-line order."""
@@ -81,9 +98,10 @@ class RosArguments:
 def parse_value(text: str) -> object:
     """A parameter value from its command-line text, read as YAML the way rcl reads it."""
     try:
-        value = yaml.safe_load(text) if text.strip() else ''
+        value = yaml.load(text, Loader=_RclYamlLoader) if text.strip() else ''
     except yaml.YAMLError as exc:
-        raise ArgumentError(f'cannot parse parameter value {text!r}: {exc}') from exc
+        raise ArgumentError(
+            f'cannot parse parameter value {text!r}: {_yaml_problem(exc)}') from exc
     if value is None:
         return text
     return value
@@ -132,7 +150,11 @@ def parse_ros_args(ros: list[str]) -> RosArguments:
         arg = ros[i]
         if arg in ('-p', '--param'):
             node, name, text = _split_assignment(operand(arg), arg)
-            parsed.params.append((node, name, parse_value(text)))
+            try:
+                value = parse_value(text)
+            except ArgumentError as exc:
+                raise ArgumentError(f'{arg} {name}: {exc}') from exc
+            parsed.params.append((node, name, value))
         elif arg == '--params-file':
             path = Path(operand(arg))
             parsed.params_files.append(path)
@@ -208,13 +230,13 @@ def load_params_file(path: Path) -> list[tuple[str, dict[str, object]]]:
         text = Path(path).read_text(encoding='utf-8')
     except OSError as exc:
         raise ParameterError(f'{where}: cannot read: {exc.strerror or exc}') from exc
+    except UnicodeDecodeError as exc:
+        raise ParameterError(
+            f'{where}: not UTF-8 text: {exc.reason} at byte {exc.start}') from exc
     try:
-        document = yaml.safe_load(text)
+        document = yaml.load(text, Loader=_RclYamlLoader)
     except yaml.YAMLError as exc:
-        mark = getattr(exc, 'problem_mark', None)
-        at = f' at line {mark.line + 1}' if mark is not None else ''
-        raise ParameterError(f'{where}: not valid YAML{at}: '
-                             f'{getattr(exc, "problem", None) or exc}') from exc
+        raise ParameterError(f'{where}: not valid YAML: {_yaml_problem(exc)}') from exc
     if not isinstance(document, dict) or not document:
         raise ParameterError(f'{where}: expected a mapping of node names to '
                              "{ros__parameters: {...}}, got " + type(document).__name__)

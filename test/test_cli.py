@@ -1,0 +1,179 @@
+"""Command lines: ``python -m gait_nodes run`` and node entry points built with ``run_node``.
+
+Bad input must end with exit status 2 and one line on stderr, never a traceback.
+"""
+
+import os
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parent.parent
+
+#: A node entry point as every gait node writes one: a class and ``run_node``.
+GAIN_NODE = """\
+    import sys
+
+    from gait_nodes import runtime
+    from gait_nodes.cli import run_node
+
+
+    class GainNode(runtime.Node):
+        \"\"\"Declares one float parameter and prints it.\"\"\"
+
+        def __init__(self):
+            super().__init__('gain_node')
+            gain = self.declare_parameter('gain', 1.0).value
+            print(f'gain={gain!r}', flush=True)
+
+
+    if __name__ == '__main__':
+        sys.exit(run_node(lambda options: GainNode(), prog='gain_node',
+                          description='A node with one float parameter, gain.'))
+    """
+
+
+def env_with(**values: str) -> dict[str, str]:
+    env = dict(os.environ)
+    env.pop('GAIT_NODES_RUNTIME', None)
+    env['PYTHONPATH'] = str(REPO)
+    env.update(values)
+    return env
+
+
+def run(args: list[str], *, cwd: Path, **env: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, *args], cwd=cwd, env=env_with(**env),
+                          capture_output=True, text=True, timeout=60)
+
+
+def assert_bad_input(result: subprocess.CompletedProcess, *words: str) -> None:
+    """Exit 2, exactly one line on stderr naming the problem, no traceback."""
+    assert result.returncode == 2, (result.stdout, result.stderr)
+    assert 'Traceback' not in result.stderr
+    lines = result.stderr.splitlines()
+    assert len(lines) == 1, result.stderr
+    assert 'error' in lines[0]
+    for word in words:
+        assert word in lines[0]
+
+
+@pytest.fixture
+def gain_node(tmp_path) -> Path:
+    path = tmp_path / 'gain_node.py'
+    path.write_text(textwrap.dedent(GAIN_NODE))
+    return path
+
+
+def test_run_inproc_prints_a_summary(tmp_path):
+    result = run(['-m', 'gait_nodes', 'run', '--runtime', 'inproc', '--duration', '2'],
+                 cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    assert 'Traceback' not in result.stderr
+    assert 'gait_nodes run: runtime inproc' in result.stdout
+    assert 'simulated 2.00 s' in result.stdout
+
+
+def test_run_inproc_json_summary(tmp_path):
+    import json
+
+    result = run(['-m', 'gait_nodes', 'run', '--runtime', 'inproc', '--duration', '1.5',
+                  '--json'], cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    summary = json.loads(result.stdout)
+    assert summary['runtime'] == 'inproc'
+    assert summary['simulated_s'] == 1.5
+    assert summary['exit_codes'] == {}
+
+
+@pytest.mark.parametrize(('args', 'env', 'words'), [
+    (['--runtime', 'bogus'], {}, ['bogus']),
+    ([], {'GAIT_NODES_RUNTIME': 'bogus'}, ['bogus', 'inproc']),
+    (['--runtime', 'inproc', '--duration', '-1'], {}, ['-1']),
+    (['--runtime', 'inproc', '--duration', 'soon'], {}, ['soon']),
+    (['--runtime', 'inproc', '--duration', 'nan'], {}, ['nan']),
+    (['--runtime', 'inproc', '--nodes', 'teleporter'], {}, ['teleporter']),
+    (['--runtime', 'inproc', '--ros-args', '--bogus'], {}, ['--bogus']),
+    (['--runtime', 'inproc', '--ros-args', '-p', 'gain'], {}, ['gain']),
+    (['--runtime', 'inproc', '--ros-args', '--params-file', 'missing.yaml'], {},
+     ['missing.yaml']),
+    (['--runtime', 'inproc', '--ros-args', '--params-file', 'bad.yaml'], {}, ['bad.yaml']),
+    (['--runtime', 'inproc', '--ros-args', '--params-file', 'list.yaml'], {}, ['list.yaml']),
+    (['--runtime', 'inproc', '--ros-args', '--params-file', 'binary.yaml'], {},
+     ['binary.yaml']),
+    (['--runtime', 'inproc', '--ros-args', '-p', 'robot:=[biped,'], {}, ['robot', 'line 1']),
+    (['--runtime', 'rclpy'], {}, ['rclpy']),
+    (['--no-such-option'], {}, ['--no-such-option']),
+], ids=['runtime-flag', 'runtime-env', 'negative-duration', 'word-duration', 'nan-duration',
+        'unknown-node', 'unknown-ros-flag', 'param-without-value', 'missing-params-file',
+        'bad-yaml-params-file', 'list-params-file', 'binary-params-file', 'bad-yaml-value',
+        'rclpy-without-ros', 'unknown-option'])
+def test_run_refuses_bad_input_on_one_line(tmp_path, args, env, words):
+    (tmp_path / 'bad.yaml').write_text('/**: {ros__parameters: {robot: [biped}}\n')
+    (tmp_path / 'list.yaml').write_text('- robot\n- biped\n')
+    (tmp_path / 'binary.yaml').write_bytes(b'\xff\xfe\x00r\x00o\x00b\x00o\x00t')
+    result = run(['-m', 'gait_nodes', 'run', *args], cwd=tmp_path, **env)
+    assert_bad_input(result, *words)
+
+
+def test_run_overrides_do_not_address_the_internal_monitor(tmp_path):
+    # Only the monitor runs here; a graph-wide override is not its unknown parameter.
+    result = run(['-m', 'gait_nodes', 'run', '--runtime', 'inproc', '--nodes', '',
+                  '--duration', '1', '--ros-args', '-p', 'robot:=biped'], cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    assert 'gait_nodes run: runtime inproc' in result.stdout
+
+
+def test_run_without_command_is_refused(tmp_path):
+    assert_bad_input(run(['-m', 'gait_nodes'], cwd=tmp_path))
+
+
+def test_node_entry_point_takes_a_parameter(tmp_path, gain_node):
+    result = run([str(gain_node), '--ros-args', '-p', 'gain:=2.5'], cwd=tmp_path,
+                 GAIT_NODES_RUNTIME='inproc')
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.splitlines() == ['gain=2.5']
+
+
+def test_node_entry_point_takes_a_params_file(tmp_path, gain_node):
+    (tmp_path / 'gain.yaml').write_text('gain_node:\n  ros__parameters:\n    gain: 0.75\n')
+    result = run([str(gain_node), '--runtime', 'inproc', '--ros-args', '--params-file',
+                  'gain.yaml'], cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.splitlines() == ['gain=0.75']
+
+
+@pytest.mark.parametrize(('ros_args', 'words'), [
+    (['-p', 'gain:=abc'], ['gain', 'Wrong parameter type']),
+    (['-p', 'nope:=1'], ['nope', 'gain']),
+    (['--bogus'], ['--bogus']),
+    (['--params-file', 'missing.yaml'], ['missing.yaml']),
+    (['-p', 'gain:=[1.0,'], ['gain', 'line 1']),
+], ids=['wrong-type', 'unknown-parameter', 'unknown-ros-flag', 'missing-params-file',
+        'bad-yaml-value'])
+def test_node_entry_point_refuses_bad_input_on_one_line(tmp_path, gain_node, ros_args, words):
+    result = run([str(gain_node), '--ros-args', *ros_args], cwd=tmp_path,
+                 GAIT_NODES_RUNTIME='inproc')
+    assert_bad_input(result, 'gain_node', *words)
+
+
+def test_node_entry_point_refuses_unknown_runtime(tmp_path, gain_node):
+    assert_bad_input(run([str(gain_node), '--runtime', 'bogus'], cwd=tmp_path), 'bogus')
+    assert_bad_input(run([str(gain_node)], cwd=tmp_path, GAIT_NODES_RUNTIME='bogus'), 'bogus')
+
+
+def test_node_entry_point_help(tmp_path, gain_node):
+    result = run([str(gain_node), '--help'], cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    assert 'one float parameter' in result.stdout
+    assert '--ros-args' in result.stdout or '-p name:=value' in result.stdout
+    assert '--runtime' in result.stdout
+    assert result.stderr == ''
+
+
+def test_run_help(tmp_path):
+    result = run(['-m', 'gait_nodes', 'run', '--help'], cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    assert '--duration' in result.stdout and '--runtime' in result.stdout
