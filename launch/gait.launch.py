@@ -1,0 +1,98 @@
+"""Start the gait_nodes graph on a ROS 2 Jazzy machine.
+
+Usage::
+
+    ros2 launch gait_nodes gait.launch.py robot:=robosimian gait:=crawl
+    ros2 launch gait_nodes gait.launch.py record:=bags/walk   # also record to an MCAP bag
+
+Each node loads ``share/gait_nodes/config/<node>.yaml`` when the package ships one, then the
+launch arguments. Without ROS, ``python -m gait_nodes run`` starts the same graph.
+"""
+
+import os
+
+from ament_index_python.packages import get_package_share_directory
+from launch import LaunchDescription
+from launch.actions import DeclareLaunchArgument
+from launch.conditions import IfCondition
+from launch.substitutions import LaunchConfiguration, NotEqualsSubstitution
+from launch_ros.actions import Node
+from launch_ros.parameter_descriptions import ParameterValue
+
+PACKAGE = 'gait_nodes'
+
+#: Nodes of the walking pipeline, in data-flow order.
+GAIT_NODES = (
+    'footstep_planner',
+    'com_preview_controller',
+    'swing_leg_policy',
+    'whole_body_ik',
+    'kinematic_simulator',
+)
+
+
+def _params_file(node_name):
+    """Shipped params file of ``node_name`` as a list of zero or one path."""
+    path = os.path.join(get_package_share_directory(PACKAGE), 'config', f'{node_name}.yaml')
+    return [path] if os.path.exists(path) else []
+
+
+def generate_launch_description():
+    """Declare the launch arguments and the gait nodes, plus the recorder when asked."""
+    # Typed, so that a robot or gait name is never read as YAML (`on` -> true).
+    robot = ParameterValue(LaunchConfiguration('robot'), value_type=str)
+    gait = ParameterValue(LaunchConfiguration('gait'), value_type=str)
+    use_sim_time = ParameterValue(LaunchConfiguration('use_sim_time'), value_type=bool)
+    record = LaunchConfiguration('record')
+
+    arguments = [
+        DeclareLaunchArgument(
+            'robot',
+            default_value='robosimian',
+            description='Robot name: config/robots/<robot>.yaml and its URDF.',
+        ),
+        DeclareLaunchArgument(
+            'gait',
+            default_value='crawl',
+            description='Initial gait of the footstep planner (crawl, trot, ...).',
+        ),
+        DeclareLaunchArgument(
+            'use_sim_time',
+            default_value='true',
+            description='Follow /clock, published by kinematic_simulator.',
+        ),
+        DeclareLaunchArgument(
+            'record',
+            default_value='',
+            description='Output bag directory of the recorder; empty: do not record.',
+        ),
+    ]
+
+    nodes = []
+    for node_name in GAIT_NODES:
+        overrides = {'use_sim_time': use_sim_time, 'robot': robot}
+        if node_name == 'footstep_planner':
+            overrides['gait'] = gait
+        nodes.append(
+            Node(
+                package=PACKAGE,
+                executable=node_name,
+                name=node_name,
+                output='screen',
+                parameters=[*_params_file(node_name), overrides],
+            )
+        )
+
+    nodes.append(
+        Node(
+            package=PACKAGE,
+            executable='recorder',
+            name='recorder',
+            output='screen',
+            arguments=['-o', record],
+            parameters=[*_params_file('recorder'), {'use_sim_time': use_sim_time}],
+            condition=IfCondition(NotEqualsSubstitution(record, '')),
+        )
+    )
+
+    return LaunchDescription(arguments + nodes)
