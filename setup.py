@@ -147,7 +147,7 @@ setup(
     },
     zip_safe=True,
     maintainer='gait_nodes maintainers',
-    maintainer_email='maintainers@users.noreply.h-seed-cc0c3470.example',
+    maintainer_email='gait-nodes@example.org',
     description='Walking-gait generation for legged robots as ROS 2 nodes, with or without ROS.',
     license='Apache-2.0',
     entry_points={
