@@ -1,7 +1,7 @@
 """``python -m gait_nodes run ...``: start the whole gait graph, stop it cleanly, print a summary.
 
-With ``--runtime dds`` every node is its own process (``python -m gait_nodes.<node>``), as on a
-robot; with ``--runtime inproc`` all nodes share one process and one lockstep executor, and the
+With --runtime dds every node is its own process (python -m gait_nodes.<node>), as on a
+robot; with --runtime inproc all nodes share one process and one lockstep executor, and the
 duration is simulated time. The command starts whichever contract nodes are installed.
 """
 
@@ -40,10 +40,11 @@ def _positive_float(text: str) -> float:
 
 def build_parser() -> ArgumentParser:
     """The ``run`` command line."""
-    parser = ArgumentParser(prog=PROG, description=__doc__.split('\n\n')[0])
+    parser = ArgumentParser(prog=PROG, description='Start the whole gait graph, stop it '
+                            'cleanly, print a summary.')
     commands = parser.add_subparsers(dest='command', required=True, metavar='run')
-    run = commands.add_parser('run', help='start the node graph', description=__doc__,
-                              epilog=parser.epilog)
+    run = commands.add_parser('run', help='start the node graph',
+                              description=__doc__.split('\n\n', 1)[1], epilog=parser.epilog)
     run.error = parser.error
     run.add_argument('--runtime', choices=['dds', 'inproc', 'rclpy'], default=None,
                      help='dds: one process per node; inproc: one process, simulated time '
