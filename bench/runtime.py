@@ -95,6 +95,26 @@ def measure_sleep_overshoot(samples: int = 200, request_s: float = 0.0005) -> di
     return {'p50': percentile(over, 50), 'p99': percentile(over, 99), 'max': max(over)}
 
 
+def make_sender(joint_state_type, header_type, payload, publish):
+    """``send(i)``: build a JointState stamped with the send time [ns] and hand it to ``publish``.
+
+    The same builder serves our runtime and raw cyclonedds, so both sides do identical work.
+    """
+    names, position, velocity, effort = payload
+    time_ns = time.time_ns
+
+    def send(i):
+        msg = joint_state_type(header=header_type(frame_id='base_link'), name=names,
+                               position=position, velocity=velocity, effort=effort)
+        now = time_ns()
+        stamp = msg.header.stamp
+        stamp.sec = now // NS
+        stamp.nanosec = now % NS
+        publish(msg)
+
+    return send
+
+
 def paced_loop(send, rate: float, seconds: float, spin_margin_s: float) -> dict:
     """Call ``send(i)`` on a ``1/rate`` grid of time.perf_counter for ``seconds``.
 
@@ -262,17 +282,8 @@ def role_ours_send(args) -> None:
     names, position, velocity, effort = joint_payload(args.joints)
     overshoot = measure_sleep_overshoot()
     margin = spin_margin(overshoot)
-    publish = publisher.publish
-    time_ns = time.time_ns
-
-    def send(i):
-        msg = JointState(header=Header(frame_id='base_link'), name=names, position=position,
-                         velocity=velocity, effort=effort)
-        now = time_ns()
-        stamp = msg.header.stamp
-        stamp.sec = now // NS
-        stamp.nanosec = now % NS
-        publish(msg)
+    send = make_sender(JointState, Header, (names, position, velocity, effort),
+                       publisher.publish)
 
     profiler = maybe_profile(args)
     result = paced_loop(send, args.rate, args.seconds, margin)
@@ -417,17 +428,7 @@ def role_raw_send(args) -> None:
     names, position, velocity, effort = joint_payload(args.joints)
     overshoot = measure_sleep_overshoot()
     margin = spin_margin(overshoot)
-    write = writer.write
-    time_ns = time.time_ns
-
-    def send(i):
-        msg = JointState(header=Header(frame_id='base_link'), name=names, position=position,
-                         velocity=velocity, effort=effort)
-        now = time_ns()
-        stamp = msg.header.stamp
-        stamp.sec = now // NS
-        stamp.nanosec = now % NS
-        write(msg)
+    send = make_sender(JointState, Header, (names, position, velocity, effort), writer.write)
 
     profiler = maybe_profile(args)
     result = paced_loop(send, args.rate, args.seconds, margin)
