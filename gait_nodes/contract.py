@@ -1,0 +1,521 @@
+"""The public topic contract's message layouts, as plain data with converters both ways.
+
+Every node and bag tool that reads or writes a gait topic goes through this module, so that a
+layout is spelled once (DESIGN.md, "Nodes and the public topic contract"):
+
+``/gait/footsteps`` (trajectory_msgs/MultiDOFJointTrajectory, latched)
+    ``header.frame_id`` = ``odom``; ``header.stamp`` = the plan's start time; ``joint_names`` = the
+    foot names; one point per contact change, ``time_from_start`` from the plan start, with one
+    ``transforms`` entry per foot: where that foot is at that instant (a foot in swing is listed
+    at its landing place from the touch-down point on). A foot is in swing over
+    ``[t_k, t_{k+1}]`` exactly when its transform differs between points ``k`` and ``k + 1``;
+    the planner never emits a zero-length step, so "moved" and "swung" are the same thing.
+``/gait/zmp_reference`` (nav_msgs/Path)
+    ``header.frame_id`` = ``odom``, ``header.stamp`` = the first sample's time; each pose is one
+    sample of the ZMP reference stamped at its own (future) time, ``z = 0``, identity
+    orientation. Between samples the reference is linear in time.
+``/gait/com_reference`` (trajectory_msgs/MultiDOFJointTrajectory)
+    ``joint_names`` = ``['com']``; point 0 is the state at ``header.stamp``: COM position in
+    ``transforms[0].translation`` with the body yaw in its rotation, velocity in
+    ``velocities[0].linear`` (yaw rate in ``angular.z``), acceleration in
+    ``accelerations[0].linear``. Further points, if any, are the planned horizon.
+``/gait/swing_trajectory`` (trajectory_msgs/MultiDOFJointTrajectory)
+    ``joint_names`` = ``[foot]``; ``header.stamp`` = lift-off time; one point per waypoint with
+    the foot position and yaw (rotation about z) and ``time_from_start`` from lift-off. The first
+    point is the lift-off place, the last the landing place.
+
+Times are integer nanoseconds at the message boundary and float seconds inside the arrays.
+Converters from messages validate what they read and raise :class:`ContractError` with the reason;
+nodes turn that into a /diagnostics report and drop the message.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from gait_nodes.errors import GaitNodesError
+from gait_nodes.interfaces import get_message
+
+#: World frame of every planned quantity (REP-105).
+WORLD_FRAME = 'odom'
+#: Body frame of the robot.
+BASE_FRAME = 'base_link'
+#: Joint name carried by /gait/com_reference.
+COM_JOINT_NAME = 'com'
+#: Two foot transforms closer than this [m, rad] are "the same place".
+SAME_PLACE_TOLERANCE = 1e-9
+
+
+class ContractError(GaitNodesError):
+    """A message breaks the topic contract: shape, frame, ordering or a non-finite value."""
+
+
+def ns_to_time_msg(stamp_ns: int):
+    """builtin_interfaces/Time for integer nanoseconds since the epoch (or since sim start)."""
+    msg = get_message('builtin_interfaces/msg/Time')()
+    msg.sec, msg.nanosec = divmod(int(stamp_ns), 1_000_000_000)
+    return msg
+
+
+def time_msg_to_ns(msg) -> int:
+    """Integer nanoseconds of a builtin_interfaces/Time."""
+    return int(msg.sec) * 1_000_000_000 + int(msg.nanosec)
+
+
+def seconds_to_duration_msg(seconds: float):
+    """builtin_interfaces/Duration for a non-negative number of seconds, rounded to 1 ns."""
+    msg = get_message('builtin_interfaces/msg/Duration')()
+    msg.sec, msg.nanosec = divmod(int(round(seconds * 1e9)), 1_000_000_000)
+    return msg
+
+
+def duration_msg_to_seconds(msg) -> float:
+    """Seconds of a builtin_interfaces/Duration."""
+    return int(msg.sec) + int(msg.nanosec) * 1e-9
+
+
+def yaw_to_quaternion(yaw_rad: float) -> tuple[float, float, float, float]:
+    """(x, y, z, w) of a rotation by ``yaw_rad`` about z."""
+    return (0.0, 0.0, math.sin(0.5 * yaw_rad), math.cos(0.5 * yaw_rad))
+
+
+def quaternion_to_yaw(x: float, y: float, z: float, w: float) -> float:
+    """Yaw [rad] of a quaternion (the z-y-x Euler angle about z), in (-pi, pi]."""
+    return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+
+
+def _frozen(array) -> np.ndarray:
+    result = np.array(array, dtype=float)
+    result.setflags(write=False)
+    return result
+
+
+def _check_finite(values: np.ndarray, what: str) -> None:
+    if not np.all(np.isfinite(values)):
+        raise ContractError(f'{what} holds a NaN or infinite value')
+
+
+def _check_frame(header, what: str) -> None:
+    if header.frame_id != WORLD_FRAME:
+        raise ContractError(f'{what} is in frame {header.frame_id!r}; the contract frame is '
+                            f'{WORLD_FRAME!r}')
+
+
+def _transform(position: Sequence[float], yaw_rad: float):
+    msg = get_message('geometry_msgs/msg/Transform')()
+    msg.translation.x, msg.translation.y, msg.translation.z = (float(v) for v in position)
+    q = yaw_to_quaternion(float(yaw_rad))
+    msg.rotation.x, msg.rotation.y, msg.rotation.z, msg.rotation.w = q
+    return msg
+
+
+def _transform_values(msg) -> tuple[list[float], float]:
+    t, r = msg.translation, msg.rotation
+    return [t.x, t.y, t.z], quaternion_to_yaw(r.x, r.y, r.z, r.w)
+
+
+def _twist(linear: Sequence[float], angular_z: float = 0.0):
+    msg = get_message('geometry_msgs/msg/Twist')()
+    msg.linear.x, msg.linear.y, msg.linear.z = (float(v) for v in linear)
+    msg.angular.z = float(angular_z)
+    return msg
+
+
+# -- /gait/footsteps -------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Swing:
+    """One swing of one foot, read off a :class:`FootstepPlan`.
+
+    Attributes:
+        foot: Foot name.
+        lift_off_s: Lift-off time from the plan start [s].
+        touch_down_s: Touch-down time from the plan start [s].
+        start_in_world: Lift-off position (3,) in odom [m].
+        end_in_world: Landing position (3,) in odom [m].
+        start_yaw_rad: Foot yaw at lift-off [rad].
+        end_yaw_rad: Foot yaw at landing [rad].
+    """
+
+    foot: str
+    lift_off_s: float
+    touch_down_s: float
+    start_in_world: np.ndarray
+    end_in_world: np.ndarray
+    start_yaw_rad: float
+    end_yaw_rad: float
+
+    @property
+    def duration_s(self) -> float:
+        """Swing time [s]."""
+        return self.touch_down_s - self.lift_off_s
+
+
+@dataclass(frozen=True)
+class FootstepPlan:
+    """Planned foot placements at each contact change.
+
+    Attributes:
+        start_ns: Plan start time [ns] (ROS time of ``time_from_start = 0``).
+        foot_names: Foot names, in the robot YAML's order.
+        times_s: (K,) contact-change times from the start [s], non-decreasing.
+        positions_in_world: (K, F, 3) foot positions at each time [m].
+        yaws_rad: (K, F) foot yaw at each time [rad].
+    """
+
+    start_ns: int
+    foot_names: tuple[str, ...]
+    times_s: np.ndarray
+    positions_in_world: np.ndarray
+    yaws_rad: np.ndarray
+    _swings: tuple[Swing, ...] | None = field(default=None, repr=False, compare=False)
+
+    def __post_init__(self):
+        times = _frozen(self.times_s)
+        positions = _frozen(self.positions_in_world)
+        yaws = _frozen(self.yaws_rad)
+        count, feet = len(times), len(self.foot_names)
+        if count < 1 or feet < 1:
+            raise ContractError(f'a footstep plan needs at least one point and one foot, got '
+                                f'{count} points and {feet} feet')
+        if positions.shape != (count, feet, 3) or yaws.shape != (count, feet):
+            raise ContractError(f'footstep plan shapes disagree: times ({count},), positions '
+                                f'{positions.shape}, yaws {yaws.shape} for {feet} feet')
+        if len(set(self.foot_names)) != feet:
+            raise ContractError(f'foot names repeat: {list(self.foot_names)}')
+        _check_finite(times, 'footstep times')
+        _check_finite(positions, 'footstep positions')
+        _check_finite(yaws, 'footstep yaws')
+        if np.any(np.diff(times) < 0):
+            raise ContractError('footstep times go backwards')
+        object.__setattr__(self, 'foot_names', tuple(self.foot_names))
+        object.__setattr__(self, 'times_s', times)
+        object.__setattr__(self, 'positions_in_world', positions)
+        object.__setattr__(self, 'yaws_rad', yaws)
+
+    @property
+    def end_s(self) -> float:
+        """Time of the last contact change from the start [s]."""
+        return float(self.times_s[-1])
+
+    def moved(self) -> np.ndarray:
+        """(K-1, F) booleans: foot ``f`` swings over ``[t_k, t_{k+1}]``."""
+        step = np.linalg.norm(np.diff(self.positions_in_world, axis=0), axis=2)
+        turn = np.abs(np.angle(np.exp(1j * np.diff(self.yaws_rad, axis=0))))
+        return (step > SAME_PLACE_TOLERANCE) | (turn > SAME_PLACE_TOLERANCE)
+
+    def swings(self) -> tuple[Swing, ...]:
+        """Every swing in the plan, ordered by lift-off time then foot order."""
+        if self._swings is None:
+            found = []
+            for k, f in zip(*np.nonzero(self.moved()), strict=True):
+                found.append(Swing(
+                    foot=self.foot_names[f],
+                    lift_off_s=float(self.times_s[k]),
+                    touch_down_s=float(self.times_s[k + 1]),
+                    start_in_world=self.positions_in_world[k, f],
+                    end_in_world=self.positions_in_world[k + 1, f],
+                    start_yaw_rad=float(self.yaws_rad[k, f]),
+                    end_yaw_rad=float(self.yaws_rad[k + 1, f]),
+                ))
+            found.sort(key=lambda s: (s.lift_off_s, self.foot_names.index(s.foot)))
+            object.__setattr__(self, '_swings', tuple(found))
+        return self._swings
+
+    def contacts_at(self, t_s: float) -> np.ndarray:
+        """(F,) booleans: which feet are on the ground at ``t_s`` from the start.
+
+        At an instant shared by a touch-down and a lift-off both feet count as down.
+        """
+        down = np.ones(len(self.foot_names), dtype=bool)
+        for swing in self.swings():
+            if swing.lift_off_s < t_s < swing.touch_down_s:
+                down[self.foot_names.index(swing.foot)] = False
+        return down
+
+    def index_at(self, t_s: float) -> int:
+        """Index of the last point at or before ``t_s`` (0 before the start)."""
+        return max(int(np.searchsorted(self.times_s, t_s, side='right')) - 1, 0)
+
+    def stance_positions_at(self, t_s: float) -> np.ndarray:
+        """(F, 3) positions: stance feet where they stand, swing feet at their lift-off place."""
+        return self.positions_in_world[self.index_at(t_s)]
+
+
+def footsteps_to_msg(plan: FootstepPlan):
+    """trajectory_msgs/MultiDOFJointTrajectory for ``plan`` (layout in the module docstring)."""
+    msg = get_message('trajectory_msgs/msg/MultiDOFJointTrajectory')()
+    point_type = get_message('trajectory_msgs/msg/MultiDOFJointTrajectoryPoint')
+    msg.header.frame_id = WORLD_FRAME
+    msg.header.stamp = ns_to_time_msg(plan.start_ns)
+    msg.joint_names = list(plan.foot_names)
+    points = []
+    for k, t_s in enumerate(plan.times_s):
+        point = point_type()
+        point.transforms = [_transform(plan.positions_in_world[k, f], plan.yaws_rad[k, f])
+                            for f in range(len(plan.foot_names))]
+        point.time_from_start = seconds_to_duration_msg(float(t_s))
+        points.append(point)
+    msg.points = points
+    return msg
+
+
+def footsteps_from_msg(msg) -> FootstepPlan:
+    """The :class:`FootstepPlan` of a /gait/footsteps message; ContractError if malformed."""
+    _check_frame(msg.header, '/gait/footsteps')
+    feet = len(msg.joint_names)
+    if not msg.points:
+        raise ContractError('/gait/footsteps has no points')
+    times, positions, yaws = [], [], []
+    for k, point in enumerate(msg.points):
+        if len(point.transforms) != feet:
+            raise ContractError(f'/gait/footsteps point {k} has {len(point.transforms)} '
+                                f'transforms for {feet} feet')
+        times.append(duration_msg_to_seconds(point.time_from_start))
+        row = [_transform_values(t) for t in point.transforms]
+        positions.append([p for p, _ in row])
+        yaws.append([y for _, y in row])
+    return FootstepPlan(time_msg_to_ns(msg.header.stamp), tuple(msg.joint_names),
+                        np.array(times), np.array(positions), np.array(yaws))
+
+
+# -- /gait/zmp_reference ---------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class ZmpReference:
+    """Samples of the ZMP reference, linear in time between samples.
+
+    Attributes:
+        stamps_ns: (N,) sample times [ns], strictly increasing.
+        zmp_in_world: (N, 2) ZMP reference in odom [m].
+    """
+
+    stamps_ns: np.ndarray
+    zmp_in_world: np.ndarray
+
+    def __post_init__(self):
+        stamps = np.array(self.stamps_ns, dtype=np.int64)
+        stamps.setflags(write=False)
+        zmp = _frozen(self.zmp_in_world)
+        if len(stamps) < 1:
+            raise ContractError('the ZMP reference is empty')
+        if zmp.shape != (len(stamps), 2):
+            raise ContractError(f'ZMP reference shape {zmp.shape} for {len(stamps)} stamps')
+        _check_finite(zmp, 'the ZMP reference')
+        if np.any(np.diff(stamps) <= 0):
+            raise ContractError('ZMP reference stamps are not strictly increasing')
+        object.__setattr__(self, 'stamps_ns', stamps)
+        object.__setattr__(self, 'zmp_in_world', zmp)
+
+    @property
+    def horizon_s(self) -> float:
+        """Time from the first to the last sample [s]."""
+        return (int(self.stamps_ns[-1]) - int(self.stamps_ns[0])) * 1e-9
+
+    def sample(self, stamps_ns: np.ndarray) -> np.ndarray:
+        """(M, 2) reference at ``stamps_ns``, linear between samples, held beyond the ends."""
+        origin = int(self.stamps_ns[0])
+        t = (np.asarray(stamps_ns, dtype=np.int64) - origin) * 1e-9
+        known = (self.stamps_ns - origin) * 1e-9
+        return np.stack([np.interp(t, known, self.zmp_in_world[:, i]) for i in range(2)],
+                        axis=-1)
+
+
+def zmp_reference_to_msg(reference: ZmpReference):
+    """nav_msgs/Path for ``reference`` (layout in the module docstring)."""
+    msg = get_message('nav_msgs/msg/Path')()
+    pose_type = get_message('geometry_msgs/msg/PoseStamped')
+    msg.header.frame_id = WORLD_FRAME
+    msg.header.stamp = ns_to_time_msg(int(reference.stamps_ns[0]))
+    poses = []
+    for stamp_ns, (x, y) in zip(reference.stamps_ns, reference.zmp_in_world, strict=True):
+        pose = pose_type()
+        pose.header.frame_id = WORLD_FRAME
+        pose.header.stamp = ns_to_time_msg(int(stamp_ns))
+        pose.pose.position.x, pose.pose.position.y = float(x), float(y)
+        poses.append(pose)
+    msg.poses = poses
+    return msg
+
+
+def zmp_reference_from_msg(msg) -> ZmpReference:
+    """The :class:`ZmpReference` of a /gait/zmp_reference Path; :class:`ContractError` if bad."""
+    _check_frame(msg.header, '/gait/zmp_reference')
+    if not msg.poses:
+        raise ContractError('/gait/zmp_reference has no poses')
+    for pose in msg.poses:
+        if pose.header.frame_id not in ('', WORLD_FRAME):
+            raise ContractError(f'a /gait/zmp_reference pose is in frame '
+                                f'{pose.header.frame_id!r}; the contract frame is {WORLD_FRAME!r}')
+    stamps = [time_msg_to_ns(p.header.stamp) for p in msg.poses]
+    zmp = [(p.pose.position.x, p.pose.position.y) for p in msg.poses]
+    return ZmpReference(np.array(stamps, dtype=np.int64), np.array(zmp, dtype=float))
+
+
+# -- /gait/com_reference ---------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class ComState:
+    """COM reference at one instant.
+
+    Attributes:
+        stamp_ns: Time [ns].
+        position_in_world: (3,) COM position [m].
+        velocity_in_world: (3,) COM velocity [m/s].
+        acceleration_in_world: (3,) COM acceleration [m/s^2].
+        yaw_rad: Body yaw [rad].
+        yaw_rate_rad_s: Body yaw rate [rad/s].
+    """
+
+    stamp_ns: int
+    position_in_world: np.ndarray
+    velocity_in_world: np.ndarray
+    acceleration_in_world: np.ndarray
+    yaw_rad: float = 0.0
+    yaw_rate_rad_s: float = 0.0
+
+    def __post_init__(self):
+        for name in ('position_in_world', 'velocity_in_world', 'acceleration_in_world'):
+            value = _frozen(getattr(self, name))
+            if value.shape != (3,):
+                raise ContractError(f'COM {name} must have 3 components, got {value.shape}')
+            _check_finite(value, f'the COM {name}')
+            object.__setattr__(self, name, value)
+        if not (math.isfinite(self.yaw_rad) and math.isfinite(self.yaw_rate_rad_s)):
+            raise ContractError('the COM reference yaw holds a NaN or infinite value')
+
+
+def com_reference_to_msg(states: Sequence[ComState]):
+    """MultiDOFJointTrajectory with ``states[0]`` at the header stamp and the rest as horizon."""
+    if not states:
+        raise ContractError('a COM reference needs at least one state')
+    msg = get_message('trajectory_msgs/msg/MultiDOFJointTrajectory')()
+    point_type = get_message('trajectory_msgs/msg/MultiDOFJointTrajectoryPoint')
+    msg.header.frame_id = WORLD_FRAME
+    msg.header.stamp = ns_to_time_msg(states[0].stamp_ns)
+    msg.joint_names = [COM_JOINT_NAME]
+    points = []
+    for state in states:
+        point = point_type()
+        point.transforms = [_transform(state.position_in_world, state.yaw_rad)]
+        point.velocities = [_twist(state.velocity_in_world, state.yaw_rate_rad_s)]
+        point.accelerations = [_twist(state.acceleration_in_world)]
+        point.time_from_start = seconds_to_duration_msg((state.stamp_ns - states[0].stamp_ns)
+                                                        * 1e-9)
+        points.append(point)
+    msg.points = points
+    return msg
+
+
+def com_reference_from_msg(msg) -> list[ComState]:
+    """The states of a /gait/com_reference message; :class:`ContractError` if malformed."""
+    _check_frame(msg.header, '/gait/com_reference')
+    if list(msg.joint_names) != [COM_JOINT_NAME]:
+        raise ContractError(f'/gait/com_reference joint_names must be [{COM_JOINT_NAME!r}], got '
+                            f'{list(msg.joint_names)}')
+    if not msg.points:
+        raise ContractError('/gait/com_reference has no points')
+    start_ns = time_msg_to_ns(msg.header.stamp)
+    states = []
+    for k, point in enumerate(msg.points):
+        if (len(point.transforms), len(point.velocities), len(point.accelerations)) != (1, 1, 1):
+            raise ContractError(f'/gait/com_reference point {k} must carry one transform, '
+                                f'velocity and acceleration')
+        position, yaw = _transform_values(point.transforms[0])
+        v, a = point.velocities[0], point.accelerations[0]
+        states.append(ComState(
+            stamp_ns=start_ns + int(round(duration_msg_to_seconds(point.time_from_start) * 1e9)),
+            position_in_world=position,
+            velocity_in_world=[v.linear.x, v.linear.y, v.linear.z],
+            acceleration_in_world=[a.linear.x, a.linear.y, a.linear.z],
+            yaw_rad=yaw,
+            yaw_rate_rad_s=v.angular.z,
+        ))
+    return states
+
+
+# -- /gait/swing_trajectory ------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class SwingTrajectory:
+    """Timed waypoints of one foot's swing.
+
+    Attributes:
+        foot: Foot name.
+        start_ns: Lift-off time [ns].
+        times_s: (W,) waypoint times from lift-off [s], non-decreasing, first 0.
+        positions_in_world: (W, 3) waypoints [m].
+        yaws_rad: (W,) foot yaw at each waypoint [rad].
+    """
+
+    foot: str
+    start_ns: int
+    times_s: np.ndarray
+    positions_in_world: np.ndarray
+    yaws_rad: np.ndarray
+
+    def __post_init__(self):
+        times = _frozen(self.times_s)
+        positions = _frozen(self.positions_in_world)
+        yaws = _frozen(self.yaws_rad)
+        if len(times) < 2:
+            raise ContractError(f'a swing trajectory needs at least 2 waypoints, got {len(times)}')
+        if positions.shape != (len(times), 3) or yaws.shape != (len(times),):
+            raise ContractError(f'swing trajectory shapes disagree: times {times.shape}, '
+                                f'positions {positions.shape}, yaws {yaws.shape}')
+        _check_finite(times, 'swing times')
+        _check_finite(positions, 'swing waypoints')
+        _check_finite(yaws, 'swing yaws')
+        if np.any(np.diff(times) < 0) or times[0] < 0:
+            raise ContractError('swing waypoint times must start at >= 0 and not go backwards')
+        object.__setattr__(self, 'times_s', times)
+        object.__setattr__(self, 'positions_in_world', positions)
+        object.__setattr__(self, 'yaws_rad', yaws)
+
+    @property
+    def duration_s(self) -> float:
+        """Lift-off to touch-down [s]."""
+        return float(self.times_s[-1])
+
+
+def swing_trajectory_to_msg(swing: SwingTrajectory):
+    """MultiDOFJointTrajectory for one swing (layout in the module docstring)."""
+    msg = get_message('trajectory_msgs/msg/MultiDOFJointTrajectory')()
+    point_type = get_message('trajectory_msgs/msg/MultiDOFJointTrajectoryPoint')
+    msg.header.frame_id = WORLD_FRAME
+    msg.header.stamp = ns_to_time_msg(swing.start_ns)
+    msg.joint_names = [swing.foot]
+    points = []
+    for t_s, position, yaw in zip(swing.times_s, swing.positions_in_world, swing.yaws_rad,
+                                  strict=True):
+        point = point_type()
+        point.transforms = [_transform(position, yaw)]
+        point.time_from_start = seconds_to_duration_msg(float(t_s))
+        points.append(point)
+    msg.points = points
+    return msg
+
+
+def swing_trajectory_from_msg(msg) -> SwingTrajectory:
+    """The :class:`SwingTrajectory` of a /gait/swing_trajectory message; ContractError if bad."""
+    _check_frame(msg.header, '/gait/swing_trajectory')
+    if len(msg.joint_names) != 1:
+        raise ContractError(f'/gait/swing_trajectory names one foot, got {list(msg.joint_names)}')
+    times, positions, yaws = [], [], []
+    for k, point in enumerate(msg.points):
+        if len(point.transforms) != 1:
+            raise ContractError(f'/gait/swing_trajectory point {k} must carry one transform')
+        position, yaw = _transform_values(point.transforms[0])
+        times.append(duration_msg_to_seconds(point.time_from_start))
+        positions.append(position)
+        yaws.append(yaw)
+    return SwingTrajectory(msg.joint_names[0], time_msg_to_ns(msg.header.stamp),
+                           np.array(times), np.array(positions).reshape(-1, 3), np.array(yaws))

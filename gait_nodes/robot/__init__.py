@@ -1,0 +1,1 @@
+"""Robot descriptions (URDF + robot YAML), Pinocchio models and inverse kinematics."""

@@ -1,0 +1,330 @@
+"""Robot YAML: what the gait needs to know about a robot beyond its URDF.
+
+A robot is ``config/robots/<name>.yaml`` plus the URDF it names. The YAML is read here, without
+Pinocchio, into a frozen :class:`RobotDescription` that the planner and every node can trust;
+:mod:`gait_nodes.robot.model` loads the URDF into Pinocchio and checks the names against it.
+
+Format (lengths in metres, angles in radians, in the base frame: x forward, y left, z up)::
+
+    name: robosimian
+    description: free text (say where the numbers come from)
+    urdf: robosimian.urdf        # relative to the YAML, absolute, or
+                                 # example-robot-data:go2_description/urdf/go2.urdf
+    kind: quadruped              # quadruped | biped
+    gaits: [crawl, trot]         # gaits the robot can do (biped: [biped])
+    base_frame: base_link
+    feet:                        # ordered; quadrupeds: front_left, front_right,
+                                 # rear_left, rear_right
+      front_left:
+        frame: fl_foot           # URDF frame at the sole contact point
+        joints: [fl_joint_1, ...]  # the limb's joints, base to foot
+        nominal_position_m: [0.45, 0.55, -0.65]  # foot at standstill, in the base frame
+      ...
+    foot_radius_m: 0.055         # each foot is a disc of this radius on the ground
+    body_height_m: 0.65          # base origin above the ground at standstill
+    com_height_m: 0.60           # COM above the ground at standstill (preview control's zc)
+    joint_velocity_limit_rad_s: 1.0      # every joint unless listed below
+    joint_velocity_limits_rad_s: {}      # joint -> limit, overrides
+    reach:
+      max_step_length_m: 0.5     # longest step along x a foot can make
+      max_step_width_m: 0.2      # largest sideways displacement of a foot in one step
+      max_turn_rad: 0.35         # largest yaw change of the body per gait cycle
+    extra: {}                    # robot-specific settings (e.g. ik families), free form
+
+Every error names the file and the offending key with the allowed values.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from gait_nodes.errors import ConfigError
+from gait_nodes.paths import data_dir
+
+KINDS = ('quadruped', 'biped')
+GAITS_BY_KIND = {'quadruped': ('crawl', 'trot'), 'biped': ('biped',)}
+EXAMPLE_ROBOT_DATA_PREFIX = 'example-robot-data:'
+
+
+@dataclass(frozen=True)
+class Foot:
+    """One foot (end of a limb) of the robot.
+
+    Attributes:
+        name: Foot name used on the topics (``joint_names`` of /gait/footsteps).
+        frame: URDF frame at the contact point.
+        joints: The limb's joint names, base to foot.
+        nominal_position_in_base: (3,) foot position at standstill, in the base frame [m].
+    """
+
+    name: str
+    frame: str
+    joints: tuple[str, ...]
+    nominal_position_in_base: np.ndarray
+
+
+@dataclass(frozen=True)
+class Reach:
+    """How far the feet can go per step (checked by the footstep planner).
+
+    Attributes:
+        max_step_length_m: Longest foot displacement along x in one step [m].
+        max_step_width_m: Largest foot displacement along y in one step [m].
+        max_turn_rad: Largest body yaw change per gait cycle [rad].
+    """
+
+    max_step_length_m: float
+    max_step_width_m: float
+    max_turn_rad: float
+
+
+@dataclass(frozen=True)
+class RobotDescription:
+    """A robot YAML, validated. See the module docstring for the meaning of each field."""
+
+    name: str
+    path: Path
+    urdf_path: Path
+    kind: str
+    gaits: tuple[str, ...]
+    base_frame: str
+    feet: tuple[Foot, ...]
+    foot_radius_m: float
+    body_height_m: float
+    com_height_m: float
+    joint_velocity_limit_rad_s: float
+    joint_velocity_limits_rad_s: Mapping[str, float]
+    reach: Reach
+    description: str = ''
+    extra: Mapping[str, object] = field(default_factory=dict)
+
+    @property
+    def foot_names(self) -> tuple[str, ...]:
+        """Foot names in YAML order."""
+        return tuple(foot.name for foot in self.feet)
+
+    @property
+    def joint_names(self) -> tuple[str, ...]:
+        """Every limb joint, foot by foot, in YAML order."""
+        return tuple(joint for foot in self.feet for joint in foot.joints)
+
+    def foot(self, name: str) -> Foot:
+        """The foot called ``name``; ConfigError listing the valid names otherwise."""
+        for foot in self.feet:
+            if foot.name == name:
+                return foot
+        raise ConfigError(f'{self.name} has no foot {name!r}; feet: {list(self.foot_names)}')
+
+    def velocity_limit_rad_s(self, joint: str) -> float:
+        """Velocity limit of ``joint`` [rad/s]."""
+        return float(self.joint_velocity_limits_rad_s.get(joint, self.joint_velocity_limit_rad_s))
+
+    def nominal_stance_in_base(self) -> np.ndarray:
+        """(F, 3) nominal foot positions in the base frame [m]."""
+        return np.array([foot.nominal_position_in_base for foot in self.feet])
+
+
+def robots_dir() -> Path:
+    """The shipped robot folder (``config/robots``)."""
+    return Path(data_dir('config')) / 'robots'
+
+
+def available_robots() -> list[str]:
+    """Names of the shipped robots."""
+    folder = robots_dir()
+    return sorted(p.stem for p in folder.glob('*.yaml')) if folder.is_dir() else []
+
+
+def robot_yaml_path(name_or_path: str | os.PathLike) -> Path:
+    """Path of a robot YAML given a shipped robot name or a file path."""
+    text = os.fspath(name_or_path)
+    if text.endswith(('.yaml', '.yml')) or os.sep in text:
+        path = Path(text)
+        if not path.is_file():
+            raise ConfigError(f'{path}: robot YAML not found')
+        return path
+    path = robots_dir() / f'{text}.yaml'
+    if not path.is_file():
+        raise ConfigError(f'unknown robot {text!r}; shipped robots: {available_robots()} '
+                          f'(or give the path of a robot YAML)')
+    return path
+
+
+def example_robot_data_dir() -> Path:
+    """The ``robots`` folder of the example-robot-data package (an optional extra).
+
+    ``EXAMPLE_ROBOT_DATA_MODEL_DIR`` (the variable example-robot-data itself honours) wins;
+    otherwise the folder its cmeel wheel installs under ``<site-packages>/cmeel.prefix/share``.
+    """
+    import sysconfig
+
+    override = os.environ.get('EXAMPLE_ROBOT_DATA_MODEL_DIR')
+    candidates = [Path(override)] if override else []
+    for key in ('purelib', 'platlib'):
+        candidates.append(Path(sysconfig.get_paths()[key]) / 'cmeel.prefix' / 'share'
+                          / 'example-robot-data' / 'robots')
+    for candidate in candidates:
+        if candidate.is_dir():
+            return candidate
+    raise ConfigError('this robot needs the example-robot-data package: pip install '
+                      '"gait_nodes[robots]" (or GAIT_NODES_ROBOTS=1 sh tools/venv.sh)')
+
+
+def _resolve_urdf(yaml_path: Path, text: str) -> Path:
+    if text.startswith(EXAMPLE_ROBOT_DATA_PREFIX):
+        path = example_robot_data_dir() / text[len(EXAMPLE_ROBOT_DATA_PREFIX):]
+    else:
+        path = Path(text) if os.path.isabs(text) else yaml_path.parent / text
+    if not path.is_file():
+        raise ConfigError(f'{yaml_path}: urdf {text!r} not found (looked at {path})')
+    return path
+
+
+class _Reader:
+    """Typed access to a YAML mapping whose errors name the file and the key."""
+
+    def __init__(self, path: Path, data: Mapping, where: str = ''):
+        self.path, self.data, self.where = path, data, where
+
+    def _name(self, key: str) -> str:
+        return f'{self.where}{key}'
+
+    def fail(self, key: str, problem: str):
+        raise ConfigError(f'{self.path}: {self._name(key)}: {problem}')
+
+    def get(self, key: str, default=None, required: bool = True):
+        if key not in self.data:
+            if required and default is None:
+                self.fail(key, 'missing')
+            return default
+        return self.data[key]
+
+    def string(self, key: str, default: str | None = None) -> str:
+        value = self.get(key, default)
+        if not isinstance(value, str) or not value:
+            self.fail(key, f'must be a non-empty string, got {value!r}')
+        return value
+
+    def number(self, key: str, low: float, high: float, default: float | None = None) -> float:
+        value = self.get(key, default)
+        if isinstance(value, bool) or not isinstance(value, (int, float)) \
+                or not math.isfinite(value) or not low < value <= high:
+            self.fail(key, f'must be a number in ({low}, {high}], got {value!r}')
+        return float(value)
+
+    def mapping(self, key: str, default: Mapping | None = None) -> _Reader:
+        value = self.get(key, default)
+        if not isinstance(value, Mapping):
+            self.fail(key, f'must be a mapping, got {type(value).__name__}')
+        return _Reader(self.path, value, f'{self._name(key)}.')
+
+    def names(self, key: str) -> tuple[str, ...]:
+        value = self.get(key)
+        if not isinstance(value, list) or not value \
+                or not all(isinstance(v, str) and v for v in value):
+            self.fail(key, f'must be a non-empty list of names, got {value!r}')
+        if len(set(value)) != len(value):
+            self.fail(key, f'names repeat: {value}')
+        return tuple(value)
+
+    def vector(self, key: str, size: int) -> np.ndarray:
+        value = self.get(key)
+        if not isinstance(value, list) or len(value) != size or not all(
+                isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+                for v in value):
+            self.fail(key, f'must be a list of {size} finite numbers, got {value!r}')
+        array = np.array(value, dtype=float)
+        array.setflags(write=False)
+        return array
+
+
+def load_robot_description(name_or_path: str | os.PathLike) -> RobotDescription:
+    """Read and validate a robot YAML (a shipped name such as ``robosimian``, or a path).
+
+    Raises:
+        ConfigError: The file is missing or unreadable, or a key is missing or out of range;
+            the message names the file, the key and the allowed values.
+    """
+    path = robot_yaml_path(name_or_path)
+    try:
+        data = yaml.safe_load(path.read_text())
+    except (OSError, yaml.YAMLError) as exc:
+        raise ConfigError(f'{path}: cannot read robot YAML: {exc}'.splitlines()[0]) from exc
+    if not isinstance(data, Mapping):
+        raise ConfigError(f'{path}: a robot YAML must be a mapping at the top level')
+    top = _Reader(path, data)
+    known = {'name', 'description', 'urdf', 'kind', 'gaits', 'base_frame', 'feet',
+             'foot_radius_m', 'body_height_m', 'com_height_m', 'joint_velocity_limit_rad_s',
+             'joint_velocity_limits_rad_s', 'reach', 'extra'}
+    unknown = sorted(set(data) - known)
+    if unknown:
+        raise ConfigError(f'{path}: unknown keys {unknown}; allowed: {sorted(known)}')
+
+    kind = top.string('kind')
+    if kind not in KINDS:
+        top.fail('kind', f'must be one of {list(KINDS)}, got {kind!r}')
+    gaits = top.names('gaits')
+    bad_gaits = [g for g in gaits if g not in GAITS_BY_KIND[kind]]
+    if bad_gaits:
+        top.fail('gaits', f'{bad_gaits} not possible for a {kind}; allowed: '
+                          f'{list(GAITS_BY_KIND[kind])}')
+
+    feet_reader = top.mapping('feet')
+    expected_feet = 4 if kind == 'quadruped' else 2
+    if len(feet_reader.data) != expected_feet:
+        top.fail('feet', f'a {kind} has {expected_feet} feet, got {len(feet_reader.data)}')
+    feet = []
+    for foot_name in feet_reader.data:
+        foot = feet_reader.mapping(foot_name)
+        feet.append(Foot(name=str(foot_name), frame=foot.string('frame'),
+                         joints=foot.names('joints'),
+                         nominal_position_in_base=foot.vector('nominal_position_m', 3)))
+    all_joints = [j for foot in feet for j in foot.joints]
+    if len(set(all_joints)) != len(all_joints):
+        top.fail('feet', 'a joint belongs to more than one limb')
+
+    limits_reader = top.mapping('joint_velocity_limits_rad_s', default={})
+    limits = {}
+    for joint in limits_reader.data:
+        if joint not in all_joints:
+            limits_reader.fail(str(joint), f'not a limb joint; limb joints: {all_joints}')
+        limits[str(joint)] = limits_reader.number(joint, 0.0, 100.0)
+
+    reach_reader = top.mapping('reach')
+    reach = Reach(max_step_length_m=reach_reader.number('max_step_length_m', 0.0, 5.0),
+                  max_step_width_m=reach_reader.number('max_step_width_m', 0.0, 5.0),
+                  max_turn_rad=reach_reader.number('max_turn_rad', 0.0, math.pi))
+    extra = top.get('extra', {}, required=False)
+    if not isinstance(extra, Mapping):
+        top.fail('extra', 'must be a mapping')
+
+    description = RobotDescription(
+        name=top.string('name'),
+        path=path,
+        urdf_path=_resolve_urdf(path, top.string('urdf')),
+        kind=kind,
+        gaits=gaits,
+        base_frame=top.string('base_frame'),
+        feet=tuple(feet),
+        foot_radius_m=top.number('foot_radius_m', 0.0, 0.5),
+        body_height_m=top.number('body_height_m', 0.0, 5.0),
+        com_height_m=top.number('com_height_m', 0.0, 5.0),
+        joint_velocity_limit_rad_s=top.number('joint_velocity_limit_rad_s', 0.0, 100.0),
+        joint_velocity_limits_rad_s=limits,
+        reach=reach,
+        description=str(top.get('description', '', required=False)),
+        extra=dict(extra),
+    )
+    for foot in description.feet:
+        if foot.nominal_position_in_base[2] >= 0:
+            z = foot.nominal_position_in_base[2]
+            raise ConfigError(f'{path}: feet.{foot.name}.nominal_position_m: the foot must be '
+                              f'below the base (z < 0), got z = {z}')
+    return description

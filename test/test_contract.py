@@ -1,0 +1,115 @@
+"""The contract layouts: round trips through messages and CDR, swing reading, bad messages."""
+
+import math
+
+import numpy as np
+import pytest
+
+from gait_nodes import contract
+from gait_nodes.contract import (
+    ComState,
+    ContractError,
+    FootstepPlan,
+    SwingTrajectory,
+    ZmpReference,
+)
+from gait_nodes.interfaces import deserialize_message, serialize_message
+
+
+def through_cdr(msg):
+    return deserialize_message(serialize_message(msg), type(msg))
+
+
+def crawl_plan():
+    """Two feet, one swing each: left moves over [1, 2] s, right over [3, 4] s."""
+    times = [0.0, 1.0, 2.0, 3.0, 4.0]
+    left = [[0, 0.2, 0], [0, 0.2, 0], [0.3, 0.2, 0], [0.3, 0.2, 0], [0.3, 0.2, 0]]
+    right = [[0, -0.2, 0], [0, -0.2, 0], [0, -0.2, 0], [0, -0.2, 0], [0.3, -0.2, 0.05]]
+    positions = np.stack([left, right], axis=1)
+    yaws = np.zeros((5, 2))
+    yaws[4, 1] = 0.1
+    return FootstepPlan(5_000_000_123, ('left', 'right'), times, positions, yaws)
+
+
+def test_footsteps_round_trip_and_swings():
+    plan = crawl_plan()
+    back = contract.footsteps_from_msg(through_cdr(contract.footsteps_to_msg(plan)))
+    assert back.start_ns == plan.start_ns
+    assert back.foot_names == plan.foot_names
+    np.testing.assert_allclose(back.times_s, plan.times_s, atol=1e-9)
+    np.testing.assert_allclose(back.positions_in_world, plan.positions_in_world, atol=1e-12)
+    np.testing.assert_allclose(back.yaws_rad, plan.yaws_rad, atol=1e-12)
+    swings = back.swings()
+    assert [(s.foot, s.lift_off_s, s.touch_down_s) for s in swings] == [
+        ('left', 1.0, 2.0), ('right', 3.0, 4.0)]
+    assert swings[1].end_yaw_rad == pytest.approx(0.1)
+    assert list(back.contacts_at(1.5)) == [False, True]
+    assert list(back.contacts_at(2.0)) == [True, True]
+    assert list(back.contacts_at(3.5)) == [True, False]
+    np.testing.assert_allclose(back.stance_positions_at(1.5)[0], [0, 0.2, 0])
+
+
+def test_footstep_plan_is_read_only_and_checked():
+    plan = crawl_plan()
+    with pytest.raises(ValueError):
+        plan.positions_in_world[0, 0, 0] = 1.0
+    with pytest.raises(ContractError, match='backwards'):
+        FootstepPlan(0, ('a',), [1.0, 0.5], np.zeros((2, 1, 3)), np.zeros((2, 1)))
+    bad = np.zeros((2, 1, 3))
+    bad[1, 0, 0] = math.nan
+    with pytest.raises(ContractError, match='NaN'):
+        FootstepPlan(0, ('a',), [0.0, 1.0], bad, np.zeros((2, 1)))
+    msg = contract.footsteps_to_msg(plan)
+    msg.header.frame_id = 'map'
+    with pytest.raises(ContractError, match="frame 'map'"):
+        contract.footsteps_from_msg(msg)
+
+
+def test_zmp_reference_round_trip_interpolation_and_errors():
+    stamps = np.array([10, 20, 30], dtype=np.int64) * 1_000_000
+    reference = ZmpReference(stamps, [[0.0, 0.0], [0.1, 0.0], [0.1, 0.2]])
+    back = contract.zmp_reference_from_msg(through_cdr(contract.zmp_reference_to_msg(reference)))
+    np.testing.assert_array_equal(back.stamps_ns, stamps)
+    np.testing.assert_allclose(back.sample([15_000_000, 25_000_000, 99_000_000]),
+                               [[0.05, 0.0], [0.1, 0.1], [0.1, 0.2]])
+    assert back.horizon_s == pytest.approx(0.02)
+    with pytest.raises(ContractError, match='strictly increasing'):
+        ZmpReference([2, 1], [[0, 0], [0, 0]])
+    with pytest.raises(ContractError, match='empty'):
+        ZmpReference(np.zeros(0, dtype=np.int64), np.zeros((0, 2)))
+    msg = contract.zmp_reference_to_msg(reference)
+    msg.poses[1].pose.position.y = math.inf
+    with pytest.raises(ContractError, match='NaN or infinite'):
+        contract.zmp_reference_from_msg(msg)
+
+
+def test_com_reference_round_trip():
+    states = [ComState(1_000, [0.1, 0.2, 0.8], [0.3, 0.0, 0.0], [0.0, -1.0, 0.0], 0.5, 0.1),
+              ComState(6_001_000, [0.2, 0.2, 0.8], [0.3, 0.0, 0.0], [0.0, 0.0, 0.0], 0.6, 0.1)]
+    back = contract.com_reference_from_msg(through_cdr(contract.com_reference_to_msg(states)))
+    assert [s.stamp_ns for s in back] == [1_000, 6_001_000]
+    for a, b in zip(states, back, strict=True):
+        np.testing.assert_allclose(b.position_in_world, a.position_in_world)
+        np.testing.assert_allclose(b.velocity_in_world, a.velocity_in_world)
+        np.testing.assert_allclose(b.acceleration_in_world, a.acceleration_in_world)
+        assert b.yaw_rad == pytest.approx(a.yaw_rad)
+        assert b.yaw_rate_rad_s == pytest.approx(a.yaw_rate_rad_s)
+    with pytest.raises(ContractError, match='NaN'):
+        ComState(0, [math.nan, 0, 0], [0, 0, 0], [0, 0, 0])
+
+
+def test_swing_trajectory_round_trip():
+    swing = SwingTrajectory('fl', 7, [0.0, 0.5, 1.0], [[0, 0, 0], [0.1, 0, 0.1], [0.2, 0, 0]],
+                            [0.0, 0.1, 0.2])
+    back = contract.swing_trajectory_from_msg(
+        through_cdr(contract.swing_trajectory_to_msg(swing)))
+    assert (back.foot, back.start_ns, back.duration_s) == ('fl', 7, 1.0)
+    np.testing.assert_allclose(back.positions_in_world, swing.positions_in_world)
+    np.testing.assert_allclose(back.yaws_rad, swing.yaws_rad)
+    with pytest.raises(ContractError, match='at least 2'):
+        SwingTrajectory('fl', 0, [0.0], [[0, 0, 0]], [0.0])
+
+
+def test_yaw_quaternion_identity():
+    for yaw in np.linspace(-3.1, 3.1, 13):
+        assert contract.quaternion_to_yaw(*contract.yaw_to_quaternion(yaw)) == pytest.approx(yaw)
