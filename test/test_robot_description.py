@@ -1,0 +1,59 @@
+"""Robot YAML loading: the fixtures load, and every kind of bad file is refused with its path."""
+
+from pathlib import Path
+
+import pytest
+import yaml
+
+from gait_nodes.errors import ConfigError
+from gait_nodes.robot.description import load_robot_description
+
+ROBOTS = Path(__file__).parent / 'data' / 'robots'
+
+
+def test_fixtures_load():
+    quad = load_robot_description(ROBOTS / 'quadruped.yaml')
+    assert quad.foot_names == ('front_left', 'front_right', 'rear_left', 'rear_right')
+    assert quad.nominal_stance_in_base().shape == (4, 3)
+    assert quad.velocity_limit_rad_s('fl_1') == 1.0
+    assert quad.urdf_path.is_file()
+    biped = load_robot_description(ROBOTS / 'biped.yaml')
+    assert biped.kind == 'biped' and biped.gaits == ('biped',)
+
+
+def write_variant(tmp_path, change):
+    data = yaml.safe_load((ROBOTS / 'quadruped.yaml').read_text())
+    change(data)
+    (tmp_path / 'point.urdf').write_text((ROBOTS / 'point.urdf').read_text())
+    path = tmp_path / 'robot.yaml'
+    path.write_text(yaml.safe_dump(data))
+    return path
+
+
+@pytest.mark.parametrize(('change', 'expected'), [
+    (lambda d: d.pop('foot_radius_m'), 'foot_radius_m: missing'),
+    (lambda d: d.update(foot_radius_m=-1), r'foot_radius_m: must be a number in \(0.0, 0.5\]'),
+    (lambda d: d.update(kind='hexapod'), "kind: must be one of"),
+    (lambda d: d.update(gaits=['biped']), "not possible for a quadruped"),
+    (lambda d: d.update(urdf='missing.urdf'), "urdf 'missing.urdf' not found"),
+    (lambda d: d.update(colour='red'), r"unknown keys \['colour'\]"),
+    (lambda d: d['feet'].pop('rear_right'), 'a quadruped has 4 feet, got 3'),
+    (lambda d: d['feet']['front_left'].update(nominal_position_m=[0, 0]), 'list of 3 finite'),
+    (lambda d: d['feet']['front_left'].update(nominal_position_m=[0, 0, 0.1]), 'z < 0'),
+    (lambda d: d.update(joint_velocity_limits_rad_s={'elbow': 2.0}), 'not a limb joint'),
+    (lambda d: d['reach'].update(max_turn_rad='wide'), 'max_turn_rad: must be a number'),
+])
+def test_bad_yaml_is_refused_with_path_and_reason(tmp_path, change, expected):
+    path = write_variant(tmp_path, change)
+    with pytest.raises(ConfigError, match=expected) as info:
+        load_robot_description(path)
+    assert str(path) in str(info.value)
+
+
+def test_unknown_robot_lists_shipped(tmp_path):
+    with pytest.raises(ConfigError, match='unknown robot'):
+        load_robot_description('no_such_robot')
+    broken = tmp_path / 'broken.yaml'
+    broken.write_text('name: [unclosed\n')
+    with pytest.raises(ConfigError, match='cannot read robot YAML'):
+        load_robot_description(broken)
