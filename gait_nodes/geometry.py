@@ -1,0 +1,77 @@
+"""Plane geometry of support polygons: convex hulls of foot discs and signed stability margins.
+
+One implementation serves the planner (ZMP inside the support polygon with a margin), the ZMP
+monitor and ``inspect`` (which recomputes margins from a bag), so the three always agree.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial import ConvexHull, QhullError
+
+#: Vertices per foot disc when a contact is drawn as a polygon.
+DISC_SEGMENTS = 16
+
+
+def convex_hull(points: np.ndarray) -> np.ndarray:
+    """Counter-clockwise convex hull vertices (M, 2) of planar points (N, 2).
+
+    Degenerate inputs (one point, collinear points) return the extreme points in order, so the
+    result is always usable by :func:`signed_distance`.
+    """
+    points = np.asarray(points, dtype=float).reshape(-1, 2)
+    if len(points) == 0:
+        raise ValueError('a convex hull needs at least one point')
+    unique = np.unique(points, axis=0)
+    if len(unique) >= 3:
+        try:
+            return unique[ConvexHull(unique).vertices]
+        except QhullError:
+            pass  # collinear: fall through to the segment case
+    if len(unique) == 1:
+        return unique
+    direction = unique[-1] - unique[0]
+    order = np.argsort(unique @ direction)
+    return unique[[order[0], order[-1]]]
+
+
+def foot_discs_polygon(centres: np.ndarray, radius_m: float,
+                       segments: int = DISC_SEGMENTS) -> np.ndarray:
+    """Convex hull (M, 2) of discs of ``radius_m`` [m] around contact centres (N, 2).
+
+    The discs are approximated by regular polygons whose edges touch the circle from outside
+    (vertices at ``radius / cos(pi / segments)``), so the polygon contains every disc.
+    """
+    centres = np.asarray(centres, dtype=float).reshape(-1, 2)
+    if radius_m <= 0:
+        return convex_hull(centres)
+    angles = np.linspace(0.0, 2.0 * np.pi, segments, endpoint=False)
+    ring = (radius_m / np.cos(np.pi / segments)) * np.stack([np.cos(angles), np.sin(angles)], 1)
+    return convex_hull((centres[:, None, :] + ring[None, :, :]).reshape(-1, 2))
+
+
+def signed_distance(points: np.ndarray, hull: np.ndarray) -> np.ndarray:
+    """Stability margin of planar points (N, 2) against a convex polygon (M, 2), CCW.
+
+    Positive inside (distance to the nearest edge), negative outside (minus the distance to the
+    polygon), zero on the boundary. A one- or two-vertex hull (a point or a segment) has no
+    inside: every point gets minus its distance to it.
+
+    Returns:
+        (N,) margins [m].
+    """
+    points = np.asarray(points, dtype=float).reshape(-1, 2)
+    hull = np.asarray(hull, dtype=float).reshape(-1, 2)
+    starts = hull
+    ends = np.roll(hull, -1, axis=0)
+    edges = ends - starts  # (M, 2)
+    lengths_sq = np.maximum(np.einsum('ij,ij->i', edges, edges), 1e-300)
+    relative = points[:, None, :] - starts[None, :, :]  # (N, M, 2)
+    t = np.clip(np.einsum('nmj,mj->nm', relative, edges) / lengths_sq, 0.0, 1.0)
+    nearest = starts[None] + t[..., None] * edges[None]
+    distance = np.linalg.norm(points[:, None, :] - nearest, axis=2).min(axis=1)
+    if len(hull) < 3:
+        return -distance
+    cross = edges[None, :, 0] * relative[..., 1] - edges[None, :, 1] * relative[..., 0]
+    inside = np.all(cross >= 0.0, axis=1)
+    return np.where(inside, distance, -distance)
