@@ -59,6 +59,9 @@ class Recorder(Node):
             self.writer.add_topic(name, type_name, [offered_qos_yaml(publisher_qos)])
             self.create_subscription(get_message(type_name), name, self._writer_for(name),
                                      profile, raw=True)
+        # Messages alone trigger flushes only while they keep coming: a timer bounds the age of
+        # the open chunk when traffic stops, so a SIGKILL never loses more than flush_period_s.
+        self.create_timer(flush_period_s / 4, self.writer.flush_if_due)
         self.get_logger().info(f'recording {len(topics)} topics to {self.writer.path}')
 
     def _writer_for(self, topic: str):

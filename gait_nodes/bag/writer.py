@@ -108,6 +108,11 @@ class BagWriter:
         if now - self._last_flush >= self.flush_period_s:
             self.flush()
 
+    def flush_if_due(self) -> None:
+        """Flush when the open chunk is older than ``flush_period_s`` (call it from a timer)."""
+        if not self._closed and time.monotonic() - self._last_flush >= self.flush_period_s:
+            self.flush()
+
     def flush(self) -> None:
         """Finish the open chunk and push it to the file."""
         self._writer.flush()

@@ -1,0 +1,444 @@
+"""What ``inspect`` computes from a bag: topic statistics and, for gait bags, gait metrics.
+
+Every number is recomputed from the recorded messages with the definitions below, so that an
+independent reader of the bag can check it:
+
+- ``duration_s``: last minus first log time over all messages; topic ``rate_hz``:
+  ``(count - 1) / (last - first log time)`` of that topic.
+- ``distance_m``: path length of ``odom -> base_link`` (from ``/tf``) in the ground plane;
+  ``displacement_m``: straight-line distance from its first to its last position;
+  ``mean_speed_m_s``: ``distance_m`` over the time between those two samples (header stamps).
+- ``steps``: each swing executed by the time the bag ends (the latest /gait/footsteps version of
+  it, see :class:`gait_nodes.contract.FootstepPlan`); a step's length is the horizontal distance
+  from its lift-off place to its landing place.
+- ``zmp_margin``: for each ``/gait/zmp`` sample, the signed distance (positive inside) to the
+  latest ``/gait/support_polygon`` stamped at or before it (:func:`gait_nodes.geometry.
+  signed_distance`); ``time_outside_s`` sums, over samples outside, the time to the next sample.
+- ``joint_velocity``: peak ``|velocity|`` in ``/joint_states`` (and ``/joint_commands``) per
+  joint, against the robot YAML's limit when the robot is known (``--robot``, or the
+  ``hardware_id`` of the bag's diagnostics).
+- ``commands``: ``/gait/command_status`` answers, accepted and rejected with their reasons.
+- ``diagnostics``: statuses on ``/diagnostics`` counted by level and by name.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import struct
+from collections import Counter, defaultdict
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from gait_nodes import contract
+from gait_nodes.bag.reader import BagReader
+from gait_nodes.diagnostics import LEVEL_NAMES, level_value
+from gait_nodes.errors import ConfigError, GaitNodesError
+from gait_nodes.geometry import convex_hull, signed_distance
+from gait_nodes.graph import TOPICS
+from gait_nodes.interfaces import deserialize_message, get_message
+
+#: Topics whose messages inspect decodes (when their type is the contract's).
+GAIT_TOPICS = ('/tf', '/gait/zmp', '/gait/com', '/gait/support_polygon', '/gait/footsteps',
+               '/gait/zmp_reference', '/gait/com_reference', '/gait/swing_trajectory',
+               '/joint_states', '/joint_commands', '/gait/command_status', '/diagnostics')
+
+
+@dataclass
+class JointSeries:
+    """Joint samples of one JointState topic."""
+
+    names: list[str] = field(default_factory=list)
+    stamps_ns: list[int] = field(default_factory=list)
+    positions: list[list[float]] = field(default_factory=list)
+    velocities: list[list[float]] = field(default_factory=list)
+
+
+@dataclass
+class GaitSeries:
+    """Decoded time series of a gait bag, for metrics and plots (stamps in [ns])."""
+
+    base: list[tuple[int, float, float, float, float]] = field(default_factory=list)
+    zmp: list[tuple[int, float, float]] = field(default_factory=list)
+    com: list[tuple[int, float, float, float]] = field(default_factory=list)
+    polygons: list[tuple[int, np.ndarray]] = field(default_factory=list)
+    zmp_reference: list[tuple[int, float, float]] = field(default_factory=list)
+    zmp_reference_last: contract.ZmpReference | None = None
+    com_reference: list[tuple[int, float, float, float]] = field(default_factory=list)
+    plans: list[contract.FootstepPlan] = field(default_factory=list)
+    swings: list[contract.SwingTrajectory] = field(default_factory=list)
+    joints: dict[str, JointSeries] = field(default_factory=dict)
+    statuses: list[dict] = field(default_factory=list)
+    diagnostics: list[tuple[int, str, int, str, str]] = field(default_factory=list)
+    undecodable: Counter = field(default_factory=Counter)
+
+
+def _stamp(header) -> int:
+    return contract.time_msg_to_ns(header.stamp)
+
+
+class _Collector:
+    """Decodes the gait topics of a bag into a :class:`GaitSeries`."""
+
+    def __init__(self):
+        self.series = GaitSeries()
+        self._classes = {}
+
+    def message(self, topic: str, type_name: str, data: bytes) -> None:
+        if TOPICS.get(topic) != type_name:
+            return
+        cls = self._classes.get(type_name)
+        if cls is None:
+            cls = self._classes[type_name] = get_message(type_name)
+        try:
+            msg = deserialize_message(data, cls)
+            getattr(self, '_' + topic.strip('/').replace('/', '_'))(msg)
+        except (GaitNodesError, ValueError, IndexError, UnicodeDecodeError, struct.error,
+                TypeError):
+            self.series.undecodable[topic] += 1
+
+    def _tf(self, msg) -> None:
+        for transform in msg.transforms:
+            if transform.header.frame_id.lstrip('/') == contract.WORLD_FRAME and \
+                    transform.child_frame_id.lstrip('/') == contract.BASE_FRAME:
+                t, r = transform.transform.translation, transform.transform.rotation
+                self.series.base.append((_stamp(transform.header), t.x, t.y, t.z,
+                                         contract.quaternion_to_yaw(r.x, r.y, r.z, r.w)))
+
+    def _gait_zmp(self, msg) -> None:
+        self.series.zmp.append((_stamp(msg.header), msg.point.x, msg.point.y))
+
+    def _gait_com(self, msg) -> None:
+        self.series.com.append((_stamp(msg.header), msg.point.x, msg.point.y, msg.point.z))
+
+    def _gait_support_polygon(self, msg) -> None:
+        vertices = np.array([(p.x, p.y) for p in msg.polygon.points], dtype=float)
+        if len(vertices) and np.all(np.isfinite(vertices)):
+            self.series.polygons.append((_stamp(msg.header), convex_hull(vertices)))
+
+    def _gait_zmp_reference(self, msg) -> None:
+        reference = contract.zmp_reference_from_msg(msg)
+        self.series.zmp_reference.append((int(reference.stamps_ns[0]),
+                                          *reference.zmp_in_world[0]))
+        self.series.zmp_reference_last = reference
+
+    def _gait_com_reference(self, msg) -> None:
+        state = contract.com_reference_from_msg(msg)[0]
+        self.series.com_reference.append((state.stamp_ns, *state.position_in_world))
+
+    def _gait_footsteps(self, msg) -> None:
+        self.series.plans.append(contract.footsteps_from_msg(msg))
+
+    def _gait_swing_trajectory(self, msg) -> None:
+        self.series.swings.append(contract.swing_trajectory_from_msg(msg))
+
+    def _joints(self, name: str, msg) -> None:
+        series = self.series.joints.setdefault(name, JointSeries())
+        names = list(msg.name)
+        if series.names and names != series.names:
+            return  # a different joint set: keep the first one consistent
+        series.names = names
+        series.stamps_ns.append(_stamp(msg.header))
+        series.positions.append(list(msg.position))
+        series.velocities.append(list(msg.velocity))
+
+    def _joint_states(self, msg) -> None:
+        self._joints('/joint_states', msg)
+
+    def _joint_commands(self, msg) -> None:
+        self._joints('/joint_commands', msg)
+
+    def _gait_command_status(self, msg) -> None:
+        try:
+            status = json.loads(msg.data)
+        except json.JSONDecodeError:
+            status = {'accepted': None, 'reason': 'status is not JSON', 'raw': msg.data}
+        self.series.statuses.append(status if isinstance(status, dict) else {'raw': status})
+
+    def _diagnostics(self, msg) -> None:
+        stamp = _stamp(msg.header)
+        for status in msg.status:
+            self.series.diagnostics.append((stamp, status.name, level_value(status.level),
+                                            status.message, status.hardware_id))
+
+
+def _round(value: float, digits: int = 6):
+    return None if value is None or not math.isfinite(value) else round(float(value), digits)
+
+
+def base_metrics(series: GaitSeries) -> dict | None:
+    """Distance, displacement and mean speed of the base from /tf."""
+    if len(series.base) < 2:
+        return None
+    base = np.array(sorted(series.base))
+    xy = base[:, 1:3]
+    distance = float(np.sum(np.linalg.norm(np.diff(xy, axis=0), axis=1)))
+    elapsed = (base[-1, 0] - base[0, 0]) * 1e-9
+    return {'source': '/tf odom->base_link', 'samples': len(base),
+            'distance_m': _round(distance),
+            'displacement_m': _round(float(np.linalg.norm(xy[-1] - xy[0]))),
+            'time_s': _round(elapsed),
+            'mean_speed_m_s': _round(distance / elapsed) if elapsed > 0 else None}
+
+
+def executed_swings(plans: list[contract.FootstepPlan], until_ns: int | None) -> list[dict]:
+    """Swings landed by ``until_ns``, each from the latest plan that contains it.
+
+    A swing is identified by its foot and lift-off time (to 1 ms); a later plan replaces an
+    earlier one's version of the same swing.
+    """
+    by_key = {}
+    for plan in plans:
+        for swing in plan.swings():
+            lift_ns = plan.start_ns + int(round(swing.lift_off_s * 1e9))
+            land_ns = plan.start_ns + int(round(swing.touch_down_s * 1e9))
+            if until_ns is not None and land_ns > until_ns:
+                continue
+            by_key[(swing.foot, round(lift_ns / 1e6))] = (lift_ns, land_ns, swing)
+    swings = []
+    for lift_ns, land_ns, swing in sorted(by_key.values(), key=lambda v: (v[0], v[2].foot)):
+        length = float(np.linalg.norm((swing.end_in_world - swing.start_in_world)[:2]))
+        swings.append({'foot': swing.foot, 'lift_off_ns': lift_ns, 'touch_down_ns': land_ns,
+                       'start': swing.start_in_world.tolist(),
+                       'end': swing.end_in_world.tolist(), 'length_m': length})
+    return swings
+
+
+def step_metrics(series: GaitSeries, until_ns: int | None) -> dict | None:
+    """Step count and lengths of the executed swings."""
+    if not series.plans:
+        return None
+    swings = executed_swings(series.plans, until_ns)
+    lengths = np.array([s['length_m'] for s in swings])
+    per_foot = defaultdict(list)
+    for swing in swings:
+        per_foot[swing['foot']].append(swing['length_m'])
+    return {'count': len(swings),
+            'mean_length_m': _round(lengths.mean()) if len(lengths) else None,
+            'min_length_m': _round(lengths.min()) if len(lengths) else None,
+            'max_length_m': _round(lengths.max()) if len(lengths) else None,
+            'per_foot': {foot: {'count': len(v), 'mean_length_m': _round(float(np.mean(v)))}
+                         for foot, v in per_foot.items()}}
+
+
+def zmp_margins(series: GaitSeries) -> tuple[np.ndarray, np.ndarray]:
+    """(stamps [ns], margins [m]) of each /gait/zmp sample that has a polygon before it."""
+    if not series.zmp or not series.polygons:
+        return np.zeros(0, dtype=np.int64), np.zeros(0)
+    zmp = sorted(series.zmp)
+    polygons = sorted(series.polygons, key=lambda p: p[0])
+    polygon_stamps = np.array([p[0] for p in polygons], dtype=np.int64)
+    stamps = np.array([z[0] for z in zmp], dtype=np.int64)
+    points = np.array([(z[1], z[2]) for z in zmp])
+    which = np.searchsorted(polygon_stamps, stamps, side='right') - 1
+    margins = np.full(len(zmp), np.nan)
+    for index in np.unique(which[which >= 0]):
+        chosen = which == index
+        margins[chosen] = signed_distance(points[chosen], polygons[index][1])
+    keep = which >= 0
+    return stamps[keep], margins[keep]
+
+
+def margin_metrics(series: GaitSeries) -> dict | None:
+    """Min and mean stability margin and the time the ZMP spent outside the support polygon."""
+    stamps, margins = zmp_margins(series)
+    if len(margins) == 0:
+        return None
+    durations = np.append(np.diff(stamps), 0) * 1e-9
+    outside = margins < 0
+    first_outside = int(stamps[np.argmax(outside)]) if outside.any() else None
+    return {'samples': len(margins), 'min_m': _round(margins.min()),
+            'mean_m': _round(margins.mean()),
+            'time_outside_s': _round(float(durations[outside].sum())),
+            'samples_outside': int(outside.sum()),
+            'first_outside_ns': first_outside}
+
+
+def robot_limits(robot: str | None) -> tuple[str | None, Callable[[str], float | None]]:
+    """The robot's name and a joint -> velocity limit lookup (None when unknown)."""
+    if not robot:
+        return None, lambda joint: None
+    from gait_nodes.robot.description import load_robot_description
+
+    try:
+        description = load_robot_description(robot)
+    except ConfigError:
+        return robot, lambda joint: None
+    joints = set(description.joint_names)
+    return description.name, lambda joint: (description.velocity_limit_rad_s(joint)
+                                            if joint in joints else None)
+
+
+def joint_metrics(series: GaitSeries, limit_of: Callable[[str], float | None]) -> dict:
+    """Peak joint speed per JointState topic, against the limits."""
+    result = {}
+    for topic, joints in series.joints.items():
+        rows = [v for v in joints.velocities if len(v) == len(joints.names)]
+        if not rows or not joints.names:
+            continue
+        speeds = np.abs(np.array(rows, dtype=float))
+        peaks = np.nanmax(speeds, axis=0)
+        worst = int(np.nanargmax(peaks))
+        limits = [limit_of(name) for name in joints.names]
+        ratios = [p / lim if lim else None for p, lim in zip(peaks, limits, strict=True)]
+        known = [r for r in ratios if r is not None]
+        over = sum(int(np.sum(speeds[:, i] > lim * (1 + 1e-9)))
+                   for i, lim in enumerate(limits) if lim)
+        result[topic] = {
+            'samples': len(rows),
+            'peak_rad_s': _round(peaks[worst]), 'peak_joint': joints.names[worst],
+            'limit_rad_s': limits[worst],
+            'peak_ratio_to_limit': _round(max(known)) if known else None,
+            'samples_over_limit': over if known else None,
+            'per_joint_peak_rad_s': {n: _round(p) for n, p in zip(joints.names, peaks,
+                                                                 strict=True)},
+        }
+    return result
+
+
+def command_metrics(series: GaitSeries) -> dict | None:
+    """Accepted and rejected gait commands with the rejection reasons."""
+    if not series.statuses:
+        return None
+    rejected = [s for s in series.statuses if s.get('accepted') is False]
+    return {'answered': len(series.statuses),
+            'accepted': sum(1 for s in series.statuses if s.get('accepted') is True),
+            'rejected': len(rejected),
+            'rejections': [str(s.get('reason', '')) for s in rejected]}
+
+
+def diagnostic_metrics(series: GaitSeries) -> dict | None:
+    """Diagnostic statuses by level and by name."""
+    if not series.diagnostics:
+        return None
+    by_level = Counter(LEVEL_NAMES.get(level, str(level)) for _, _, level, _, _
+                       in series.diagnostics)
+    by_name = defaultdict(Counter)
+    for _, name, level, _, _ in series.diagnostics:
+        by_name[name][LEVEL_NAMES.get(level, str(level))] += 1
+    errors = [(stamp, name, message) for stamp, name, level, message, _ in series.diagnostics
+              if level == 2]
+    return {'by_level': dict(by_level),
+            'by_name': {name: dict(counts) for name, counts in sorted(by_name.items())},
+            'first_error': ({'stamp_ns': errors[0][0], 'name': errors[0][1],
+                             'message': errors[0][2]} if errors else None)}
+
+
+def hardware_id(series: GaitSeries) -> str | None:
+    """The robot named by the bag's diagnostics, if any."""
+    names = Counter(hw for *_, hw in series.diagnostics if hw)
+    return names.most_common(1)[0][0] if names else None
+
+
+@dataclass
+class Inspection:
+    """The result of reading a bag: the JSON report and the series behind it."""
+
+    report: dict
+    series: GaitSeries
+
+
+def inspect_bag(path: str | Path, robot: str | None = None,
+                progress: Callable[[int], None] | None = None) -> Inspection:
+    """Read a bag once and compute its report (see the module docstring for the definitions).
+
+    Args:
+        path: Bag directory or ``.mcap`` file.
+        robot: Robot name or YAML for joint limits (default: the diagnostics' hardware_id).
+        progress: Called with the number of bytes read since the last call.
+
+    Raises:
+        NotABagError: The path is not a bag.
+    """
+    reader = BagReader(path)
+    collector = _Collector()
+    counts = Counter()
+    first, last = {}, {}
+    types = {}
+    for channel, log_ns, _, data in reader.messages(progress=progress):
+        topic = channel.topic
+        counts[topic] += 1
+        if topic not in first:
+            first[topic] = log_ns
+            types[topic] = channel.type_name
+        last[topic] = log_ns
+        if topic in GAIT_TOPICS and channel.message_encoding == 'cdr':
+            collector.message(topic, channel.type_name, data)
+    series = collector.series
+    for channel in reader.channels.values():
+        types.setdefault(channel.topic, channel.type_name)
+    start = min(first.values()) if first else None
+    end = max(last.values()) if last else None
+    topics = []
+    for topic in sorted(types):
+        count = counts.get(topic, 0)
+        span = (last[topic] - first[topic]) * 1e-9 if count else 0.0
+        topics.append({'topic': topic, 'type': types[topic], 'count': count,
+                       'rate_hz': _round((count - 1) / span, 3) if count > 1 and span > 0
+                       else None})
+    report = {
+        'bag': str(path),
+        'files': [str(f) for f in reader.files],
+        'complete': all(state.complete for state in reader.file_states),
+        'damage': [{'file': str(d.file), 'offset': d.offset, 'reason': d.reason,
+                    'lost_bytes': d.lost_bytes,
+                    'lost_start_ns': d.lost_start_ns, 'lost_end_ns': d.lost_end_ns,
+                    'description': d.describe()} for d in reader.damage],
+        'message_count': sum(counts.values()),
+        'start_ns': start, 'end_ns': end,
+        'duration_s': _round((end - start) * 1e-9) if start is not None else 0.0,
+        'topics': topics,
+        'metadata_check': metadata_check(reader.metadata, counts, types),
+    }
+    gait = gait_report(series, robot)
+    if gait:
+        report['gait'] = gait
+    if series.undecodable:
+        report['undecodable'] = dict(series.undecodable)
+    return Inspection(report, series)
+
+
+def gait_report(series: GaitSeries, robot: str | None = None) -> dict:
+    """The gait metrics of the decoded series; keys only for what the bag holds."""
+    robot_name, limit_of = robot_limits(robot or hardware_id(series))
+    stamps = [s[0] for s in series.base] + [s[0] for s in series.zmp] + \
+        [s[0] for s in series.com]
+    until = max(stamps) if stamps else None
+    sections = {
+        'base': base_metrics(series),
+        'steps': step_metrics(series, until),
+        'zmp_margin': margin_metrics(series),
+        'joint_velocity': joint_metrics(series, limit_of) or None,
+        'commands': command_metrics(series),
+        'diagnostics': diagnostic_metrics(series),
+    }
+    gait = {key: value for key, value in sections.items() if value is not None}
+    if gait and robot_name:
+        gait['robot'] = robot_name
+    return gait
+
+
+def metadata_check(metadata: dict | None, counts: Counter, types: dict) -> dict | None:
+    """Compare ``metadata.yaml`` with what the MCAP files hold."""
+    if metadata is None:
+        return None
+    info = metadata.get('rosbag2_bagfile_information', {})
+    problems = []
+    if info.get('version') != 9:
+        problems.append(f'metadata version {info.get("version")!r}, expected 9')
+    declared_total = info.get('message_count')
+    if declared_total != sum(counts.values()):
+        problems.append(f'message_count {declared_total} but the files hold '
+                        f'{sum(counts.values())}')
+    for entry in info.get('topics_with_message_count') or []:
+        meta = entry.get('topic_metadata', {})
+        name = meta.get('name')
+        if entry.get('message_count') != counts.get(name, 0):
+            problems.append(f'{name}: message_count {entry.get("message_count")} but the files '
+                            f'hold {counts.get(name, 0)}')
+        if name in types and meta.get('type') != types[name]:
+            problems.append(f'{name}: type {meta.get("type")} but the file says {types[name]}')
+    return {'matches': not problems, 'problems': problems}

@@ -1,0 +1,148 @@
+"""inspect: what a rosbag2 MCAP bag (or a lone .mcap) holds, and how the gait in it went.
+
+``python -m gait_nodes.inspect BAG [--json] [--plot DIR] [--robot NAME]``
+
+Prints topics, types, counts, rates and duration for any ROS 2 MCAP bag; for gait bags also the
+distance walked, mean speed, step lengths, ZMP stability margin (min, mean, time outside the
+support polygon), peak joint velocity against the limit, rejected commands and diagnostics by
+level (definitions in :mod:`gait_nodes.bag.analysis`). A truncated or damaged bag is read up to
+the damage, and what was lost is said. ``--json`` prints one JSON object instead; ``--plot DIR``
+writes PNGs. Exit status: 0 when the bag was read (even partly), 2 when the path is not a bag or
+the arguments are wrong.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+
+from gait_nodes.cli import ArgumentParser, fail
+from gait_nodes.errors import GaitNodesError
+
+PROG = 'python -m gait_nodes.inspect'
+#: Show progress on a non-terminal too above this size [bytes].
+PROGRESS_BYTES = 64 << 20
+FEET_PER_METRE = 3.280839895
+
+
+def _mm(value) -> str:
+    return 'n/a' if value is None else f'{value * 1000:.1f} mm'
+
+
+def format_report(report: dict) -> str:
+    """The report as text for a person."""
+    lines = [f'bag:       {report["bag"]}']
+    if not report['complete']:
+        lines.append('           INCOMPLETE: the writer did not finish (no summary); read what '
+                     'was flushed')
+    lines.append(f'files:     {", ".join(report["files"])}')
+    lines.append(f'duration:  {report["duration_s"]:.3f} s, {report["message_count"]} messages')
+    width = max([len(t['topic']) for t in report['topics']] + [5])
+    type_width = max([len(t['type']) for t in report['topics']] + [4])
+    lines.append(f'{"topic":<{width}}  {"type":<{type_width}}  {"count":>8}  {"rate":>10}')
+    for topic in report['topics']:
+        rate = f'{topic["rate_hz"]:.2f} Hz' if topic['rate_hz'] is not None else '-'
+        lines.append(f'{topic["topic"]:<{width}}  {topic["type"]:<{type_width}}  '
+                     f'{topic["count"]:>8}  {rate:>10}')
+    for damage in report['damage']:
+        lines.append(f'DAMAGE:    {damage["description"]}')
+    check = report.get('metadata_check')
+    if check is not None:
+        lines.append('metadata:  metadata.yaml matches the files' if check['matches'] else
+                     'metadata:  metadata.yaml disagrees: ' + '; '.join(check['problems']))
+    gait = report.get('gait')
+    if gait:
+        lines.append('gait:' + (f' ({gait["robot"]})' if 'robot' in gait else ''))
+        base = gait.get('base')
+        if base:
+            speed = base['mean_speed_m_s']
+            speed_text = (f', mean speed {speed:.4f} m/s ({speed * 60 * FEET_PER_METRE:.2f} '
+                          f'ft/min)' if speed is not None else '')
+            lines.append(f'  walked:      {base["distance_m"]:.3f} m in {base["time_s"]:.2f} s '
+                         f'(net {base["displacement_m"]:.3f} m){speed_text}')
+        steps = gait.get('steps')
+        if steps:
+            text = f'  steps:       {steps["count"]}'
+            if steps['count']:
+                text += (f', length mean {steps["mean_length_m"]:.3f} m (min '
+                         f'{steps["min_length_m"]:.3f}, max {steps["max_length_m"]:.3f})')
+            lines.append(text)
+        margin = gait.get('zmp_margin')
+        if margin:
+            lines.append(f'  ZMP margin:  min {_mm(margin["min_m"])}, mean {_mm(margin["mean_m"])}'
+                         f', outside the support polygon {margin["time_outside_s"]:.3f} s '
+                         f'({margin["samples_outside"]} of {margin["samples"]} samples)')
+        for topic, joints in (gait.get('joint_velocity') or {}).items():
+            text = (f'  peak joint velocity ({topic}): {joints["peak_rad_s"]:.4f} rad/s at '
+                    f'{joints["peak_joint"]}')
+            if joints['limit_rad_s']:
+                text += (f', limit {joints["limit_rad_s"]:g} rad/s (max ratio '
+                         f'{joints["peak_ratio_to_limit"]:.3f}, {joints["samples_over_limit"]} '
+                         f'samples over)')
+            lines.append(text)
+        commands = gait.get('commands')
+        if commands:
+            lines.append(f'  commands:    {commands["answered"]} answered, {commands["accepted"]}'
+                         f' accepted, {commands["rejected"]} rejected')
+            lines.extend(f'    rejected: {reason}' for reason in commands['rejections'])
+        diagnostics = gait.get('diagnostics')
+        if diagnostics:
+            levels = ', '.join(f'{k} {v}' for k, v in sorted(diagnostics['by_level'].items()))
+            lines.append(f'  diagnostics: {levels}')
+            if diagnostics['first_error']:
+                error = diagnostics['first_error']
+                lines.append(f'    first ERROR: {error["name"]}: {error["message"]}')
+    for topic, count in (report.get('undecodable') or {}).items():
+        lines.append(f'undecodable: {count} messages on {topic}')
+    return '\n'.join(lines)
+
+
+def main(args: list[str] | None = None) -> int:
+    """Entry point of ``python -m gait_nodes.inspect``."""
+    parser = ArgumentParser(prog=PROG, description=__doc__.split('\n\n')[0])
+    parser.add_argument('bag', help='rosbag2 directory or .mcap file')
+    parser.add_argument('--json', action='store_true', help='print one JSON object')
+    parser.add_argument('--plot', metavar='DIR', help='write PNG plots into DIR')
+    parser.add_argument('--robot', help='robot name or YAML for joint limits (default: the '
+                                        "hardware_id in the bag's diagnostics)")
+    progress_group = parser.add_mutually_exclusive_group()
+    progress_group.add_argument('--progress', dest='progress', action='store_true',
+                                default=None, help='always show a progress bar on stderr')
+    progress_group.add_argument('--no-progress', dest='progress', action='store_false',
+                                help='never show one')
+    options = parser.parse_args(args)
+
+    from gait_nodes.bag.analysis import inspect_bag, robot_limits
+    from gait_nodes.bag.reader import BagReader
+
+    try:
+        total = BagReader(options.bag).total_bytes
+        show = options.progress if options.progress is not None else (
+            sys.stderr.isatty() or total > PROGRESS_BYTES)
+        from tqdm import tqdm
+
+        with tqdm(total=total, unit='B', unit_scale=True, desc='reading', disable=not show,
+                  file=sys.stderr, leave=False) as bar:
+            inspection = inspect_bag(options.bag, robot=options.robot, progress=bar.update)
+        report = inspection.report
+        if options.plot:
+            from gait_nodes.bag.plots import write_plots
+
+            robot = options.robot or report.get('gait', {}).get('robot')
+            written = write_plots(inspection.series, options.plot, robot_limits(robot)[1])
+            report['plots'] = [str(p) for p in written]
+    except GaitNodesError as error:
+        return fail(PROG, error)
+    except OSError as error:
+        return fail(PROG, GaitNodesError(f'{options.bag}: {error.strerror or error}'))
+    if options.json:
+        print(json.dumps(report, indent=1))
+    else:
+        print(format_report(report))
+        for plot in report.get('plots', []):
+            print(f'plot:      {plot}')
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
