@@ -52,7 +52,7 @@ class Recorder(Node):
         self.writer = BagWriter(output, flush_period_s=flush_period_s)
         for name, type_name in topics.items():
             latched = name in LATCHED_TOPICS
-            profile = QoSProfile(depth=100, durability=DurabilityPolicy.TRANSIENT_LOCAL
+            profile = QoSProfile(depth=1000, durability=DurabilityPolicy.TRANSIENT_LOCAL
                                  if latched else DurabilityPolicy.VOLATILE)
             publisher_qos = QoSProfile(depth=1 if latched else 10,
                                        durability=profile.durability)

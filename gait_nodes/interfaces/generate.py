@@ -239,36 +239,61 @@ class _DeserializerBuilder:
         self.classes = classes
         self.w = writer
         self.order = order
+        # A run of fixed-position primitives read with one unpack: (indent, targets, format),
+        # and the struct constructions waiting for it (they only use values read before).
+        self._run: tuple[int, list[str], str] | None = None
+        self._deferred: list[str] = []
+
+    def emit(self, indent: int, line: str) -> None:
+        self.flush()
+        self.w.emit(indent, line)
+
+    def flush(self) -> None:
+        """Emit the pending run of primitives as one ``unpack_from``."""
+        if self._run is None:
+            return
+        indent, targets, fmt = self._run
+        deferred, self._run, self._deferred = self._deferred, None, []
+        name = self.w.struct_const(self.order + fmt)
+        self.w.emit(indent, f'{", ".join(targets)}, = {name}.unpack_from(d, p)')
+        self.w.emit(indent, f'p += {struct.calcsize(self.order + fmt)}')
+        for line in deferred:
+            self.w.emit(indent, line)
 
     def align(self, indent: int, align: int, state: _Alignment) -> None:
         pad = state.static_pad(align)
         if pad is None:
-            self.w.emit(indent, f'p += (4 - p) % {align}')
+            self.emit(indent, f'p += (4 - p) % {align}')
             state.reset(align)
         elif pad:
-            self.w.emit(indent, f'p += {pad}')
+            self.emit(indent, f'p += {pad}')
             state.advance(pad)
 
     def single(self, indent: int, field: FieldDef, target: str, state: _Alignment) -> None:
         if field.is_primitive:
             fmt, size = PRIMITIVES[field.base_type]
-            self.align(indent, size, state)
-            name = self.w.struct_const(self.order + fmt)
-            self.w.emit(indent, f'{target}, = {name}.unpack_from(d, p)')
-            self.w.emit(indent, f'p += {size}')
-            state.advance(size)
+            pad = state.static_pad(size)
+            if pad is None:
+                self.align(indent, size, state)
+                pad = 0
+            if self._run is None or self._run[0] != indent:
+                self.flush()
+                self._run = (indent, [], '')
+            run_indent, targets, run_fmt = self._run
+            self._run = (run_indent, [*targets, target], run_fmt + 'x' * pad + fmt)
+            state.advance(pad + size)
         elif field.is_string:
             self.align(indent, 4, state)
             length = self.w.unique('n')
             name = self.w.struct_const(self.order + 'I')
-            self.w.emit(indent, f'{length}, = {name}.unpack_from(d, p)')
+            self.emit(indent, f'{length}, = {name}.unpack_from(d, p)')
             if field.base_type == 'wstring':
-                self.w.emit(indent, f'{target} = bytes(d[p + 4:p + 4 + 2 * {length}])'
+                self.emit(indent, f'{target} = bytes(d[p + 4:p + 4 + 2 * {length}])'
                                     f'.decode("utf-16-le")')
-                self.w.emit(indent, f'p += 4 + 2 * {length}')
+                self.emit(indent, f'p += 4 + 2 * {length}')
             else:
-                self.w.emit(indent, f'{target} = bytes(d[p + 4:p + 3 + {length}]).decode()')
-                self.w.emit(indent, f'p += 4 + {length}')
+                self.emit(indent, f'{target} = bytes(d[p + 4:p + 3 + {length}]).decode()')
+                self.emit(indent, f'p += 4 + {length}')
             state.reset(1)
         else:
             self.struct(indent, self.definitions[field.base_type], target, state)
@@ -281,7 +306,11 @@ class _DeserializerBuilder:
             values.append(var)
         cls = f'C_{msgdef.type_name.replace("/", "_")}'
         self.w.constants[cls] = self.classes[msgdef.type_name]
-        self.w.emit(indent, f'{target} = {cls}({", ".join(values)})')
+        construction = f'{target} = {cls}({", ".join(values)})'
+        if self._run is not None and self._run[0] == indent:
+            self._deferred.append(construction)
+        else:
+            self.emit(indent, construction)
 
     def field(self, indent: int, field: FieldDef, target: str, state: _Alignment) -> None:
         if field.container is None:
@@ -290,33 +319,33 @@ class _DeserializerBuilder:
         single = dataclasses.replace(field, container=None, size=None)
         count = self.w.unique('c')
         if field.container == 'array':
-            self.w.emit(indent, f'{count} = {field.size}')
+            self.emit(indent, f'{count} = {field.size}')
         else:
             self.single(indent, FieldDef('count', 'uint32'), count, state)
         if field.is_primitive:
             fmt, size = PRIMITIVES[field.base_type]
             if field.container == 'sequence' and size > 1:
-                self.w.emit(indent, f'if {count}: p += (4 - p) % {size}')
+                self.emit(indent, f'if {count}: p += (4 - p) % {size}')
             elif field.container == 'array':
                 self.align(indent, size, state)
             if field.base_type in _BYTE_LIKE:
-                self.w.emit(indent, f'{target} = bytes(d[p:p + {count}])')
+                self.emit(indent, f'{target} = bytes(d[p:p + {count}])')
                 if field.base_type != 'uint8' or field.container == 'array':
-                    self.w.emit(indent, f'{target} = list({target})')
+                    self.emit(indent, f'{target} = list({target})')
             else:
-                self.w.emit(indent, f'{target} = list(unpack_from("{self.order}%d{fmt}" '
+                self.emit(indent, f'{target} = list(unpack_from("{self.order}%d{fmt}" '
                                     f'% {count}, d, p))')
-            self.w.emit(indent, f'p += {size} * {count}')
+            self.emit(indent, f'p += {size} * {count}')
             if field.container == 'array':
                 state.advance(size * field.size)
             else:
                 state.reset(min(size, 4))
             return
         element = self.w.unique('e')
-        self.w.emit(indent, f'{target} = []')
-        self.w.emit(indent, f'for _ in range({count}):')
+        self.emit(indent, f'{target} = []')
+        self.emit(indent, f'for _ in range({count}):')
         self.single(indent + 1, single, element, _Alignment(1))
-        self.w.emit(indent + 1, f'{target}.append({element})')
+        self.emit(indent + 1, f'{target}.append({element})')
         state.reset(1)
 
 
@@ -347,7 +376,9 @@ def make_deserializer(msgdef: MsgDef, definitions: dict[str, MsgDef],
                       classes: dict[str, type], order: str) -> Callable:
     """Function ``(data, p) -> (message, end)`` reading CDR data at offset ``p``."""
     writer = _CodeWriter()
-    _DeserializerBuilder(definitions, classes, writer, order).struct(1, msgdef, 'o', _Alignment())
+    builder = _DeserializerBuilder(definitions, classes, writer, order)
+    builder.struct(1, msgdef, 'o', _Alignment())
+    builder.flush()
     return _compile(writer, 'deserialize', 'd, p', '(o, p)')
 
 

@@ -61,6 +61,11 @@ def _qos(profile, user_data: bytes):
     return Qos(*policies)
 
 
+#: Sample, view and instance state "any" (SampleState.Any | ViewState.Any | InstanceState.Any
+#: of cyclonedds.core), for raw takes.
+_ANY_STATE = 0x3 | 0xC | 0x70
+
+
 def dds_topic_name(topic: str) -> str:
     """ROS topic ``/a/b`` -> DDS topic ``rt/a/b``."""
     return 'rt' + topic
@@ -188,7 +193,12 @@ class DdsTransport:
         entity.__del__()
 
     def wait(self, timeout_ns: int) -> list[tuple[object, object]]:
-        """Wait up to ``timeout_ns`` for data; return ``(subscription, message)`` pairs."""
+        """Wait up to ``timeout_ns`` for data; return ``(subscription, message)`` pairs.
+
+        Raw subscriptions get the CDR bytes (encapsulation header included) as the message.
+        """
+        from cyclonedds._clayer import ddspy_take
+
         if timeout_ns > 0:
             self.waitset.wait(min(timeout_ns, WAIT_SLICE_NS))
         self.guard.set(False)
@@ -197,6 +207,16 @@ class DdsTransport:
             if not entry.condition.triggered:
                 continue
             depth = max(entry.subscription.qos_profile.depth, 1)
+            if entry.subscription.raw:
+                # A recorder wants the CDR bytes: take them as Cyclone holds them (4-byte
+                # padded, as rmw_cyclonedds hands them to rosbag2) without a decode/encode.
+                taken = ddspy_take(entry.reader._ref, _ANY_STATE, depth)
+                if isinstance(taken, int):
+                    raise GaitNodesError(f'DDS take failed with code {taken} on '
+                                         f'{entry.subscription.topic_name}')
+                ready.extend((entry.subscription, data) for data, info in taken
+                             if info.valid_data)
+                continue
             for sample in entry.reader.take(N=depth):
                 if getattr(sample, 'sample_info', None) is None or not \
                         sample.sample_info.valid_data:

@@ -12,7 +12,9 @@ from gait_nodes.runtime.clock import NS_PER_S
 
 
 def _deliver(subscription, msg) -> None:
-    subscription.callback(msg.serialize() if subscription.raw else msg)
+    if subscription.raw and not isinstance(msg, bytes):
+        msg = msg.serialize()
+    subscription.callback(msg)
 
 
 class SingleThreadedExecutor:
