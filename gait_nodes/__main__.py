@@ -233,6 +233,35 @@ def print_summary(summary: dict, as_json: bool) -> None:
             print(f'  node {name} exited with status {code}')
     if summary.get('bag'):
         print(f'  recorded: {summary["bag"]}')
+        report = summary.get('inspect') or {}
+        if 'error' in report:
+            print(f'  the bag cannot be read: {report["error"]}')
+        else:
+            from gait_nodes.inspect import format_gait
+
+            check = report.get('metadata_check') or {}
+            print(f'  bag: {report.get("message_count", 0)} messages over '
+                  f'{report.get("duration_s", 0.0):.2f} s, '
+                  + ('metadata.yaml matches' if check.get('matches') else
+                     f'metadata problems: {check.get("problems")}'))
+            for damage in report.get('damage', []):
+                print(f'  DAMAGE: {damage["description"]}')
+            for line in format_gait(report.get('gait')):
+                print('  ' + line)
+            print(f'  details and plots: python -m gait_nodes.inspect {summary["bag"]} '
+                  f'--plot {summary["bag"]}_plots')
+
+
+def _inspect_recording(bag: str) -> dict:
+    """The inspect report of the bag just recorded (an ``error`` entry if it cannot be read)."""
+    from gait_nodes.bag.analysis import inspect_bag
+
+    try:
+        report = inspect_bag(bag).report
+    except GaitNodesError as exc:
+        return {'error': str(exc)}
+    keep = ('message_count', 'duration_s', 'complete', 'damage', 'metadata_check', 'gait')
+    return {key: report[key] for key in keep if key in report}
 
 
 def main(args: list[str] | None = None) -> int:
@@ -263,6 +292,7 @@ def main(args: list[str] | None = None) -> int:
         return fail(PROG, exc)
     if options.record:
         summary['bag'] = os.path.abspath(options.record)
+        summary['inspect'] = _inspect_recording(options.record)
     print_summary(summary, options.json)
     failed = [name for name, code in summary['exit_codes'].items() if code != 0]
     return 1 if failed else 0

@@ -29,6 +29,54 @@ def _mm(value) -> str:
     return 'n/a' if value is None else f'{value * 1000:.1f} mm'
 
 
+def format_gait(gait: dict | None) -> list[str]:
+    """Lines for the gait section of a report (none when the bag holds no gait topics)."""
+    lines = []
+    if not gait:
+        return lines
+    lines.append('gait:' + (f' ({gait["robot"]})' if 'robot' in gait else ''))
+    base = gait.get('base')
+    if base:
+        speed = base['mean_speed_m_s']
+        speed_text = (f', mean speed {speed:.4f} m/s ({speed * 60 * FEET_PER_METRE:.2f} '
+                      f'ft/min)' if speed is not None else '')
+        lines.append(f'  walked:      {base["distance_m"]:.3f} m in {base["time_s"]:.2f} s '
+                     f'(net {base["displacement_m"]:.3f} m){speed_text}')
+    steps = gait.get('steps')
+    if steps:
+        text = f'  steps:       {steps["count"]}'
+        if steps['count']:
+            text += (f', length mean {steps["mean_length_m"]:.3f} m (min '
+                     f'{steps["min_length_m"]:.3f}, max {steps["max_length_m"]:.3f})')
+        lines.append(text)
+    margin = gait.get('zmp_margin')
+    if margin:
+        lines.append(f'  ZMP margin:  min {_mm(margin["min_m"])}, mean {_mm(margin["mean_m"])}'
+                     f', outside the support polygon {margin["time_outside_s"]:.3f} s '
+                     f'({margin["samples_outside"]} of {margin["samples"]} samples)')
+    for topic, joints in (gait.get('joint_velocity') or {}).items():
+        text = (f'  peak joint velocity ({topic}): {joints["peak_rad_s"]:.4f} rad/s at '
+                f'{joints["peak_joint"]}')
+        if joints['limit_rad_s']:
+            text += (f', limit {joints["limit_rad_s"]:g} rad/s (max ratio '
+                     f'{joints["peak_ratio_to_limit"]:.3f}, {joints["samples_over_limit"]} '
+                     f'samples over)')
+        lines.append(text)
+    commands = gait.get('commands')
+    if commands:
+        lines.append(f'  commands:    {commands["answered"]} answered, {commands["accepted"]}'
+                     f' accepted, {commands["rejected"]} rejected')
+        lines.extend(f'    rejected: {reason}' for reason in commands['rejections'])
+    diagnostics = gait.get('diagnostics')
+    if diagnostics:
+        levels = ', '.join(f'{k} {v}' for k, v in sorted(diagnostics['by_level'].items()))
+        lines.append(f'  diagnostics: {levels}')
+        if diagnostics['first_error']:
+            error = diagnostics['first_error']
+            lines.append(f'    first ERROR: {error["name"]}: {error["message"]}')
+    return lines
+
+
 def format_report(report: dict) -> str:
     """The report as text for a person."""
     lines = [f'bag:       {report["bag"]}']
@@ -50,48 +98,7 @@ def format_report(report: dict) -> str:
     if check is not None:
         lines.append('metadata:  metadata.yaml matches the files' if check['matches'] else
                      'metadata:  metadata.yaml disagrees: ' + '; '.join(check['problems']))
-    gait = report.get('gait')
-    if gait:
-        lines.append('gait:' + (f' ({gait["robot"]})' if 'robot' in gait else ''))
-        base = gait.get('base')
-        if base:
-            speed = base['mean_speed_m_s']
-            speed_text = (f', mean speed {speed:.4f} m/s ({speed * 60 * FEET_PER_METRE:.2f} '
-                          f'ft/min)' if speed is not None else '')
-            lines.append(f'  walked:      {base["distance_m"]:.3f} m in {base["time_s"]:.2f} s '
-                         f'(net {base["displacement_m"]:.3f} m){speed_text}')
-        steps = gait.get('steps')
-        if steps:
-            text = f'  steps:       {steps["count"]}'
-            if steps['count']:
-                text += (f', length mean {steps["mean_length_m"]:.3f} m (min '
-                         f'{steps["min_length_m"]:.3f}, max {steps["max_length_m"]:.3f})')
-            lines.append(text)
-        margin = gait.get('zmp_margin')
-        if margin:
-            lines.append(f'  ZMP margin:  min {_mm(margin["min_m"])}, mean {_mm(margin["mean_m"])}'
-                         f', outside the support polygon {margin["time_outside_s"]:.3f} s '
-                         f'({margin["samples_outside"]} of {margin["samples"]} samples)')
-        for topic, joints in (gait.get('joint_velocity') or {}).items():
-            text = (f'  peak joint velocity ({topic}): {joints["peak_rad_s"]:.4f} rad/s at '
-                    f'{joints["peak_joint"]}')
-            if joints['limit_rad_s']:
-                text += (f', limit {joints["limit_rad_s"]:g} rad/s (max ratio '
-                         f'{joints["peak_ratio_to_limit"]:.3f}, {joints["samples_over_limit"]} '
-                         f'samples over)')
-            lines.append(text)
-        commands = gait.get('commands')
-        if commands:
-            lines.append(f'  commands:    {commands["answered"]} answered, {commands["accepted"]}'
-                         f' accepted, {commands["rejected"]} rejected')
-            lines.extend(f'    rejected: {reason}' for reason in commands['rejections'])
-        diagnostics = gait.get('diagnostics')
-        if diagnostics:
-            levels = ', '.join(f'{k} {v}' for k, v in sorted(diagnostics['by_level'].items()))
-            lines.append(f'  diagnostics: {levels}')
-            if diagnostics['first_error']:
-                error = diagnostics['first_error']
-                lines.append(f'    first ERROR: {error["name"]}: {error["message"]}')
+    lines.extend(format_gait(report.get('gait')))
     for topic, count in (report.get('undecodable') or {}).items():
         lines.append(f'undecodable: {count} messages on {topic}')
     return '\n'.join(lines)
