@@ -324,7 +324,8 @@ def reference_knots(times_s: np.ndarray, zmp: np.ndarray, max_segment_s: float,
 def fit_quintic_com(times_s, zmp_reference, com_height_m: float, initial_state,
                     knot_times_s=None, max_segment_s: float = 0.2, end: str = 'rest',
                     gravity_m_s2: float = GRAVITY_M_S2, end_weight: float = 1e6,
-                    samples_per_segment: int = 12, end_state=None) -> PiecewiseQuintic:
+                    samples_per_segment: int = 12, end_state=None,
+                    capture_point=None) -> PiecewiseQuintic:
     """C2 piecewise-quintic COM whose cart-table ZMP follows a ZMP reference.
 
     The first knot is ``initial_state`` (so a switch to this generator is continuous); at every
@@ -345,6 +346,8 @@ def fit_quintic_com(times_s, zmp_reference, com_height_m: float, initial_state,
         end_weight: Weight of the end condition against the ZMP error.
         samples_per_segment: ZMP samples per piece in the least squares.
         end_state: (3, 2) state at the last knot when ``end='state'``.
+        capture_point: (2,) target of ``c + sqrt(A) c_d`` at the last knot for
+            ``end='capture'`` (default the reference there) [m].
     """
     times = np.asarray(times_s, dtype=float)
     reference = np.asarray(zmp_reference, dtype=float)
@@ -381,7 +384,8 @@ def fit_quintic_com(times_s, zmp_reference, com_height_m: float, initial_state,
     else:
         end_rows = np.zeros((1, n))
         end_rows[0, last], end_rows[0, last + 1] = 1.0, np.sqrt(A)
-        end_targets = ref(knots[-1:])
+        end_targets = ref(knots[-1:]) if capture_point is None \
+            else np.asarray(capture_point, dtype=float).reshape(1, 2)
     weight = 0.0 if end == 'state' else np.sqrt(end_weight)
     Lm = np.vstack(rows + [weight * end_rows])
     Lt = np.vstack(targets + [weight * end_targets])

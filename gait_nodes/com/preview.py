@@ -354,15 +354,39 @@ class OnlinePreviewController:
         self._window = None
 
     def retune(self, settings: PreviewSettings) -> None:
-        """New settings; the COM state is kept (no jump), the error sum restarts.
+        """New settings; the COM state and the current jerk are kept (bumpless transfer).
 
         Raises:
             ComPlanningError: The settings have no stabilizing solution; nothing changes.
         """
         gains = preview_gains(settings)
+        jerk = self.jerk() if self._reference is not None else None
         self._gains = gains
         self._error_sum = np.zeros(2)
         self._window = None
+        if jerk is not None:
+            self.match_jerk(jerk)
+
+    def jerk(self) -> np.ndarray:
+        """(2,) jerk the next :meth:`step` applies [m/s^3]."""
+        window = self.window()
+        g = self._gains
+        error_sum = self._error_sum + g.C @ self._state - window[0]
+        return -g.integral_gain * error_sum - g.state_gain @ self._state \
+            - g.preview_gain @ window[1:]
+
+    def match_jerk(self, jerk_xy=(0.0, 0.0)) -> None:
+        """Set the error sum so that the next step applies ``jerk_xy`` (bumpless start).
+
+        A controller started from another generator's state would otherwise answer the
+        mismatch with a burst of jerk; this way the acceleration stays smooth too.
+        """
+        window = self.window()
+        g = self._gains
+        feedforward = g.state_gain @ self._state + g.preview_gain @ window[1:]
+        error_now = g.C @ self._state - window[0]
+        self._error_sum = -(np.asarray(jerk_xy, dtype=float) + feedforward) \
+            / g.integral_gain - error_now
 
     def set_reference(self, reference) -> None:
         """Use ``reference`` (a :class:`gait_nodes.contract.ZmpReference`) from now on."""

@@ -160,7 +160,8 @@ def trapezoid_durations(distances_m, cruise_speed_m_s: float,
         raise ComPlanningError(f'half-cycle distances must be > 0, got {distances}')
     v_max = check_positive('cruise_speed_m_s', cruise_speed_m_s)
     a = check_positive('acceleration_m_s2', acceleration_m_s2)
-    total = float(distances.sum())
+    edges = np.concatenate([[0.0], np.cumsum(distances)])
+    total = float(edges[-1])
     ramp = min(v_max * v_max / (2 * a), total / 2)
     v_top = math.sqrt(2 * a * ramp)
 
@@ -175,7 +176,6 @@ def trapezoid_durations(distances_m, cruise_speed_m_s: float,
         t_end = 2 * t_ramp + (total - 2 * ramp) / v_top
         return t_end - math.sqrt(2 * remaining / a)
 
-    edges = np.concatenate([[0.0], np.cumsum(distances)])
     times = np.array([time_at(s) for s in edges])
     return np.diff(times)
 
@@ -236,7 +236,7 @@ class SwayTrajectory:
 def solve_sway(waypoints_in_world, times_s, com_height_m: float, initial_position,
                initial_velocity=(0.0, 0.0), end: str = 'rest',
                gravity_m_s2: float = GRAVITY_M_S2, beta_weight: float = 1.0,
-               end_weight: float = 1e8) -> SwayTrajectory:
+               end_weight: float = 1e8, capture_point=None) -> SwayTrajectory:
     """Sway compensation over a chain of support-line segments.
 
     Args:
@@ -248,10 +248,14 @@ def solve_sway(waypoints_in_world, times_s, com_height_m: float, initial_positio
             acceleration, ``W_0`` must be the cart-table ZMP of the initial state.
         initial_velocity: (2,) COM velocity at ``times_s[0]`` [m/s].
         end: ``'rest'``: at rest over ``W_K`` at the end; ``'capture'``: the divergent component
-            ``c + sqrt(A) c_d`` equals ``W_K`` at the end (a receding window).
+            ``c + sqrt(A) c_d`` equals ``capture_point`` (default ``W_K``) at the end (a
+            receding window).
         gravity_m_s2: Gravity [m/s^2].
-        beta_weight: Weight of the time-law coefficients against the end condition.
+        beta_weight: Weight of the time-law coefficients (scaled by the segment length
+            squared, so that it weighs the ZMP's lead over a uniform motion [m]) against the
+            end condition.
         end_weight: Weight of the end condition.
+        capture_point: (2,) target of the divergent component for ``end='capture'`` [m].
 
     Returns:
         The trajectory; ``end_residual_m`` says how well the end condition was met.
@@ -311,11 +315,13 @@ def solve_sway(waypoints_in_world, times_s, com_height_m: float, initial_positio
         target = np.concatenate([W[-1], [0.0, 0.0]]) - end_constants
     else:
         J = end_rows[:2] + math.sqrt(A) * end_rows[2:]
-        target = W[-1] - (end_constants[:2] + math.sqrt(A) * end_constants[2:])
+        goal = W[-1] if capture_point is None else np.asarray(capture_point, dtype=float)
+        target = goal - (end_constants[:2] + math.sqrt(A) * end_constants[2:])
     H = end_weight * J.T @ J
     f = end_weight * J.T @ target
     regular = np.full(n, 1e-12)
-    regular[4::5] = beta_weight
+    # beta |W_k+1 - W_k| / 4 is how far the ZMP runs ahead of the uniform motion on the line.
+    regular[4::5] = beta_weight * (np.sum(D * D, axis=1) + 1e-6)
     H += np.diag(regular)
     # KKT of min 1/2 z'Hz - f'z subject to Gz = g.
     m = len(g)
@@ -329,6 +335,44 @@ def solve_sway(waypoints_in_world, times_s, com_height_m: float, initial_positio
     residual = float(np.max(np.abs(J @ solution[:n] - target)))
     return SwayTrajectory(A, T, W, z[:, 4].copy(), z[:, 0:2].copy(), z[:, 2:4].copy(),
                           residual)
+
+
+def path_waypoints(corner_times_s, corners, same_place_m: float = 1e-6):
+    """Sway waypoints of a piecewise-linear ZMP path that dwells at the feet.
+
+    Kurazume's biped ZMP never stops: it moves along the line from one foot to the next over the
+    whole half cycle. A reference that holds the ZMP at the stance ankle and moves it in double
+    support (Lucy-style) has the same path; each dwell becomes one waypoint at the middle of the
+    dwell, the other corners stay.
+
+    Args:
+        corner_times_s: (V,) times of the path's corners [s].
+        corners: (V, 2) the path's corners [m].
+        same_place_m: Corners closer than this are one place [m].
+
+    Returns:
+        ``(times (W,), waypoints (W, 2))``, first and last corner kept.
+    """
+    times = np.asarray(corner_times_s, dtype=float)
+    points = np.asarray(corners, dtype=float)
+    out_t, out_p = [times[0]], [points[0]]
+    k = 1
+    while k < len(points) - 1:
+        j = k
+        while j + 1 < len(points) and np.linalg.norm(points[j + 1] - points[k]) <= same_place_m:
+            j += 1
+        if j > k and j < len(points) - 1:
+            out_t.append(0.5 * (times[k] + times[j]))
+        elif j > k:
+            out_t.append(times[k])
+        else:
+            out_t.append(times[k])
+        out_p.append(points[k])
+        k = j + 1
+    if out_t[-1] < times[-1]:
+        out_t.append(times[-1])
+        out_p.append(points[-1])
+    return np.array(out_t), np.array(out_p)
 
 
 def line_intersection(p1, p2, q1, q2) -> np.ndarray:
