@@ -307,6 +307,7 @@ class OnlinePreviewController:
     def __init__(self, settings: PreviewSettings, position_in_world=(0.0, 0.0),
                  stamp_ns: int = 0):
         self._gains = preview_gains(settings)
+        self._cache_gains()
         self._state = np.zeros((3, 2))
         self._error_sum = np.zeros(2)
         self._stamp_ns = int(stamp_ns)
@@ -362,6 +363,7 @@ class OnlinePreviewController:
         gains = preview_gains(settings)
         jerk = self.jerk() if self._reference is not None else None
         self._gains = gains
+        self._cache_gains()
         self._error_sum = np.zeros(2)
         self._window = None
         if jerk is not None:
@@ -411,22 +413,33 @@ class OnlinePreviewController:
         steps = settings.preview_steps
         if self._window is not None:
             offset, remainder = divmod(self._stamp_ns - self._window_origin_ns, settings.dt_ns)
-            if remainder == 0 and 0 <= offset and offset + steps + 1 <= len(self._window):
+            if remainder == 0 and 0 <= offset <= len(self._window) - steps - 1:
                 return self._window[offset:offset + steps + 1]
         self._resample()
         return self._window[:steps + 1]
 
+    def _cache_gains(self) -> None:
+        g = self._gains
+        self._fast = (g.A, g.B.reshape(3, 1), g.C, g.integral_gain, g.state_gain,
+                      g.preview_gain, g.settings.dt_ns, g.settings.preview_steps)
+
     def step(self) -> ComSample:
         """Return the state at ``t_k`` and advance the controller to ``t_k + dt``."""
-        window = self.window()
-        gains = self._gains
+        A, B, C, Gi, Gx, Gd, dt_ns, steps = self._fast
+        window = self._window
+        offset = (self._stamp_ns - self._window_origin_ns) // dt_ns
+        if window is None or offset < 0 or offset > len(window) - steps - 1 \
+                or (self._stamp_ns - self._window_origin_ns) % dt_ns:
+            window = self.window()
+        else:
+            window = window[offset:offset + steps + 1]
         x = self._state
-        current = ComSample(self._stamp_ns, x[0].copy(), x[1].copy(), x[2].copy())
-        self._error_sum += gains.C @ x - window[0]
-        u = -gains.integral_gain * self._error_sum - gains.state_gain @ x \
-            - gains.preview_gain @ window[1:]
-        self._state = gains.A @ x + np.outer(gains.B, u)
-        self._stamp_ns += gains.settings.dt_ns
+        # x is replaced, never written, so its rows can be handed out without copies.
+        current = ComSample(self._stamp_ns, x[0], x[1], x[2])
+        error_sum = self._error_sum + C @ x - window[0]
+        self._error_sum = error_sum
+        self._state = A @ x + B * (-Gi * error_sum - Gx @ x - Gd @ window[1:])
+        self._stamp_ns += dt_ns
         return current
 
     def zmp(self) -> np.ndarray:
