@@ -40,3 +40,10 @@ class InvalidParameterTypeError(ParameterError):
 
 class ConfigError(GaitNodesError):
     """A configuration file (YAML, URDF, params file) was refused at load."""
+
+
+class ComPlanningError(GaitNodesError):
+    """A COM generator refused its settings or its input (e.g. no stabilizing Riccati solution).
+
+    The message names the offending value and the allowed range.
+    """

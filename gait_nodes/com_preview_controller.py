@@ -1,0 +1,255 @@
+"""com_preview_controller node: /gait/zmp_reference in, /gait/com_reference out every tick.
+
+``python -m gait_nodes.com_preview_controller --ros-args -p robot:=biped -p com_method:=preview``
+
+Methods (parameter ``com_method``): ``preview`` (Kajita preview control), ``sway`` (Kurazume
+sway compensation on the reference's path), ``polynomial`` (fifth-order pieces, Lucy). The COM
+height is ``com_height_m``, or the robot YAML's when 0. Switching method or changing a parameter
+re-initializes the generator from the current COM state, so the COM does not jump. The body yaw
+comes from /gait/footsteps (mean of the planned foot yaws, linear between contact changes);
+without a plan it is 0.
+
+A ZMP reference with a NaN, out-of-order stamps, too short a horizon (< ``preview_s``) or in a
+frame other than odom is dropped and reported on /diagnostics; the controller keeps its last good
+reference and its state. A parameter change that the controller cannot use (Riccati equation
+without a stabilizing solution, horizon shorter than one step, unknown method) is refused with
+the reason.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+
+import numpy as np
+
+from gait_nodes import contract
+from gait_nodes.cli import run_node
+from gait_nodes.com.online import GeneratorSettings, make_generator
+from gait_nodes.com.preview import PreviewSettings, preview_gains
+from gait_nodes.diagnostics import ERROR, OK, WARN, DiagnosticsReporter
+from gait_nodes.errors import ComPlanningError, GaitNodesError
+from gait_nodes.interfaces import get_message
+from gait_nodes.robot.description import load_robot_description
+from gait_nodes.runtime import DurabilityPolicy, Node, QoSProfile, SetParametersResult
+
+NODE_NAME = 'com_preview_controller'
+ZMP_TOPIC = '/gait/zmp_reference'
+FOOTSTEPS_TOPIC = '/gait/footsteps'
+COM_TOPIC = '/gait/com_reference'
+#: Declared parameters and their defaults (also in config/com_preview_controller.yaml).
+DEFAULTS = {
+    'robot': 'robosimian',
+    'com_method': 'preview',
+    'com_height_m': 0.0,
+    'dt_s': 0.005,
+    'preview_s': 1.6,
+    'Q': 1.0,
+    'R': 1e-6,
+    'status_period_s': 1.0,
+}
+#: Most ticks the controller catches up in one timer call when it fell behind the clock.
+MAX_CATCH_UP_TICKS = 50
+
+
+def plan_yaw(plan: contract.FootstepPlan, t_s: float) -> tuple[float, float]:
+    """Body yaw [rad] and yaw rate [rad/s] of a footstep plan at ``t_s`` from its start.
+
+    The yaw is the circular mean of the planned foot yaws at each contact change, unwrapped and
+    linear in time between them.
+    """
+    means = np.unwrap(np.angle(np.exp(1j * plan.yaws_rad).sum(axis=1)))
+    times = plan.times_s
+    if len(times) < 2 or t_s <= times[0] or t_s >= times[-1]:
+        return float(np.interp(t_s, times, means)), 0.0
+    k = min(max(int(np.searchsorted(times, t_s, side='right')) - 1, 0), len(times) - 2)
+    span = times[k + 1] - times[k]
+    rate = (means[k + 1] - means[k]) / span if span > 0 else 0.0
+    return float(np.interp(t_s, times, means)), float(rate)
+
+
+class ComPreviewController(Node):
+    """Generates the COM reference from the ZMP reference (see the module docstring)."""
+
+    def __init__(self):
+        super().__init__(NODE_NAME)
+        values = {name: self.declare_parameter(name, default).value
+                  for name, default in DEFAULTS.items()}
+        self._robot = load_robot_description(values['robot'])
+        self._values = values
+        self._settings = self._make_settings(values, self._robot)  # raises when invalid
+        preview_gains(self._settings.preview)
+        self.diagnostics = DiagnosticsReporter(self, self._robot.name)
+        self._publisher = self.create_publisher(
+            get_message('trajectory_msgs/msg/MultiDOFJointTrajectory'), COM_TOPIC, 10)
+        self.create_subscription(get_message('nav_msgs/msg/Path'), ZMP_TOPIC,
+                                 self._on_zmp_reference, 10)
+        self.create_subscription(
+            get_message('trajectory_msgs/msg/MultiDOFJointTrajectory'), FOOTSTEPS_TOPIC,
+            self._on_footsteps, QoSProfile(depth=1,
+                                           durability=DurabilityPolicy.TRANSIENT_LOCAL))
+        self._reference = None
+        self._plan = None
+        self._generator = None
+        self._last_published = None
+        self._timer = self.create_timer(self._settings.preview.dt_s, self._tick)
+        self._status_timer = self.create_timer(values['status_period_s'], self._report_status)
+        self.add_on_set_parameters_callback(self._on_set_parameters)
+        self.get_logger().info(
+            f'{self._settings.method} COM at {self._settings.preview.com_height_m:.3f} m for '
+            f'{self._robot.name}, {1.0 / self._settings.preview.dt_s:.0f} Hz')
+
+    # --- settings -----------------------------------------------------------------------------
+
+    @staticmethod
+    def _make_settings(values: dict, robot) -> GeneratorSettings:
+        height = values['com_height_m'] or robot.com_height_m
+        if values['com_height_m'] < 0:
+            raise ComPlanningError(f'com_height_m must be >= 0 (0: the robot YAML), got '
+                                   f'{values["com_height_m"]}')
+        if not 0 < values['status_period_s'] <= 60:
+            raise ComPlanningError(f'status_period_s must be in (0, 60], got '
+                                   f'{values["status_period_s"]}')
+        preview = PreviewSettings(com_height_m=height, dt_s=values['dt_s'],
+                                  preview_s=values['preview_s'], q_weight=values['Q'],
+                                  r_weight=values['R'])
+        return GeneratorSettings(preview, values['com_method'])
+
+    def _on_set_parameters(self, parameters) -> SetParametersResult:
+        values = dict(self._values)
+        values.update({p.name: p.value for p in parameters if p.name in DEFAULTS})
+        try:
+            robot = self._robot if values['robot'] == self._values['robot'] \
+                else load_robot_description(values['robot'])
+            settings = self._make_settings(values, robot)
+            preview_gains(settings.preview)
+        except GaitNodesError as exc:
+            return SetParametersResult(successful=False, reason=str(exc))
+        old, old_values = self._settings, self._values
+        self._robot, self._values, self._settings = robot, values, settings
+        if settings.preview.dt_s != old.preview.dt_s:
+            self.destroy_timer(self._timer)
+            self._timer = self.create_timer(settings.preview.dt_s, self._tick)
+        if values['status_period_s'] != old_values['status_period_s']:
+            self.destroy_timer(self._status_timer)
+            self._status_timer = self.create_timer(values['status_period_s'],
+                                                   self._report_status)
+        if self._generator is not None and settings != old:
+            self._switch_generator()
+        self.diagnostics.report('settings', OK, f'{settings.method} COM, zc '
+                                f'{settings.preview.com_height_m:.3f} m',
+                                {'com_method': settings.method, 'dt_s': settings.preview.dt_s,
+                                 'preview_s': settings.preview.preview_s,
+                                 'Q': settings.preview.q_weight,
+                                 'R': settings.preview.r_weight})
+        return SetParametersResult(successful=True)
+
+    def _switch_generator(self) -> None:
+        current = self._generator.state()
+        state = np.array([current.position_in_world, current.velocity_in_world,
+                          current.acceleration_in_world])
+        self._generator = make_generator(self._settings, state, current.stamp_ns,
+                                         self._reference)
+
+    # --- inputs -------------------------------------------------------------------------------
+
+    def _on_zmp_reference(self, msg) -> None:
+        try:
+            reference = contract.zmp_reference_from_msg(msg)
+        except contract.ContractError as exc:
+            self.diagnostics.drop(ZMP_TOPIC, str(exc))
+            return
+        preview = self._settings.preview
+        if reference.horizon_s < preview.preview_s - 0.5 * preview.dt_s:
+            self.diagnostics.drop(ZMP_TOPIC, f'horizon {reference.horizon_s:.3f} s is shorter '
+                                             f'than preview_s = {preview.preview_s} s')
+            return
+        if self._reference is not None and \
+                int(reference.stamps_ns[0]) < int(self._reference.stamps_ns[0]):
+            self.diagnostics.drop(ZMP_TOPIC, 'stamped before the previous reference '
+                                             '(out of order)')
+            return
+        self._reference = reference
+        if self._generator is not None:
+            self._generator.set_reference(reference)
+
+    def _on_footsteps(self, msg) -> None:
+        try:
+            self._plan = contract.footsteps_from_msg(msg)
+        except contract.ContractError as exc:
+            self.diagnostics.drop(FOOTSTEPS_TOPIC, str(exc))
+
+    # --- output -------------------------------------------------------------------------------
+
+    def _tick(self) -> None:
+        if self._reference is None:
+            return
+        now_ns = self.get_clock().now().nanoseconds
+        preview = self._settings.preview
+        if self._generator is None:
+            start = self._reference.sample(np.array([now_ns], dtype=np.int64))[0]
+            state = np.array([start, (0.0, 0.0), (0.0, 0.0)])
+            self._generator = make_generator(self._settings, state, now_ns, self._reference)
+        behind = (now_ns - self._generator.stamp_ns) // preview.dt_ns
+        if behind > MAX_CATCH_UP_TICKS or behind < -1:
+            # Far off the clock (a jump in time): carry the state over to now.
+            current = self._generator.state()
+            self._generator.reset(current.position_in_world, current.velocity_in_world,
+                                  current.acceleration_in_world, stamp_ns=now_ns)
+            self._generator.set_reference(self._reference)
+        elif behind < 0:
+            return
+        try:
+            for _ in range(max(int(behind), 0)):
+                self._generator.step()
+            sample = self._generator.step()
+        except ComPlanningError as exc:
+            self.diagnostics.report('generator', ERROR, f'{self._settings.method}: {exc}')
+            return
+        self._publish(sample)
+
+    def _publish(self, sample) -> None:
+        yaw, yaw_rate = 0.0, 0.0
+        if self._plan is not None:
+            yaw, yaw_rate = plan_yaw(self._plan, (sample.stamp_ns - self._plan.start_ns) * 1e-9)
+            yaw = math.remainder(yaw, 2 * math.pi)
+        height = self._settings.preview.com_height_m
+        state = contract.ComState(
+            stamp_ns=sample.stamp_ns,
+            position_in_world=[*sample.position_in_world, height],
+            velocity_in_world=[*sample.velocity_in_world, 0.0],
+            acceleration_in_world=[*sample.acceleration_in_world, 0.0],
+            yaw_rad=yaw, yaw_rate_rad_s=yaw_rate)
+        self._publisher.publish(contract.com_reference_to_msg([state]))
+        self._last_published = sample
+
+    def _report_status(self) -> None:
+        if self._last_published is None:
+            self.diagnostics.report('controller', WARN, f'waiting for {ZMP_TOPIC}')
+            return
+        sample = self._last_published
+        preview = self._settings.preview
+        zmp = sample.position_in_world - preview.com_height_m / preview.gravity_m_s2 \
+            * sample.acceleration_in_world
+        reference = self._reference.sample(np.array([sample.stamp_ns], dtype=np.int64))[0]
+        values = {
+            'com_method': self._settings.method,
+            'zmp_error_m': float(np.linalg.norm(zmp - reference)),
+            'dropped_references': self.diagnostics.dropped.get(ZMP_TOPIC, 0),
+        }
+        if hasattr(self._generator, 'sway_fallbacks') and self._settings.method == 'sway':
+            values['sway_plans'] = self._generator.sway_plans
+            values['sway_fallbacks_to_polynomial'] = self._generator.sway_fallbacks
+        self.diagnostics.report('controller', OK, f'{self._settings.method} COM running',
+                                values)
+
+
+def main(args: list[str] | None = None) -> int:
+    """Entry point: ``python -m gait_nodes.com_preview_controller [--ros-args ...]``."""
+    return run_node(lambda options: ComPreviewController(), args,
+                    prog='python -m gait_nodes.com_preview_controller',
+                    description=__doc__.split('\n\n')[0])
+
+
+if __name__ == '__main__':
+    sys.exit(main())
