@@ -40,3 +40,11 @@ class InvalidParameterTypeError(ParameterError):
 
 class ConfigError(GaitNodesError):
     """A configuration file (YAML, URDF, params file) was refused at load."""
+
+
+class GaitParameterError(ParameterError):
+    """A gait parameter (command, ROS parameter or setting) is invalid or beyond the robot."""
+
+
+class GaitCommandError(GaitParameterError):
+    """A /gait/command message is not a valid command (JSON, schema, unknown key, type)."""
