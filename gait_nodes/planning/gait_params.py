@@ -45,7 +45,7 @@ import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 
-from gait_nodes.errors import GaitParameterError
+from gait_nodes.errors import GaitCommandError, GaitParameterError
 from gait_nodes.robot.description import RobotDescription
 
 GAITS = ('biped', 'crawl', 'trot', 'auto')
@@ -256,3 +256,51 @@ def parameters_from_mapping(base: GaitParameters, values: Mapping[str, object],
     params = base.replace(**changes)
     params.check_robot(robot)
     return params
+
+
+def command_schema() -> dict:
+    """The JSON Schema of /gait/command (``msgs_schema/gait_command.schema.json``)."""
+    global _SCHEMA
+    if _SCHEMA is None:
+        import json
+
+        from gait_nodes.paths import data_dir
+
+        _SCHEMA = json.loads((data_dir('msgs_schema') / 'gait_command.schema.json').read_text())
+    return _SCHEMA
+
+
+_SCHEMA: dict | None = None
+
+
+def parse_command(text: str) -> dict[str, object]:
+    """The changes asked by a /gait/command JSON text, checked against the schema.
+
+    Raises:
+        GaitCommandError: Invalid JSON, not an object, a NaN or infinite number, an unknown key,
+            a wrong type or a value outside the schema's range; the message says which.
+    """
+    import json
+
+    import jsonschema
+
+    try:
+        values = json.loads(text)
+    except (json.JSONDecodeError, TypeError) as exc:
+        raise GaitCommandError(f'invalid JSON: {exc}') from exc
+    if not isinstance(values, dict):
+        raise GaitCommandError(f'a gait command is a JSON object, got {type(values).__name__}')
+    for key, value in values.items():
+        if isinstance(value, float) and not math.isfinite(value):
+            raise GaitCommandError(f'{key} must be finite, got {value!r}')
+    allowed = list(command_schema()['properties'])
+    unknown = sorted(set(values) - set(allowed))
+    if unknown:
+        raise GaitCommandError(f'unknown key(s) {unknown}; allowed: {allowed}')
+    validator = jsonschema.Draft202012Validator(command_schema())
+    error = jsonschema.exceptions.best_match(validator.iter_errors(values))
+    if error is not None:
+        where = '.'.join(str(p) for p in error.absolute_path)
+        raise GaitCommandError(f'{where + ": " if where else ""}{error.message}')
+    return {key: float(value) if key in NUMERIC_RANGES else value
+            for key, value in values.items()}
