@@ -29,7 +29,7 @@ import numpy as np
 
 from gait_nodes.contract import FootstepPlan, ZmpReference
 from gait_nodes.errors import GaitParameterError
-from gait_nodes.planning import zmp_reference
+from gait_nodes.planning import support, zmp_reference
 from gait_nodes.planning.gait_params import GaitParameters
 from gait_nodes.planning.layout import FootLayout
 from gait_nodes.robot.description import RobotDescription
@@ -191,8 +191,9 @@ class Step:
         slots: Swing slots in time order.
         zmp_times_s: (K,) ZMP knot times [s].
         zmp_points: (K, 2) ZMP knots in odom [m].
-        zmp_margin_kept_m: Margin the step's ZMP keeps by construction [m] (crawl: inside the
-            contact-point triangles; biped and trot: on the support line, i.e. the foot radius).
+        zmp_margin_kept_m: Margin [m] the step's ZMP keeps by construction inside the support
+            polygon, the hull of the stance feet's discs (biped and trot: on the support line,
+            i.e. the foot radius; crawl: its depth in the contact-point triangles plus that).
         params: Parameters the step was planned with.
         twist: Twist the step was planned with.
     """
@@ -416,7 +417,7 @@ class GaitPlanner:
         if not slots:
             times = np.array([t0, t_end])
             points = np.array([state.zmp, zmp_reference.stand_point(self.layout, positions)])
-            kept = self.robot.foot_radius_m
+            kept = self._all_down_margin(points, positions)
             kind = 'stand'
         else:
             times = np.array([t0, t1, t_end])
@@ -433,9 +434,14 @@ class GaitPlanner:
         settled = zmp_reference.stand_point(self.layout, state.positions)
         after = dataclasses.replace(state, time_s=t_end, zmp=settled, mode='standing',
                                     rest_pose=rest, last_anchor=rest)
+        points = np.array([state.zmp, settled])
         return Step(gait, 'stand', t0, t_end, state.positions, state.yaws, (),
-                    np.array([t0, t_end]), np.array([state.zmp, settled]),
-                    self.robot.foot_radius_m, self._params, self._twist, after)
+                    np.array([t0, t_end]), points, self._all_down_margin(points, state.positions),
+                    self._params, self._twist, after)
+
+    def _all_down_margin(self, points: np.ndarray, positions: np.ndarray) -> float:
+        return min(support.support_margin(p, positions, self.robot.foot_radius_m)
+                   for p in points)
 
     def _zmp_knots(self, gait, state, slots, times, group) -> tuple[np.ndarray, float]:
         if gait == 'biped':
@@ -449,8 +455,9 @@ class GaitPlanner:
                     self.robot.foot_radius_m)
         before = [state.positions] + [slot.positions_after for slot in slots[:-1]]
         region = [(slot.feet, positions) for slot, positions in zip(slots, before, strict=True)]
-        return zmp_reference.crawl_knots(self.layout, region, slots[0].positions_after,
-                                         self._params.zmp_margin_m, state.zmp)
+        knots, kept = zmp_reference.crawl_knots(self.layout, region, slots[0].positions_after,
+                                                self._params.zmp_margin_m, state.zmp)
+        return knots, kept + self.robot.foot_radius_m
 
     @staticmethod
     def _path_pose(start_s, pose, twist, t_s) -> np.ndarray:
