@@ -47,3 +47,11 @@ class ComPlanningError(GaitNodesError):
 
     The message names the offending value and the allowed range.
     """
+
+
+class GaitParameterError(ParameterError):
+    """A gait parameter (command, ROS parameter or setting) is invalid or beyond the robot."""
+
+
+class GaitCommandError(GaitParameterError):
+    """A /gait/command message is not a valid command (JSON, schema, unknown key, type)."""

@@ -1,0 +1,596 @@
+"""Footsteps, contact schedule and ZMP reference of a walk driven online by (vx, vy, wz).
+
+The body follows a reference path integrated from the commanded twist (body frame, constant
+between commands): a straight line, a circular arc, or a side step. Each foot lands where the
+body will be at the middle of its coming stance phase, at its nominal offset (the stance
+``step_width_m`` wide), with the body's yaw: the footholds follow the curved path and, in steady
+walking, every foot moves ``v T`` per swing (Kurazume's coordinate transformation of the straight
+gait). The gait's rhythm is fixed by ``step_period_s`` and ``duty_factor``
+(see :mod:`gait_nodes.planning.gait_params`); the ZMP reference of each step comes from
+:mod:`gait_nodes.planning.zmp_reference`.
+
+Online changes (:meth:`GaitPlanner.set_velocity`, :meth:`GaitPlanner.set_parameters`) take effect
+at the next step boundary: the step under way is kept, the later ones are planned again from the
+state it ends in. From standstill the first step starts with an extra weight-shift phase of one
+step period; a zero twist ends the walk with closing steps that bring every foot to its nominal
+place under the last landing pose, then the ZMP settles between the feet.
+
+All times here are float seconds from the planner's origin (the node maps them to ROS time).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from gait_nodes.contract import FootstepPlan, ZmpReference
+from gait_nodes.errors import GaitParameterError
+from gait_nodes.planning import support, zmp_reference
+from gait_nodes.planning.gait_params import GaitParameters
+from gait_nodes.planning.layout import FootLayout
+from gait_nodes.robot.description import RobotDescription
+
+#: A foot closer than this to its target [m, rad] does not step (no zero-length steps).
+ALREADY_THERE = 1e-6
+NS_PER_S = 1_000_000_000
+
+
+@dataclass(frozen=True)
+class Twist2D:
+    """Planar body twist in the body frame.
+
+    Attributes:
+        vx_m_s: Forward speed [m/s].
+        vy_m_s: Leftward speed [m/s].
+        wz_rad_s: Turn rate, counter-clockwise [rad/s].
+    """
+
+    vx_m_s: float = 0.0
+    vy_m_s: float = 0.0
+    wz_rad_s: float = 0.0
+
+    def is_zero(self) -> bool:
+        """True when the twist asks for no motion."""
+        return self.vx_m_s == 0.0 and self.vy_m_s == 0.0 and self.wz_rad_s == 0.0
+
+    def scaled(self, factor: float) -> Twist2D:
+        """The twist times ``factor``."""
+        return Twist2D(self.vx_m_s * factor, self.vy_m_s * factor, self.wz_rad_s * factor)
+
+    def as_tuple(self) -> tuple[float, float, float]:
+        """(vx, vy, wz)."""
+        return (self.vx_m_s, self.vy_m_s, self.wz_rad_s)
+
+
+def integrate_pose(pose: np.ndarray, twist: Twist2D, duration_s: float) -> np.ndarray:
+    """Pose (x, y, yaw) reached from ``pose`` after ``duration_s`` of the constant ``twist``."""
+    x, y, yaw = pose
+    w = twist.wz_rad_s
+    turn = w * duration_s
+    if abs(turn) < 1e-9:
+        dx, dy = twist.vx_m_s * duration_s, twist.vy_m_s * duration_s
+    else:
+        sin_t, cos_t = math.sin(turn), math.cos(turn)
+        dx = (twist.vx_m_s * sin_t + twist.vy_m_s * (cos_t - 1.0)) / w
+        dy = (twist.vx_m_s * (1.0 - cos_t) + twist.vy_m_s * sin_t) / w
+    c, s = math.cos(yaw), math.sin(yaw)
+    return np.array([x + c * dx - s * dy, y + s * dx + c * dy, yaw + turn])
+
+
+def place(pose: np.ndarray, offsets_in_base: np.ndarray) -> np.ndarray:
+    """(N, 2) world positions of base-frame ``offsets_in_base`` for the body at ``pose``."""
+    c, s = math.cos(pose[2]), math.sin(pose[2])
+    rotation = np.array([[c, -s], [s, c]])
+    return offsets_in_base @ rotation.T + pose[:2]
+
+
+def wrap_angle(angle: np.ndarray) -> np.ndarray:
+    """Angles wrapped to [-pi, pi)."""
+    return (np.asarray(angle) + np.pi) % (2.0 * np.pi) - np.pi
+
+
+def clamp_velocity(twist: Twist2D, params: GaitParameters, robot: RobotDescription,
+                   layout: FootLayout) -> tuple[Twist2D, list[str]]:
+    """The twist the planner walks for a commanded ``twist``, and why it was reduced.
+
+    Each component is clamped to its configured maximum; then the whole twist is scaled down so
+    that no foot moves more than one stride (``step_length_m`` along x,
+    ``reach.max_step_width_m`` along y) and the body turns at most ``reach.max_turn_rad`` in a
+    cycle.
+    """
+    notes = []
+    values = list(twist.as_tuple())
+    names = ('vx', 'vy', 'wz')
+    limits = (params.max_vx_m_s, params.max_vy_m_s, params.max_wz_rad_s)
+    settings = ('max_vx_m_s', 'max_vy_m_s', 'max_wz_rad_s')
+    units = ('m/s', 'm/s', 'rad/s')
+    for i in range(3):
+        if abs(values[i]) > limits[i]:
+            clamped = math.copysign(limits[i], values[i])
+            notes.append(f'{names[i]} {values[i]:g} {units[i]} clamped to {clamped:g} '
+                         f'({settings[i]})')
+            values[i] = clamped
+    result = Twist2D(*values)
+    cycle = params.cycle_s
+    offsets = layout.offsets(params.step_width_m)
+
+    def fits(candidate: Twist2D) -> bool:
+        if abs(candidate.wz_rad_s) * cycle > robot.reach.max_turn_rad + 1e-12:
+            return False
+        moved = place(integrate_pose(np.zeros(3), candidate, cycle), offsets) - offsets
+        return bool(np.all(np.abs(moved[:, 0]) <= params.step_length_m + 1e-12)
+                    and np.all(np.abs(moved[:, 1]) <= robot.reach.max_step_width_m + 1e-12))
+
+    if not fits(result):
+        low, high = 0.0, 1.0
+        for _ in range(50):
+            middle = 0.5 * (low + high)
+            low, high = (middle, high) if fits(result.scaled(middle)) else (low, middle)
+        reduced = result.scaled(low)
+        notes.append(f'twist ({result.vx_m_s:g}, {result.vy_m_s:g}, {result.wz_rad_s:g}) '
+                     f'scaled by {low:.3f} to ({reduced.vx_m_s:.4g}, {reduced.vy_m_s:.4g}, '
+                     f'{reduced.wz_rad_s:.4g}) to keep each swing within one stride '
+                     f'(step_length_m {params.step_length_m:g} m, reach.max_step_width_m '
+                     f'{robot.reach.max_step_width_m:g} m, reach.max_turn_rad '
+                     f'{robot.reach.max_turn_rad:g} rad per {cycle:g} s cycle)')
+        result = reduced
+    return result, notes
+
+
+@dataclass(frozen=True)
+class SwingSlot:
+    """Feet that swing together.
+
+    Attributes:
+        lift_off_s: Lift-off time [s].
+        touch_down_s: Touch-down time [s].
+        feet: Indices of the swinging feet (each really moves).
+        positions_after: (F, 2) all foot positions after the touch-down [m].
+        yaws_after: (F,) all foot yaws after the touch-down [rad].
+    """
+
+    lift_off_s: float
+    touch_down_s: float
+    feet: tuple[int, ...]
+    positions_after: np.ndarray
+    yaws_after: np.ndarray
+
+
+@dataclass(frozen=True)
+class _State:
+    """What the next step is planned from (the end of the previous one)."""
+
+    time_s: float
+    positions: np.ndarray
+    yaws: np.ndarray
+    zmp: np.ndarray
+    mode: str  # 'standing' | 'walking' | 'stopping'
+    next_group: int
+    rest_pose: np.ndarray
+    last_anchor: np.ndarray
+    path_start_s: float = 0.0
+    path_pose: np.ndarray | None = None
+    path_twist: Twist2D = Twist2D()
+
+
+@dataclass(frozen=True)
+class Step:
+    """One step: all feet down while the ZMP moves, then the swing slots.
+
+    Attributes:
+        gait: The gait walked (resolved, never 'auto').
+        kind: 'walk' (has swings) or 'stand'.
+        start_s: Step start [s].
+        end_s: Step end [s] (the next step's start).
+        positions_start: (F, 2) foot positions at the start [m].
+        yaws_start: (F,) foot yaws at the start [rad].
+        slots: Swing slots in time order.
+        zmp_times_s: (K,) ZMP knot times [s].
+        zmp_points: (K, 2) ZMP knots in odom [m].
+        zmp_margin_kept_m: Margin [m] the step's ZMP keeps by construction inside the support
+            polygon, the hull of the stance feet's discs (biped and trot: on the support line,
+            i.e. the foot radius; crawl: its depth in the contact-point triangles plus that).
+        params: Parameters the step was planned with.
+        twist: Twist the step was planned with.
+    """
+
+    gait: str
+    kind: str
+    start_s: float
+    end_s: float
+    positions_start: np.ndarray
+    yaws_start: np.ndarray
+    slots: tuple[SwingSlot, ...]
+    zmp_times_s: np.ndarray
+    zmp_points: np.ndarray
+    zmp_margin_kept_m: float
+    params: GaitParameters
+    twist: Twist2D
+    state_after: _State = dataclasses.field(repr=False, compare=False)
+
+    @property
+    def positions_end(self) -> np.ndarray:
+        """(F, 2) foot positions at the end [m]."""
+        return self.slots[-1].positions_after if self.slots else self.positions_start
+
+    @property
+    def yaws_end(self) -> np.ndarray:
+        """(F,) foot yaws at the end [rad]."""
+        return self.slots[-1].yaws_after if self.slots else self.yaws_start
+
+
+class GaitPlanner:
+    """Plans footsteps and the ZMP reference online, step by step.
+
+    Args:
+        robot: Robot description (feet, foot radius, reach).
+        params: Gait parameters (default: :meth:`GaitParameters.for_robot`).
+        base_pose: Initial body pose (x [m], y [m], yaw [rad]) in odom; the feet start at their
+            nominal places under it.
+        start_s: Time of the initial standstill [s].
+
+    Raises:
+        GaitParameterError: ``params`` do not suit the robot.
+    """
+
+    def __init__(self, robot: RobotDescription, params: GaitParameters | None = None, *,
+                 base_pose: Sequence[float] = (0.0, 0.0, 0.0), start_s: float = 0.0):
+        self.robot = robot
+        self.layout = FootLayout.of(robot)
+        params = params or GaitParameters.for_robot(robot)
+        params.check_robot(robot)
+        self._params = params
+        self._requested = Twist2D()
+        self._twist = Twist2D()
+        pose = np.array(base_pose, dtype=float)
+        positions = place(pose, self.layout.offsets(params.step_width_m))
+        self._initial = _State(
+            time_s=float(start_s), positions=positions,
+            yaws=np.full(self.layout.count, pose[2]),
+            zmp=zmp_reference.stand_point(self.layout, positions), mode='standing',
+            next_group=0, rest_pose=pose, last_anchor=pose)
+        self._steps: list[Step] = []
+        self._before: tuple[float, np.ndarray, np.ndarray] | None = None
+
+    # --- settings ----------------------------------------------------------------------------
+
+    @property
+    def params(self) -> GaitParameters:
+        """Parameters of the steps planned from the next step boundary on."""
+        return self._params
+
+    @property
+    def twist(self) -> Twist2D:
+        """Twist walked from the next step boundary on (after clamping)."""
+        return self._twist
+
+    @property
+    def requested_twist(self) -> Twist2D:
+        """Twist last commanded, before clamping."""
+        return self._requested
+
+    def set_parameters(self, params: GaitParameters, now_s: float) -> None:
+        """Use ``params`` from the next step boundary after ``now_s``.
+
+        Raises:
+            GaitParameterError: ``params`` do not suit the robot (nothing changes).
+        """
+        params.check_robot(self.robot)
+        twist, _ = clamp_velocity(self._requested, params, self.robot, self.layout)
+        self._params, self._twist = params, twist
+        self._replan(now_s)
+
+    def set_velocity(self, twist: Twist2D, now_s: float) -> tuple[Twist2D, list[str]]:
+        """Walk ``twist`` from the next step boundary after ``now_s``.
+
+        Returns:
+            The twist that will be walked and, if it was reduced, why.
+
+        Raises:
+            GaitParameterError: A component is NaN or infinite (nothing changes).
+        """
+        if not all(math.isfinite(v) for v in twist.as_tuple()):
+            raise GaitParameterError(f'velocity command {twist.as_tuple()} is not finite')
+        applied, notes = clamp_velocity(twist, self._params, self.robot, self.layout)
+        self._requested = twist
+        if applied != self._twist:
+            self._twist = applied
+            self._replan(now_s)
+        return applied, notes
+
+    # --- planning ----------------------------------------------------------------------------
+
+    @property
+    def steps(self) -> tuple[Step, ...]:
+        """Planned steps kept in memory, in time order."""
+        return tuple(self._steps)
+
+    def _state(self) -> _State:
+        return self._steps[-1].state_after if self._steps else self._initial
+
+    def _replan(self, now_s: float) -> None:
+        """Drop the steps that have not started by ``now_s``."""
+        self._steps = [step for step in self._steps if step.start_s <= now_s]
+
+    def next_boundary_s(self, now_s: float) -> float:
+        """Time of the first step boundary after ``now_s`` (where a change takes effect)."""
+        for step in self._steps:
+            if step.start_s > now_s:
+                return step.start_s
+            if step.end_s > now_s:
+                return step.end_s
+        return max(self._state().time_s, now_s)
+
+    def advance(self, until_s: float) -> bool:
+        """Plan steps until the plan reaches ``until_s``; True if any step was added."""
+        added = False
+        while self._state().time_s < until_s:
+            self._steps.append(self._next_step(self._state()))
+            added = True
+        return added
+
+    def prune(self, before_s: float) -> None:
+        """Forget steps that ended before ``before_s`` (the last contact change is kept)."""
+        while len(self._steps) > 1 and self._steps[0].end_s < before_s:
+            step = self._steps.pop(0)
+            if step.slots:
+                last = step.slots[-1]
+                self._before = (last.touch_down_s, last.positions_after, last.yaws_after)
+
+    def _next_step(self, state: _State) -> Step:
+        params, twist = self._params, self._twist
+        gait = params.resolved_gait(self.robot)
+        groups = self.layout.swing_groups(gait)
+        offsets = self.layout.offsets(params.step_width_m)
+        half, cycle, swing = params.step_period_s, params.cycle_s, params.swing_s
+        t0 = state.time_s
+        if twist.is_zero():
+            rest = state.last_anchor if state.mode == 'walking' else state.rest_pose
+            targets = place(rest, offsets)
+            yaws = np.full(self.layout.count, rest[2])
+            pending = self._not_there(state, targets, yaws)
+            if not pending:
+                return self._stand_step(state, gait, rest)
+            group_index = next(g % len(groups) for g in range(state.next_group,
+                                                              state.next_group + len(groups))
+                               if pending & set(sum(groups[g % len(groups)], ())))
+            path = dict(path_start_s=state.path_start_s, path_pose=state.path_pose,
+                        path_twist=state.path_twist)
+
+            def target_of(foot, touch_down_s):
+                return targets[foot], yaws[foot], rest
+
+            mode = 'stopping'
+        else:
+            starting = state.mode != 'walking'
+            rest = state.rest_pose
+            group_index = ((0 if _leads_left(twist) else 1) if starting
+                           else state.next_group % len(groups))
+            extra = half if state.mode == 'standing' else 0.0
+            first_touch_down = t0 + params.transfer_s(gait) + extra + swing
+            if starting:
+                # The body starts so that no foot of the first cycle moves more than a stride.
+                span = half + (len(groups[group_index]) - 1) * swing
+                start = first_touch_down + 0.5 * params.duty_factor * cycle + span - cycle
+                path_pose = state.last_anchor if state.mode == 'stopping' else rest
+                path = dict(path_start_s=start, path_pose=path_pose, path_twist=twist)
+            elif twist != state.path_twist:
+                path = dict(path_start_s=t0, path_pose=self._path_pose(state.path_start_s,
+                                                                       state.path_pose,
+                                                                       state.path_twist, t0),
+                            path_twist=twist)
+            else:
+                path = dict(path_start_s=state.path_start_s, path_pose=state.path_pose,
+                            path_twist=state.path_twist)
+
+            def target_of(foot, touch_down_s):
+                anchor = self._path_pose(path['path_start_s'], path['path_pose'],
+                                         path['path_twist'],
+                                         touch_down_s + 0.5 * params.duty_factor * cycle)
+                return place(anchor, offsets[foot:foot + 1])[0], anchor[2], anchor
+
+            mode = 'walking'
+        extra = half if state.mode == 'standing' else 0.0
+        t1 = t0 + params.transfer_s(gait) + extra
+        positions, foot_yaws = state.positions.copy(), state.yaws.copy()
+        slots, last_anchor = [], state.last_anchor
+        for j, feet in enumerate(groups[group_index]):
+            lift_off, touch_down = t1 + j * swing, t1 + (j + 1) * swing
+            moving = []
+            after, after_yaws = positions.copy(), foot_yaws.copy()
+            for foot in feet:
+                target, yaw, anchor = target_of(foot, touch_down)
+                target = self._within_reach(positions[foot], target, yaw)
+                if (np.linalg.norm(target - positions[foot]) > ALREADY_THERE
+                        or abs(wrap_angle(yaw - foot_yaws[foot])) > ALREADY_THERE):
+                    after[foot], after_yaws[foot] = target, yaw
+                    moving.append(foot)
+                    last_anchor = anchor
+            if moving:
+                slots.append(SwingSlot(lift_off, touch_down, tuple(moving), after, after_yaws))
+                positions, foot_yaws = after, after_yaws
+        t_end = t1 + len(groups[group_index]) * swing
+        if not slots:
+            times = np.array([t0, t_end])
+            points = np.array([state.zmp, zmp_reference.stand_point(self.layout, positions)])
+            kept = self._all_down_margin(points, positions)
+            kind = 'stand'
+        else:
+            times = np.array([t0, t1, t_end])
+            points, kept = self._zmp_knots(gait, state, slots, times, groups[group_index])
+            kind = 'walk'
+        after_state = _State(
+            time_s=t_end, positions=positions, yaws=foot_yaws, zmp=points[-1], mode=mode,
+            next_group=group_index + 1, rest_pose=rest, last_anchor=last_anchor, **path)
+        return Step(gait, kind, t0, t_end, state.positions, state.yaws, tuple(slots), times,
+                    points, kept, params, twist, after_state)
+
+    def _stand_step(self, state: _State, gait: str, rest: np.ndarray) -> Step:
+        t0, t_end = state.time_s, state.time_s + self._params.step_period_s
+        settled = zmp_reference.stand_point(self.layout, state.positions)
+        after = dataclasses.replace(state, time_s=t_end, zmp=settled, mode='standing',
+                                    rest_pose=rest, last_anchor=rest)
+        points = np.array([state.zmp, settled])
+        return Step(gait, 'stand', t0, t_end, state.positions, state.yaws, (),
+                    np.array([t0, t_end]), points, self._all_down_margin(points, state.positions),
+                    self._params, self._twist, after)
+
+    def _all_down_margin(self, points: np.ndarray, positions: np.ndarray) -> float:
+        return min(support.support_margin(p, positions, self.robot.foot_radius_m)
+                   for p in points)
+
+    def _zmp_knots(self, gait, state, slots, times, group) -> tuple[np.ndarray, float]:
+        if gait == 'biped':
+            stance = next(f for f in range(self.layout.count) if f not in group[0])
+            return (zmp_reference.biped_knots(state.positions, stance, times, state.zmp),
+                    self.robot.foot_radius_m)
+        if gait == 'trot':
+            return (zmp_reference.trot_knots(self.layout, state.positions,
+                                             slots[-1].positions_after, group[0], times,
+                                             state.zmp),
+                    self.robot.foot_radius_m)
+        before = [state.positions] + [slot.positions_after for slot in slots[:-1]]
+        region = [(slot.feet, positions) for slot, positions in zip(slots, before, strict=True)]
+        knots, kept = zmp_reference.crawl_knots(self.layout, region, slots[0].positions_after,
+                                                self._params.zmp_margin_m, state.zmp)
+        return knots, kept + self.robot.foot_radius_m
+
+    @staticmethod
+    def _path_pose(start_s, pose, twist, t_s) -> np.ndarray:
+        return integrate_pose(pose, twist, max(t_s - start_s, 0.0))
+
+    def _not_there(self, state: _State, targets: np.ndarray, yaws: np.ndarray) -> set[int]:
+        distance = np.linalg.norm(targets - state.positions, axis=1)
+        turn = np.abs(wrap_angle(yaws - state.yaws))
+        return {int(f) for f in np.nonzero((distance > ALREADY_THERE)
+                                           | (turn > ALREADY_THERE))[0]}
+
+    def _within_reach(self, start: np.ndarray, target: np.ndarray, yaw: float) -> np.ndarray:
+        """``target``, pulled towards ``start`` if the step is longer than the robot reaches."""
+        c, s = math.cos(yaw), math.sin(yaw)
+        step = target - start
+        along, across = c * step[0] + s * step[1], -s * step[0] + c * step[1]
+        reach = self.robot.reach
+        scale = min(1.0, reach.max_step_length_m / max(abs(along), 1e-15),
+                    reach.max_step_width_m / max(abs(across), 1e-15))
+        return start + scale * step
+
+    # --- outputs -----------------------------------------------------------------------------
+
+    def zmp_knots(self) -> tuple[np.ndarray, np.ndarray]:
+        """(K,) times [s] and (K, 2) points of the ZMP reference over the planned steps."""
+        if not self._steps:
+            state = self._state()
+            return np.array([state.time_s]), state.zmp[None, :]
+        times = np.concatenate([step.zmp_times_s for step in self._steps])
+        points = np.concatenate([step.zmp_points for step in self._steps])
+        keep = np.ones(len(times), dtype=bool)
+        keep[1:] = np.diff(times) > 0
+        return times[keep], points[keep]
+
+    def zmp(self, times_s: np.ndarray) -> np.ndarray:
+        """(N, 2) ZMP reference [m] at ``times_s`` (held beyond the planned steps)."""
+        knot_times, knot_points = self.zmp_knots()
+        return zmp_reference.sample(knot_times, knot_points, np.asarray(times_s, dtype=float))
+
+    def zmp_reference(self, first_ns: int, origin_ns: int, horizon_s: float,
+                      period_s: float) -> ZmpReference:
+        """Contract samples from ``first_ns`` over ``horizon_s`` every ``period_s``.
+
+        Args:
+            first_ns: Time of the first sample [ns].
+            origin_ns: ROS time of the planner's 0 s [ns].
+            horizon_s: Time covered after the first sample [s].
+            period_s: Sample period [s].
+        """
+        period_ns = int(round(period_s * NS_PER_S))
+        count = int(math.ceil(horizon_s * NS_PER_S / period_ns - 1e-9)) + 1
+        stamps = first_ns + period_ns * np.arange(count, dtype=np.int64)
+        return ZmpReference(stamps, self.zmp((stamps - origin_ns) * 1e-9))
+
+    def _events(self) -> list[tuple[float, np.ndarray, np.ndarray]]:
+        events = []
+        if self._before is not None:
+            events.append(self._before)
+        elif self._steps:
+            first = self._steps[0]
+            events.append((first.start_s, first.positions_start, first.yaws_start))
+        else:
+            state = self._state()
+            events.append((state.time_s, state.positions, state.yaws))
+        for step in self._steps:
+            for slot in step.slots:
+                lift = (slot.lift_off_s, events[-1][1], events[-1][2])
+                if slot.lift_off_s > events[-1][0]:
+                    events.append(lift)
+                events.append((slot.touch_down_s, slot.positions_after, slot.yaws_after))
+        return events
+
+    def footstep_plan(self, now_s: float | None = None, origin_ns: int = 0) -> FootstepPlan:
+        """The contract plan: one point per contact change.
+
+        Args:
+            now_s: Keep only what matters from ``now_s`` on: the plan starts at the last contact
+                change at or before it (so a swing under way is included). None: everything.
+            origin_ns: ROS time of the planner's 0 s [ns].
+        """
+        events = self._events()
+        first = 0
+        if now_s is not None:
+            for k, (t_s, _, _) in enumerate(events):
+                if t_s <= now_s:
+                    first = k
+        events = events[first:]
+        start_s = events[0][0]
+        start_ns = origin_ns + int(round(start_s * NS_PER_S))
+        times = np.array([t for t, _, _ in events]) - start_s
+        positions = np.array([np.column_stack([p, np.zeros(len(p))]) for _, p, _ in events])
+        yaws = wrap_angle(np.array([y for _, _, y in events]))
+        return FootstepPlan(start_ns, self.layout.names, times, positions, yaws)
+
+
+def _leads_left(twist: Twist2D) -> bool:
+    if twist.vy_m_s != 0.0:
+        return twist.vy_m_s > 0.0
+    return twist.wz_rad_s >= 0.0
+
+
+def contact_schedule(plan: FootstepPlan, times_s: np.ndarray) -> np.ndarray:
+    """(N, F) booleans: foot ``f`` is on the ground at ``times_s[n]`` (from the plan start)."""
+    times_s = np.asarray(times_s, dtype=float)
+    down = np.ones((len(times_s), len(plan.foot_names)), dtype=bool)
+    for swing in plan.swings():
+        foot = plan.foot_names.index(swing.foot)
+        down[(times_s > swing.lift_off_s) & (times_s < swing.touch_down_s), foot] = False
+    return down
+
+
+def plan_walk(robot: RobotDescription, params: GaitParameters | None,
+              commands: Sequence[tuple[float, object]], duration_s: float,
+              **planner_options) -> GaitPlanner:
+    """Plan a whole walk offline (tests, benches, other nodes' checks).
+
+    Args:
+        robot: Robot description.
+        params: Initial parameters (default for the robot).
+        commands: ``(time_s, command)`` in time order, each a :class:`Twist2D` or a
+            :class:`GaitParameters`, applied as the node applies them when they arrive.
+        duration_s: Plan until this time [s].
+        **planner_options: ``base_pose``, ``start_s`` of :class:`GaitPlanner`.
+
+    Returns:
+        The planner holding every step (nothing pruned).
+    """
+    planner = GaitPlanner(robot, params, **planner_options)
+    for time_s, command in commands:
+        planner.advance(time_s)
+        if isinstance(command, Twist2D):
+            planner.set_velocity(command, time_s)
+        else:
+            planner.set_parameters(command, time_s)
+    planner.advance(duration_s)
+    return planner

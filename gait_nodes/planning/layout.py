@@ -1,0 +1,90 @@
+"""Which foot is which: sides, ends, diagonal pairs and the swing order of every gait.
+
+Feet are told apart by their nominal position in the base frame (x forward, y left), not by name,
+so that any robot YAML works: a quadruped needs one foot in each quadrant, a biped one foot on
+each side.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from gait_nodes.errors import ConfigError
+from gait_nodes.robot.description import RobotDescription
+
+
+@dataclass(frozen=True)
+class FootLayout:
+    """Foot roles of one robot (indices into the robot's foot order).
+
+    Attributes:
+        names: Foot names in the robot YAML's order.
+        nominal_xy: (F, 2) nominal foot positions in the base frame [m].
+        left: (F,) True for the feet on the left (y > 0).
+        roles: Foot index by role: quadruped "fl", "fr", "rl", "rr"; biped "l", "r".
+    """
+
+    names: tuple[str, ...]
+    nominal_xy: np.ndarray
+    left: np.ndarray
+    roles: dict[str, int]
+
+    @classmethod
+    def of(cls, robot: RobotDescription) -> FootLayout:
+        """The layout of ``robot``; ConfigError if its feet are not one per side/quadrant."""
+        xy = robot.nominal_stance_in_base()[:, :2].copy()
+        centre = xy.mean(axis=0)
+        left = xy[:, 1] > centre[1]
+        roles: dict[str, int] = {}
+        if robot.kind == 'biped':
+            for index, is_left in enumerate(left):
+                roles['l' if is_left else 'r'] = index
+            expected = {'l', 'r'}
+        else:
+            for index, (x, y) in enumerate(xy - centre):
+                roles[('f' if x > 0 else 'r') + ('l' if y > 0 else 'r')] = index
+            expected = {'fl', 'fr', 'rl', 'rr'}
+        if set(roles) != expected or len(roles) != len(xy):
+            raise ConfigError(f'{robot.name}: the nominal feet must be one per '
+                              f'{"side" if robot.kind == "biped" else "quadrant"} of the base '
+                              f'frame, got {xy.tolist()}')
+        xy.setflags(write=False)
+        left.setflags(write=False)
+        return cls(robot.foot_names, xy, left, roles)
+
+    @property
+    def count(self) -> int:
+        """Number of feet."""
+        return len(self.names)
+
+    def offsets(self, step_width_m: float) -> np.ndarray:
+        """(F, 2) foot positions in the base frame for a stance ``step_width_m`` wide [m]."""
+        y = self.nominal_xy[:, 1]
+        nominal_width = y[self.left].mean() - y[~self.left].mean()
+        shift = 0.5 * (step_width_m - nominal_width)
+        result = self.nominal_xy.copy()
+        result[:, 1] += np.where(self.left, shift, -shift)
+        return result
+
+    def swing_groups(self, gait: str) -> tuple[tuple[tuple[int, ...], ...], ...]:
+        """The gait's steps in cycle order, each a sequence of swing slots (sets of feet).
+
+        Index 0 leads with the left side: biped ``[[l]], [[r]]``; trot ``[[fl, rr]], [[fr, rl]]``;
+        crawl ``[[rl], [fl]], [[rr], [fr]]`` (hind then fore, the thesis' diagonal pairs
+        standing while a lateral pair steps).
+        """
+        r = self.roles
+        if gait == 'biped':
+            return (((r['l'],),), ((r['r'],),))
+        if gait == 'trot':
+            return (((r['fl'], r['rr']),), ((r['fr'], r['rl']),))
+        if gait == 'crawl':
+            return (((r['rl'],), (r['fl'],)), ((r['rr'],), (r['fr'],)))
+        raise ConfigError(f'no swing order for gait {gait!r}')
+
+    def diagonals(self) -> tuple[tuple[int, int], tuple[int, int]]:
+        """The two diagonal pairs of a quadruped: (fl, rr) and (fr, rl)."""
+        r = self.roles
+        return (r['fl'], r['rr']), (r['fr'], r['rl'])

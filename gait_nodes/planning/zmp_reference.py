@@ -1,0 +1,153 @@
+"""ZMP reference of each gait, as knots (time, point) with the reference linear in between.
+
+One step of any gait is ``[t0, t1]`` with all feet down (the ZMP moves from where the previous
+step left it) followed by ``[t1, t_end]``, the swings. The knots of a step are
+``(t0, z0), (t1, z1), (t_end, z_end)``:
+
+biped (Lucy, sections 2-3)
+    ``z1 = z_end`` = the stance ankle: the ZMP stays at the ankle of the supporting foot in single
+    support and travels from the rear ankle to the front ankle in double support.
+trot (Kurazume, section 2.1)
+    The ZMP runs along the diagonal line of the support pair, from the crossing of the diagonals
+    before the swing to their crossing after it (Kurazume's ``x cos(theta) + y sin(theta) = d``,
+    sway width ``D = L / (4 tan(theta))``, eq. 22); ``z1`` is that line's point at ``t1``. Curved
+    paths need no extra work: the footholds carry the coordinate transformation.
+crawl (thesis, III.B.1 and Fig. 6)
+    A lateral pair steps, hind then fore, while the other side stands. The ZMP is the crossing of
+    the stance diagonals (the mid-point of the diagonal pairs) between the two swings, moved into
+    both support triangles by the margin, and it moves only in the four-foot phase: twice a cycle,
+    half a stride each time. ``z1 = z_end`` = that point.
+
+Between two steps all feet are down and both ends of the ZMP's straight path lie inside the
+convex support polygon with the margin, so the whole path does.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from gait_nodes.planning import support
+from gait_nodes.planning.layout import FootLayout
+
+
+def stand_point(layout: FootLayout, positions: np.ndarray) -> np.ndarray:
+    """ZMP of a standing robot: between the feet (biped), the diagonals' crossing (quadruped)."""
+    if layout.count == 2:
+        return positions.mean(axis=0)
+    (a, b), (c, d) = layout.diagonals()
+    crossing = support.line_crossing(positions[a], positions[b], positions[c], positions[d])
+    if crossing is None or not (0 <= crossing[1] <= 1 and 0 <= crossing[2] <= 1):
+        return positions.mean(axis=0)
+    return crossing[0]
+
+
+def biped_knots(positions: np.ndarray, stance: int, times: Sequence[float],
+                z0: np.ndarray) -> np.ndarray:
+    """(3, 2) knots at ``times = (t0, t1, t_end)``: to the stance ankle, then held there."""
+    ankle = positions[stance]
+    return np.array([z0, ankle, ankle])
+
+
+def _point_on_segment(a: np.ndarray, b: np.ndarray, c: np.ndarray, d: np.ndarray) -> np.ndarray:
+    """Crossing of line (a, b) with line (c, d), kept on the segment [a, b]."""
+    crossing = support.line_crossing(a, b, c, d)
+    s = 0.5 if crossing is None else min(max(crossing[1], 0.0), 1.0)
+    return a + s * (b - a)
+
+
+def trot_knots(layout: FootLayout, start: np.ndarray, end: np.ndarray,
+               swinging: Sequence[int], times: Sequence[float], z0: np.ndarray) -> np.ndarray:
+    """(3, 2) knots of a trot step: along the support diagonal between diagonal crossings.
+
+    Args:
+        layout: Foot roles.
+        start: (F, 2) foot positions before the swing [m].
+        end: (F, 2) foot positions after the swing [m].
+        swinging: Feet of the swinging diagonal pair (one of them may stand still).
+        times: ``(t0, t1, t_end)`` [s].
+        z0: ZMP at ``t0`` [m].
+    """
+    first, second = layout.diagonals()
+    support_pair, moving = (second, first) if set(swinging) <= set(first) else (first, second)
+    a, b = start[support_pair[0]], start[support_pair[1]]
+    before = _point_on_segment(a, b, start[moving[0]], start[moving[1]])
+    after = _point_on_segment(a, b, end[moving[0]], end[moving[1]])
+    t0, t1, t_end = times
+    at_lift_off = before + (t1 - t0) / (t_end - t0) * (after - before)
+    return np.array([z0, at_lift_off, after])
+
+
+def crawl_region(layout: FootLayout, slots: Sequence[tuple[Sequence[int], np.ndarray]],
+                 margin_m: float) -> tuple[np.ndarray, np.ndarray]:
+    """Half-planes ``(A, b)`` of the points ``margin_m`` inside every stance triangle of a step.
+
+    Args:
+        layout: Foot roles.
+        slots: For each swing slot, the swinging feet and the (F, 2) positions before it.
+        margin_m: Margin [m].
+    """
+    normals, offsets = [], []
+    for feet, positions in slots:
+        stance = [f for f in range(layout.count) if f not in feet]
+        hull = support.convex_hull(positions[stance])
+        n, c = support.halfplanes(hull)
+        normals.append(n)
+        offsets.append(c - margin_m)
+    return np.vstack(normals), np.concatenate(offsets)
+
+
+def crawl_knots(layout: FootLayout, slots: Sequence[tuple[Sequence[int], np.ndarray]],
+                mid_positions: np.ndarray, margin_m: float, z0: np.ndarray
+                ) -> tuple[np.ndarray, float]:
+    """(3, 2) knots of a crawl step and the margin they keep [m].
+
+    The target is the crossing of the diagonals of ``mid_positions`` (the feet between the hind
+    and the fore swing, the thesis' ZMP); the knot is its projection into the region that keeps
+    ``margin_m`` inside every stance triangle of the step. If that region is empty, the point of
+    largest margin is used and the smaller margin returned.
+    """
+    normals, offsets = crawl_region(layout, slots, margin_m)
+    target = stand_point(layout, mid_positions)
+    point = support.project_onto_halfplanes(target, normals, offsets)
+    kept = margin_m
+    if point is None:
+        point, radius = support.chebyshev_centre(normals, offsets + margin_m)
+        kept = radius
+    return np.array([z0, point, point]), kept
+
+
+def crawl_margin_feasible(robot, params) -> float:
+    """Largest margin [m] a steady straight crawl at full stride leaves (both lateral steps).
+
+    Foot positions follow the planner's placement (each foot lands where the body will be at the
+    middle of its stance), with the body moving ``step_length_m`` per cycle.
+    """
+    layout = FootLayout.of(robot)
+    offsets = layout.offsets(params.step_width_m)
+    cycle, half = params.cycle_s, params.step_period_s
+    swing, transfer = params.swing_s, params.transfer_s('crawl')
+    speed = params.step_length_m / cycle
+    worst = np.inf
+    for side, (hind, fore) in enumerate(layout.swing_groups('crawl')):
+        other_hind, other_fore = layout.swing_groups('crawl')[1 - side]
+        # Touch-down times relative to the start of this step (steady state, straight).
+        last = {hind[0]: transfer + swing - cycle, fore[0]: half - cycle,
+                other_hind[0]: transfer + swing - half, other_fore[0]: 0.0}
+        start = offsets.copy()
+        for foot, t_down in last.items():
+            start[foot, 0] += speed * t_down
+        mid = start.copy()
+        mid[hind[0], 0] = offsets[hind[0], 0] + speed * (transfer + swing)
+        normals, offsets_region = crawl_region(layout, [(hind, start), (fore, mid)], 0.0)
+        _, radius = support.chebyshev_centre(normals, offsets_region)
+        worst = min(worst, radius)
+    return float(worst)
+
+
+def sample(knot_times_s: np.ndarray, knot_points: np.ndarray,
+           times_s: np.ndarray) -> np.ndarray:
+    """(N, 2) reference at ``times_s``: linear between knots, held beyond the ends."""
+    return np.stack([np.interp(times_s, knot_times_s, knot_points[:, i]) for i in range(2)],
+                    axis=-1)
