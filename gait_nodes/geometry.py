@@ -75,3 +75,15 @@ def signed_distance(points: np.ndarray, hull: np.ndarray) -> np.ndarray:
     cross = edges[None, :, 0] * relative[..., 1] - edges[None, :, 1] * relative[..., 0]
     inside = np.all(cross >= 0.0, axis=1)
     return np.where(inside, distance, -distance)
+
+
+def disc_support_margin(points: np.ndarray, centres: np.ndarray, radius_m: float) -> np.ndarray:
+    """Exact margin of points (N, 2) in the support polygon of discs of ``radius_m`` at centres.
+
+    The hull of equal discs is the hull of their centres grown by the radius, so the signed
+    distance to it is the signed distance to the centres' hull plus the radius.
+
+    Returns:
+        (N,) margins [m], positive inside.
+    """
+    return signed_distance(points, convex_hull(centres)) + radius_m

@@ -59,3 +59,12 @@ def test_margin_matches_brute_force(vertices, point):
         grown = convex_hull(np.vstack([hull, [point]]))
         inside = len(grown) == len(hull) and np.allclose(np.sort(grown, 0), np.sort(hull, 0))
         assert (margin > 0) == inside
+
+
+def test_exact_disc_margin_agrees_with_a_fine_disc_polygon():
+    from gait_nodes.geometry import disc_support_margin
+
+    centres = np.array([[0.0, 0.0], [0.6, 0.1], [0.2, 0.5]])
+    points = np.random.default_rng(3).uniform(-0.5, 1.0, size=(200, 2))
+    fine = signed_distance(points, foot_discs_polygon(centres, 0.055, segments=720))
+    np.testing.assert_allclose(disc_support_margin(points, centres, 0.055), fine, atol=1e-5)

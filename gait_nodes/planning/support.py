@@ -10,35 +10,14 @@ from __future__ import annotations
 
 import numpy as np
 
+from gait_nodes.geometry import convex_hull, disc_support_margin, signed_distance
+
+__all__ = ['EPS_M', 'chebyshev_centre', 'convex_hull', 'depth_in_hull', 'halfplanes',
+           'line_crossing', 'point_segment_distance', 'project_onto_halfplanes',
+           'support_margin']
+
 #: Lengths below this [m] are treated as zero (degenerate hulls, parallel lines).
 EPS_M = 1e-12
-
-
-def convex_hull(points: np.ndarray) -> np.ndarray:
-    """Vertices of the convex hull of ``points`` (N, 2), counter-clockwise, no repeats.
-
-    Andrew's monotone chain: unlike Qhull it accepts 1, 2 or collinear points, whose hull is a
-    point or a segment (returned as 1 or 2 vertices).
-    """
-    pts = np.unique(np.asarray(points, dtype=float).reshape(-1, 2), axis=0)
-    if len(pts) <= 2:
-        return pts
-
-    def half(sequence):
-        chain: list[np.ndarray] = []
-        for p in sequence:
-            while len(chain) >= 2 and _cross(chain[-2], chain[-1], p) <= EPS_M:
-                chain.pop()
-            chain.append(p)
-        return chain
-
-    lower, upper = half(pts), half(pts[::-1])
-    hull = np.array(lower[:-1] + upper[:-1])
-    return hull
-
-
-def _cross(o, a, b) -> float:
-    return float((a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0]))
 
 
 def point_segment_distance(point: np.ndarray, a: np.ndarray, b: np.ndarray) -> float:
@@ -63,26 +42,17 @@ def depth_in_hull(point: np.ndarray, contacts: np.ndarray) -> float:
 
     For a hull that is a point or a segment the depth is minus the distance to it.
     """
-    point = np.asarray(point, dtype=float)
-    hull = convex_hull(contacts)
-    if len(hull) == 1:
-        return -float(np.linalg.norm(point - hull[0]))
-    if len(hull) == 2:
-        return -point_segment_distance(point, hull[0], hull[1])
-    normals, offsets = halfplanes(hull)
-    slack = offsets - normals @ point
-    if np.all(slack >= 0):
-        return float(slack.min())
-    return -min(point_segment_distance(point, hull[i], hull[(i + 1) % len(hull)])
-                for i in range(len(hull)))
+    point = np.asarray(point, dtype=float).reshape(1, 2)
+    return float(signed_distance(point, convex_hull(contacts))[0])
 
 
 def support_margin(point: np.ndarray, contacts: np.ndarray, foot_radius_m: float) -> float:
     """Distance [m] of ``point`` inside the hull of discs of ``foot_radius_m`` at ``contacts``.
 
-    Exact: the hull of equal discs is the hull of their centres grown by the radius.
+    Exact (:func:`gait_nodes.geometry.disc_support_margin`).
     """
-    return depth_in_hull(point, contacts) + foot_radius_m
+    point = np.asarray(point, dtype=float).reshape(1, 2)
+    return float(disc_support_margin(point, contacts, foot_radius_m)[0])
 
 
 def line_crossing(p1: np.ndarray, p2: np.ndarray, q1: np.ndarray,
