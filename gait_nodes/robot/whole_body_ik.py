@@ -31,6 +31,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import pinocchio as pin
+from scipy.linalg import lapack
 
 from gait_nodes.contract import ComState, FootstepPlan, Swing, SwingTrajectory
 from gait_nodes.errors import ConfigError, ParameterError
@@ -188,31 +189,29 @@ class WholeBodyIkSolver:
             jacobian[-3:, :3] = np.eye(3)
         position_errors = np.zeros(feet_count)
         orientation_errors = np.zeros(feet_count)
+        frames = robot.foot_frame_ids
+        rows_per_foot = self._rows_per_foot
+        world = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
+        identity = np.eye(jacobian.shape[1])
         com_error = 0.0
         iteration = 0
         while True:
-            if free_base:
-                pin.jacobianCenterOfMass(model, data, q, False)
-                pin.computeJointJacobians(model, data)
-            else:
-                pin.computeJointJacobians(model, data, q)
+            pin.forwardKinematics(model, data, q)
             pin.updateFramePlacements(model, data)
-            for k, frame in enumerate(robot.foot_frame_ids):
-                r = k * self._rows_per_foot
+            for k, frame in enumerate(frames):
+                r = k * rows_per_foot
                 placement = data.oMf[frame]
                 error[r:r + 3] = frame_targets[k] - placement.translation
-                frame_jacobian = pin.getFrameJacobian(model, data, frame,
-                                                      pin.ReferenceFrame.LOCAL_WORLD_ALIGNED)
                 if self._orient:
                     error[r + 3:r + 6] = pin.log3(rotation_targets[k] @ placement.rotation.T)
-                    jacobian[r:r + 6, base_cols:] = frame_jacobian[:, self._v_idx]
-                    orientation_errors[k] = math.sqrt(error[r + 3:r + 6] @ error[r + 3:r + 6])
-                else:
-                    jacobian[r:r + 3, base_cols:] = frame_jacobian[:3, self._v_idx]
-                position_errors[k] = math.sqrt(error[r:r + 3] @ error[r:r + 3])
+            per_foot = error[:feet_count * rows_per_foot].reshape(feet_count, rows_per_foot)
+            position_errors = np.sqrt(np.einsum('ij,ij->i', per_foot[:, :3], per_foot[:, :3]))
+            if self._orient:
+                orientation_errors = np.sqrt(np.einsum('ij,ij->i', per_foot[:, 3:],
+                                                       per_foot[:, 3:]))
             if free_base:
-                error[-3:] = targets.com_in_world - data.com[0]
-                jacobian[-3:, 3:] = data.Jcom[:, self._v_idx]
+                error[-3:] = targets.com_in_world - pin.centerOfMass(
+                    model, data, pin.KinematicLevel.POSITION, False)
                 com_error = math.sqrt(error[-3:] @ error[-3:])
             converged = (position_errors.max() <= settings.position_tolerance_m
                          and orientation_errors.max() <= settings.orientation_tolerance_rad
@@ -220,9 +219,20 @@ class WholeBodyIkSolver:
             if converged or iteration >= settings.max_iterations:
                 break
             iteration += 1
+            pin.computeJointJacobians(model, data)
+            for k, frame in enumerate(frames):
+                r = k * rows_per_foot
+                frame_jacobian = pin.getFrameJacobian(model, data, frame, world)
+                jacobian[r:r + rows_per_foot, base_cols:] = \
+                    frame_jacobian[:rows_per_foot, self._v_idx]
+            if free_base:
+                jacobian[-3:, 3:] = pin.jacobianCenterOfMass(model, data, False)[:, self._v_idx]
             damping = error @ error + DAMPING_BIAS
-            step = np.linalg.solve(jacobian.T @ jacobian + damping * np.eye(jacobian.shape[1]),
-                                   jacobian.T @ error)
+            # Levenberg-Marquardt step (J^T J + lambda I) dx = J^T e, by Cholesky.
+            _, step, info = lapack.dposv(jacobian.T @ jacobian + damping * identity,
+                                         jacobian.T @ error)
+            if info != 0:  # not reached with lambda > 0; keep the iteration defined anyway
+                step = np.linalg.lstsq(jacobian, error, rcond=None)[0]
             largest = np.abs(step[base_cols:]).max(initial=0.0)
             if largest > MAX_NEWTON_STEP_RAD:
                 step *= MAX_NEWTON_STEP_RAD / largest
