@@ -14,6 +14,9 @@ from gait_nodes.robot.limb_ik import (
     family_bits,
     trajectory_ik,
 )
+from gait_nodes.robot.limb_ik import (
+    limb_ik as cached_limb_ik,
+)
 from gait_nodes.robot.model import load_robot_model
 
 FEET = ('front_left', 'front_right', 'rear_left', 'rear_right')
@@ -55,7 +58,7 @@ def pinocchio_sole(robot, foot, angles):
 
 
 @pytest.mark.parametrize('foot', FEET)
-@pytest.mark.parametrize('family', [2, 7])
+@pytest.mark.parametrize('family', FAMILIES)
 def test_thesis_workspace_is_reachable_and_fk_of_ik_hits_every_target(robot, limb_ik, foot,
                                                                      family):
     targets, yaws = mirrored(foot, *thesis_workspace())
@@ -96,6 +99,14 @@ def test_eight_families_give_eight_distinct_solutions_for_one_pose(robot, limb_i
     assert distinct.min() > 1e-3
     # The thesis' 3rd (010) and 8th (111) families: shoulder, knee and wrist pitch all differ.
     assert gaps[2, 7][[0, 1, 2, 4]].min() > 1e-3
+
+
+def test_module_level_limb_ik_matches_the_class(limb_ik):
+    targets, yaws = thesis_workspace()
+    q, feasible = cached_limb_ik(targets, yaws, 2)
+    expected, expected_feasible = limb_ik.solve(targets, yaws, 2)
+    np.testing.assert_array_equal(q, expected)
+    np.testing.assert_array_equal(feasible, expected_feasible)
 
 
 def test_family_bits_and_bad_family():

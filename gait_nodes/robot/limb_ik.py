@@ -311,3 +311,24 @@ def trajectory_ik(limb_ik: RoboSimianLimbIk, targets_in_base, yaws_rad, family: 
     """Solve a whole trajectory in one family and check that it stays continuous."""
     q, feasible = limb_ik.solve(targets_in_base, yaws_rad, family, foot)
     return TrajectoryIk(q, feasible, continuity_breaks(q, max_step_rad))
+
+
+def limb_ik(targets_in_base, yaws_rad, family: int, foot: str = 'front_right',
+            robot: str = 'robosimian') -> tuple[np.ndarray, np.ndarray]:
+    """:meth:`RoboSimianLimbIk.solve` for a shipped robot (model and solver cached).
+
+    Args:
+        targets_in_base: (N, 3) sole positions in the base frame [m].
+        yaws_rad: (N,) sole yaws relative to the base [rad].
+        family: IK family 0..7.
+        foot: Which limb.
+        robot: Robot name or YAML path (a robot with ``extra.limb_ik``).
+
+    Returns:
+        ``(q, feasible)``: (N, 7) limb angles [rad] and (N,) booleans.
+    """
+    from gait_nodes.robot.model import load_robot_model
+    from gait_nodes.robot.whole_body_ik import robosimian_limb_ik
+
+    return robosimian_limb_ik(load_robot_model(robot)).solve(targets_in_base, yaws_rad, family,
+                                                             foot)
