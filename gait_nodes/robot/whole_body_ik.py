@@ -1,0 +1,476 @@
+"""Whole-body IK: feet on their targets and the full-model COM on its reference.
+
+The body stays level with the commanded yaw; its position is a free variable, so that the real
+(multi-body) COM lands where the preview controller wants it: the thesis moves the body so that
+the COM of the full model follows the cart-table COM (thesis III.B.1, Figure 7). Each foot's
+contact point must reach its target; with ``foot_orientation: yaw`` the sole is also level with
+the target yaw (thesis III.A). Unknowns: base position (3) and the IK joints of every limb;
+equations: 3 or 6 per foot and 3 for the COM, a square system for every shipped robot.
+
+The solver is Gauss-Newton with Levenberg-Marquardt damping ``lambda = |e|^2 + w`` (Sugihara
+2011, "Solvability-unconcerned inverse kinematics by the Levenberg-Marquardt method"), which
+converges quadratically to a reachable target and to the least-squares best effort otherwise;
+joints are projected onto their URDF limits after every step. Warm-started from the previous
+tick it needs one to three iterations.
+
+Joint velocity limits are applied afterwards by :func:`limit_joint_velocity`: when the step
+demands more than a joint's limit, the whole step is scaled down (the fastest joint saturated,
+as the thesis times its swing motions), which keeps every joint on the straight line to the
+solution and reports which joints asked for too much and by how much.
+
+The module also turns the public references into targets at one instant: COM state
+(:func:`com_state_at`), swing waypoints (:func:`swing_pose_at`) and the fallback swing used when
+no swing trajectory is there for a foot in swing (:func:`fallback_swing_pose`).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+import pinocchio as pin
+from scipy.linalg import lapack
+
+from gait_nodes.contract import ComState, FootstepPlan, Swing, SwingTrajectory
+from gait_nodes.errors import ConfigError, ParameterError
+from gait_nodes.robot.model import RobotModel, yaw_rotation
+
+#: Sugihara's bias weight: keeps the damped system regular at singular configurations.
+DAMPING_BIAS = 1e-9
+#: Largest joint change in one Newton step [rad]; keeps a far target from jumping branches.
+MAX_NEWTON_STEP_RAD = 0.4
+
+
+@dataclass(frozen=True)
+class IkSettings:
+    """Tolerances and limits of the whole-body IK.
+
+    Attributes:
+        max_iterations: Newton iterations per solve.
+        position_tolerance_m: Foot position error below which a foot is on target [m].
+        orientation_tolerance_rad: Sole orientation error below which it is on target [rad].
+        com_tolerance_m: COM error below which the COM is on target [m].
+    """
+
+    max_iterations: int = 20
+    position_tolerance_m: float = 1e-6
+    orientation_tolerance_rad: float = 1e-6
+    com_tolerance_m: float = 1e-6
+
+    def __post_init__(self):
+        if isinstance(self.max_iterations, bool) or not isinstance(self.max_iterations, int) \
+                or not 1 <= self.max_iterations <= 1000:
+            raise ParameterError(f'max_iterations must be an integer in [1, 1000], got '
+                                 f'{self.max_iterations!r}')
+        for name in ('position_tolerance_m', 'orientation_tolerance_rad', 'com_tolerance_m'):
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and 1e-12 <= value <= 1e-2):
+                raise ParameterError(f'{name} must be in [1e-12, 1e-2], got {value!r}')
+
+
+@dataclass(frozen=True)
+class IkTargets:
+    """What the whole body must do at one instant (world frame ``odom``).
+
+    Attributes:
+        feet_in_world: (F, 3) contact point targets, in the robot's foot order [m].
+        foot_yaws_rad: (F,) sole yaw targets [rad] (ignored for point feet).
+        base_yaw_rad: Body yaw [rad]; roll and pitch are zero.
+        com_in_world: (3,) COM target [m], or None to hold the base at ``base_position_in_world``.
+        base_position_in_world: (3,) base position when ``com_in_world`` is None [m].
+    """
+
+    feet_in_world: np.ndarray
+    foot_yaws_rad: np.ndarray
+    base_yaw_rad: float = 0.0
+    com_in_world: np.ndarray | None = None
+    base_position_in_world: np.ndarray | None = None
+
+    def __post_init__(self):
+        feet = np.asarray(self.feet_in_world, dtype=float)
+        yaws = np.asarray(self.foot_yaws_rad, dtype=float)
+        if feet.ndim != 2 or feet.shape[1] != 3 or yaws.shape != (len(feet),):
+            raise ValueError(f'targets: feet must be (F, 3) with (F,) yaws, got {feet.shape} '
+                             f'and {yaws.shape}')
+        if (self.com_in_world is None) == (self.base_position_in_world is None):
+            raise ValueError('targets: give exactly one of com_in_world and '
+                             'base_position_in_world')
+        values = [feet, yaws, [self.base_yaw_rad],
+                  self.com_in_world if self.com_in_world is not None
+                  else self.base_position_in_world]
+        if not all(np.all(np.isfinite(np.asarray(v, dtype=float))) for v in values):
+            raise ValueError('targets hold a NaN or infinite value')
+        object.__setattr__(self, 'feet_in_world', feet)
+        object.__setattr__(self, 'foot_yaws_rad', yaws)
+
+
+@dataclass(frozen=True)
+class IkResult:
+    """A whole-body IK solution and how well it reaches the targets.
+
+    Attributes:
+        q: Pinocchio configuration (base pose, then the joints).
+        converged: Every foot and the COM within the tolerances.
+        iterations: Newton iterations used.
+        foot_position_errors_m: (F,) distance of each contact point from its target [m].
+        foot_orientation_errors_rad: (F,) sole orientation error (0 for point feet) [rad].
+        com_error_m: Distance of the full-model COM from its target (0 without target) [m].
+        joints_at_limit: IK joints sitting on a URDF position limit.
+    """
+
+    q: np.ndarray
+    converged: bool
+    iterations: int
+    foot_position_errors_m: np.ndarray
+    foot_orientation_errors_rad: np.ndarray
+    com_error_m: float
+    joints_at_limit: tuple[str, ...] = field(default=())
+
+
+class WholeBodyIkSolver:
+    """Solves :class:`IkTargets` for one robot; keeps its own Pinocchio data (not thread-safe).
+
+    Args:
+        robot: The robot model.
+        settings: Tolerances and iteration limit.
+    """
+
+    def __init__(self, robot: RobotModel, settings: IkSettings | None = None):
+        self.robot = robot
+        self.settings = settings or IkSettings()
+        self.model = robot.model
+        self.data = robot.new_data()
+        self.joint_names = robot.ik_joint_names
+        self._q_idx = robot.q_indices(self.joint_names)
+        self._v_idx = robot.v_indices(self.joint_names)
+        vector_idx = robot.indices(self.joint_names)
+        self._lower = np.array(robot.lower_limits[vector_idx])
+        self._upper = np.array(robot.upper_limits[vector_idx])
+        self._orient = robot.foot_orientation == 'yaw'
+        self._rows_per_foot = 6 if self._orient else 3
+        self._frame_offset = np.array([0.0, 0.0, robot.foot_frame_height_m])
+        self._offsets = np.array(robot.foot_rotation_offsets)
+
+    def solve(self, targets: IkTargets, q_start: np.ndarray) -> IkResult:
+        """Configuration reaching ``targets``, starting the iteration at ``q_start``.
+
+        The base orientation in ``q_start`` is replaced by the target yaw (level body).
+        Never returns NaN: a target out of reach gives the least-squares best effort with the
+        residuals in the result.
+        """
+        model, data, robot = self.model, self.data, self.robot
+        feet_count = len(robot.foot_frame_ids)
+        if targets.feet_in_world.shape != (feet_count, 3):
+            raise ValueError(f'{robot.name} has {feet_count} feet, targets give '
+                             f'{len(targets.feet_in_world)}')
+        settings = self.settings
+        q = np.array(q_start, dtype=float)
+        if not np.all(np.isfinite(q)):
+            raise ValueError('q_start holds a NaN or infinite value')
+        half = 0.5 * targets.base_yaw_rad
+        q[3:7] = (0.0, 0.0, math.sin(half), math.cos(half))
+        free_base = targets.com_in_world is not None
+        if not free_base:
+            q[:3] = targets.base_position_in_world
+        frame_targets = targets.feet_in_world + self._frame_offset
+        rotation_targets = [yaw_rotation(y) @ self._offsets[k]
+                            for k, y in enumerate(targets.foot_yaws_rad)]
+        n_joints = len(self._v_idx)
+        base_cols = 3 if free_base else 0
+        rows = feet_count * self._rows_per_foot + (3 if free_base else 0)
+        jacobian = np.zeros((rows, base_cols + n_joints))
+        error = np.zeros(rows)
+        if free_base:
+            for k in range(feet_count):
+                r = k * self._rows_per_foot
+                jacobian[r:r + 3, :3] = np.eye(3)
+            jacobian[-3:, :3] = np.eye(3)
+        position_errors = np.zeros(feet_count)
+        orientation_errors = np.zeros(feet_count)
+        frames = robot.foot_frame_ids
+        rows_per_foot = self._rows_per_foot
+        world = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
+        identity = np.eye(jacobian.shape[1])
+        com_error = 0.0
+        iteration = 0
+        while True:
+            pin.forwardKinematics(model, data, q)
+            pin.updateFramePlacements(model, data)
+            for k, frame in enumerate(frames):
+                r = k * rows_per_foot
+                placement = data.oMf[frame]
+                error[r:r + 3] = frame_targets[k] - placement.translation
+                if self._orient:
+                    error[r + 3:r + 6] = pin.log3(rotation_targets[k] @ placement.rotation.T)
+            per_foot = error[:feet_count * rows_per_foot].reshape(feet_count, rows_per_foot)
+            position_errors = np.sqrt(np.einsum('ij,ij->i', per_foot[:, :3], per_foot[:, :3]))
+            if self._orient:
+                orientation_errors = np.sqrt(np.einsum('ij,ij->i', per_foot[:, 3:],
+                                                       per_foot[:, 3:]))
+            if free_base:
+                error[-3:] = targets.com_in_world - pin.centerOfMass(
+                    model, data, pin.KinematicLevel.POSITION, False)
+                com_error = math.sqrt(error[-3:] @ error[-3:])
+            converged = (position_errors.max() <= settings.position_tolerance_m
+                         and orientation_errors.max() <= settings.orientation_tolerance_rad
+                         and com_error <= settings.com_tolerance_m)
+            if converged or iteration >= settings.max_iterations:
+                break
+            iteration += 1
+            pin.computeJointJacobians(model, data)
+            for k, frame in enumerate(frames):
+                r = k * rows_per_foot
+                frame_jacobian = pin.getFrameJacobian(model, data, frame, world)
+                jacobian[r:r + rows_per_foot, base_cols:] = \
+                    frame_jacobian[:rows_per_foot, self._v_idx]
+            if free_base:
+                jacobian[-3:, 3:] = pin.jacobianCenterOfMass(model, data, False)[:, self._v_idx]
+            damping = error @ error + DAMPING_BIAS
+            # Levenberg-Marquardt step (J^T J + lambda I) dx = J^T e, by Cholesky.
+            _, step, info = lapack.dposv(jacobian.T @ jacobian + damping * identity,
+                                         jacobian.T @ error)
+            if info != 0:  # not reached with lambda > 0; keep the iteration defined anyway
+                step = np.linalg.lstsq(jacobian, error, rcond=None)[0]
+            largest = np.abs(step[base_cols:]).max(initial=0.0)
+            if largest > MAX_NEWTON_STEP_RAD:
+                step *= MAX_NEWTON_STEP_RAD / largest
+            if free_base:
+                q[:3] += step[:3]
+            q[self._q_idx] = np.clip(q[self._q_idx] + step[base_cols:], self._lower, self._upper)
+        joints = q[self._q_idx]
+        at_limit = (joints <= self._lower + 1e-9) | (joints >= self._upper - 1e-9)
+        return IkResult(q=q, converged=converged, iterations=iteration,
+                        foot_position_errors_m=position_errors.copy(),
+                        foot_orientation_errors_rad=orientation_errors.copy(),
+                        com_error_m=com_error,
+                        joints_at_limit=tuple(n for n, hit in zip(self.joint_names, at_limit,
+                                                                  strict=True) if hit))
+
+
+# -- seeds and the nominal stance -------------------------------------------------------------
+
+
+def limb_ik_family(robot: RobotModel) -> int | None:
+    """The default IK family of a robot with closed-form limb IK (``extra.limb_ik``), or None."""
+    settings = robot.description.extra.get('limb_ik')
+    if settings is None:
+        return None
+    if not isinstance(settings, dict) or settings.get('kind') != 'robosimian':
+        raise ConfigError(f'{robot.description.path}: extra.limb_ik: must be {{kind: '
+                          f'robosimian, family: 0..7}}, got {settings!r}')
+    family = settings.get('family', 2)
+    from gait_nodes.robot.limb_ik import family_bits
+
+    try:
+        family_bits(family)
+    except ConfigError as exc:
+        raise ConfigError(f'{robot.description.path}: extra.limb_ik.family: {exc}') from None
+    return int(family)
+
+
+def seed_configuration(robot: RobotModel, targets: IkTargets, family: int | None = None,
+                       base_position_in_world=None) -> np.ndarray:
+    """A start for the IK: the posture, or the closed-form limb IK when the robot has one.
+
+    Seeding from the limb IK in ``family`` keeps the whole-body solution in that family.
+    """
+    if base_position_in_world is None:
+        base_position_in_world = (targets.base_position_in_world
+                                  if targets.base_position_in_world is not None
+                                  else np.asarray(targets.com_in_world)
+                                  + np.array([0.0, 0.0, robot.description.body_height_m
+                                              - robot.description.com_height_m]))
+    q = robot.configuration(base_position_in_world, targets.base_yaw_rad)
+    if family is None:
+        family = limb_ik_family(robot)
+    if family is None:
+        return q
+    limb_ik = robosimian_limb_ik(robot)
+    rotation = yaw_rotation(targets.base_yaw_rad)
+    in_base = (targets.feet_in_world - np.asarray(base_position_in_world)) @ rotation
+    joints = robot.joint_positions(q)
+    for k, foot in enumerate(robot.description.feet):
+        angles, _ = limb_ik.solve(in_base[k:k + 1], targets.foot_yaws_rad[k:k + 1]
+                                  - targets.base_yaw_rad, family, foot.name)
+        joints[robot.indices(foot.joints)] = angles[0]
+    robot.set_joint_positions(q, joints)
+    return q
+
+
+_LIMB_IK_CACHE: dict[int, object] = {}
+
+
+def robosimian_limb_ik(robot: RobotModel):
+    """The (cached) :class:`gait_nodes.robot.limb_ik.RoboSimianLimbIk` of ``robot``."""
+    from gait_nodes.robot.limb_ik import RoboSimianLimbIk
+
+    key = id(robot)
+    cached = _LIMB_IK_CACHE.get(key)
+    if cached is None or cached.robot is not robot:
+        cached = _LIMB_IK_CACHE[key] = RoboSimianLimbIk(robot)
+    return cached
+
+
+def nominal_configuration(robot: RobotModel, family: int | None = None,
+                          base_position_in_world=None, base_yaw_rad: float = 0.0,
+                          solver: WholeBodyIkSolver | None = None) -> np.ndarray:
+    """The standing configuration: level base, every foot at its YAML nominal position.
+
+    The base is at ``body_height_m`` above the origin unless a position and yaw are given.
+
+    Raises:
+        ConfigError: The nominal stance is out of reach of the legs.
+    """
+    if base_position_in_world is None:
+        base_position_in_world = np.array([0.0, 0.0, robot.description.body_height_m])
+    feet = robot.nominal_feet_in_world(base_position_in_world, base_yaw_rad)
+    targets = IkTargets(feet, np.full(len(feet), base_yaw_rad), base_yaw_rad,
+                        base_position_in_world=np.asarray(base_position_in_world, dtype=float))
+    solver = solver or WholeBodyIkSolver(robot, IkSettings(max_iterations=200))
+    result = solver.solve(targets, seed_configuration(robot, targets, family))
+    if result.foot_position_errors_m.max() > 1e-4:
+        raise ConfigError(f'{robot.description.path}: the nominal stance is out of reach: foot '
+                          f'errors {np.round(result.foot_position_errors_m, 4).tolist()} m')
+    return result.q
+
+
+# -- joint velocity limits --------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class VelocitySaturation:
+    """How much a step asked of the joint velocity limits.
+
+    Attributes:
+        ratio: Largest demanded velocity over its limit (<= 1: no saturation).
+        joints: Joints whose demanded velocity exceeded their limit.
+        demanded_over_limit: Demanded/limit ratio of each of ``joints``.
+    """
+
+    ratio: float
+    joints: tuple[str, ...] = ()
+    demanded_over_limit: tuple[float, ...] = ()
+
+    @property
+    def saturated(self) -> bool:
+        """Whether the step was scaled down."""
+        return self.ratio > 1.0
+
+
+def limit_joint_velocity(robot: RobotModel, q_previous: np.ndarray, q_target: np.ndarray,
+                         dt_s: float) -> tuple[np.ndarray, np.ndarray, VelocitySaturation]:
+    """Move from ``q_previous`` towards ``q_target`` within the joint velocity limits.
+
+    Args:
+        robot: The robot (joint velocity limits from its YAML).
+        q_previous: Configuration commanded at the previous tick.
+        q_target: Configuration the IK asks for now.
+        dt_s: Time since the previous tick [s].
+
+    Returns:
+        ``(q, joint_velocities, saturation)``: the configuration to command (the whole step,
+        base included, scaled by the largest demanded/limit ratio when above 1), the joint
+        vector velocities [rad/s] (never above the limits) and the saturation report.
+    """
+    if not dt_s > 0:
+        raise ValueError(f'dt_s must be > 0, got {dt_s}')
+    previous = robot.joint_positions(q_previous)
+    step = robot.joint_positions(q_target) - previous
+    limits = robot.velocity_limits_rad_s
+    demanded = np.abs(step) / (limits * dt_s)
+    ratio = float(demanded.max(initial=0.0))
+    if ratio <= 1.0:
+        return np.array(q_target, dtype=float), step / dt_s, VelocitySaturation(ratio)
+    # Scale a hair more than needed so that rounding never leaves a joint above its limit.
+    scale = (1.0 - 1e-12) / ratio
+    q = np.array(q_previous, dtype=float)
+    q[:3] += scale * (q_target[:3] - q_previous[:3])
+    q[3:7] = q_target[3:7]
+    joints = previous + scale * step
+    robot.set_joint_positions(q, joints)
+    over = np.flatnonzero(demanded > 1.0)
+    order = over[np.argsort(-demanded[over])]
+    report = VelocitySaturation(ratio, tuple(robot.joint_names[k] for k in order),
+                                tuple(float(demanded[k]) for k in order))
+    return q, scale * step / dt_s, report
+
+
+# -- references at one instant ----------------------------------------------------------------
+
+
+def _wrap(angle):
+    return np.angle(np.exp(1j * np.asarray(angle)))
+
+
+def com_state_at(states: Sequence[ComState], stamp_ns: int,
+                 max_extrapolation_s: float = 0.05) -> tuple[np.ndarray, float]:
+    """COM position [m] and body yaw [rad] at ``stamp_ns`` from a COM reference message.
+
+    Linear between the message's points; before the first point, the first; after the last,
+    extrapolated with its velocity for at most ``max_extrapolation_s``, then held.
+    """
+    if not states:
+        raise ValueError('no COM states')
+    first, last = states[0], states[-1]
+    if stamp_ns <= first.stamp_ns:
+        return np.array(first.position_in_world), float(first.yaw_rad)
+    if stamp_ns >= last.stamp_ns:
+        dt = min((stamp_ns - last.stamp_ns) * 1e-9, max_extrapolation_s)
+        return (last.position_in_world + dt * last.velocity_in_world,
+                float(last.yaw_rad + dt * last.yaw_rate_rad_s))
+    stamps = np.array([s.stamp_ns for s in states], dtype=np.int64)
+    k = int(np.searchsorted(stamps, stamp_ns, side='right')) - 1
+    a, b = states[k], states[k + 1]
+    w = (stamp_ns - a.stamp_ns) / max(b.stamp_ns - a.stamp_ns, 1)
+    yaw = a.yaw_rad + w * float(_wrap(b.yaw_rad - a.yaw_rad))
+    return (1 - w) * a.position_in_world + w * b.position_in_world, float(yaw)
+
+
+def swing_pose_at(trajectory: SwingTrajectory, stamp_ns: int) -> tuple[np.ndarray, float]:
+    """Foot position [m] and yaw [rad] on a swing trajectory, linear between waypoints."""
+    t = (stamp_ns - trajectory.start_ns) * 1e-9
+    times = trajectory.times_s
+    position = np.array([np.interp(t, times, trajectory.positions_in_world[:, i])
+                         for i in range(3)])
+    yaws = np.unwrap(trajectory.yaws_rad)
+    return position, float(np.interp(t, times, yaws))
+
+
+def _smoothstep(s: float) -> float:
+    """Quintic 0 -> 1 with zero velocity and acceleration at both ends."""
+    s = min(max(s, 0.0), 1.0)
+    return s * s * s * (10.0 + s * (-15.0 + 6.0 * s))
+
+
+def fallback_swing_pose(swing: Swing, t_s: float, step_height_m: float
+                        ) -> tuple[np.ndarray, float]:
+    """Foot pose in a swing the swing-leg policy did not send a trajectory for.
+
+    The foot moves from its lift-off to its landing place along a quintic smoothstep in time
+    (zero velocity and acceleration at both ends), horizontally and in yaw, and is lifted by
+    ``step_height_m * sin^2(pi s)`` above the straight line (``s`` the swing phase), so that it
+    leaves and reaches the ground vertically at rest.
+
+    Args:
+        swing: The swing, from the footstep plan.
+        t_s: Time from the plan start [s].
+        step_height_m: Peak lift [m].
+    """
+    duration = swing.duration_s
+    s = (t_s - swing.lift_off_s) / duration if duration > 0 else 1.0
+    s = min(max(s, 0.0), 1.0)
+    blend = _smoothstep(s)
+    position = swing.start_in_world + blend * (swing.end_in_world - swing.start_in_world)
+    position[2] += step_height_m * math.sin(math.pi * s) ** 2
+    yaw = swing.start_yaw_rad + blend * float(_wrap(swing.end_yaw_rad - swing.start_yaw_rad))
+    return position, yaw
+
+
+def current_swing(plan: FootstepPlan, foot: str, t_s: float) -> Swing | None:
+    """The swing of ``foot`` under way at ``t_s`` from the plan start, or None."""
+    for swing in plan.swings():
+        if swing.foot == foot and swing.lift_off_s < t_s < swing.touch_down_s:
+            return swing
+    return None

@@ -1,0 +1,406 @@
+"""whole_body_ik node: COM reference, footsteps and swing trajectories in, joint commands out.
+
+``python -m gait_nodes.whole_body_ik [--ros-args -p robot:=go2 ...]``. Every tick (``rate_hz``)
+the node takes the COM reference and body yaw at that instant (/gait/com_reference), holds the
+stance feet where the footstep plan puts them (/gait/footsteps), moves each swing foot along its
+swing trajectory (/gait/swing_trajectory) and solves the whole-body IK
+(:mod:`gait_nodes.robot.whole_body_ik`): the body moves so that the full-model COM is on the
+reference. The step is scaled down to the joint velocity limits and published on
+/joint_commands (positions and velocities of every joint of the URDF).
+
+* Before the first COM reference and footstep plan have arrived, the nominal stance is held.
+* A foot in swing per the plan with no swing trajectory covering the instant follows the
+  fallback swing (quintic smoothstep from lift-off to landing place, lifted by
+  ``fallback_step_height_m``; :func:`gait_nodes.robot.whole_body_ik.fallback_swing_pose`).
+* /diagnostics: inputs dropped (NaN, wrong frame or feet) at once; every
+  ``diagnostics_period_s`` a summary: velocity saturation (fraction of saturated ticks, the
+  largest demanded/limit ratio, which joints), tracking residuals (foot, orientation and COM
+  errors, unconverged ticks, joints on a limit) and input state (waiting, stale, fallbacks).
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+from dataclasses import dataclass
+
+import numpy as np
+import yaml
+
+from gait_nodes.cli import run_node
+from gait_nodes.contract import (
+    ContractError,
+    com_reference_from_msg,
+    footsteps_from_msg,
+    swing_trajectory_from_msg,
+)
+from gait_nodes.diagnostics import OK, WARN, DiagnosticsReporter
+from gait_nodes.errors import ConfigError, GaitNodesError, ParameterError
+from gait_nodes.interfaces import get_message
+from gait_nodes.paths import config_file
+from gait_nodes.robot.model import load_robot_model
+from gait_nodes.robot.whole_body_ik import (
+    IkSettings,
+    IkTargets,
+    WholeBodyIkSolver,
+    com_state_at,
+    current_swing,
+    fallback_swing_pose,
+    limb_ik_family,
+    limit_joint_velocity,
+    nominal_configuration,
+    robosimian_limb_ik,
+    seed_configuration,
+    swing_pose_at,
+)
+from gait_nodes.runtime import Node, QoSProfile, SetParametersResult, qos_profile_latched
+
+NODE_NAME = 'whole_body_ik'
+#: Foot error and COM error above which a tick is reported as off target [m] (issue accuracy).
+FOOT_ERROR_WARN_M = 1e-4
+COM_ERROR_WARN_M = 1e-3
+
+
+def node_defaults() -> dict:
+    """Parameter defaults from ``config/whole_body_ik.yaml``."""
+    path = config_file(f'{NODE_NAME}.yaml')
+    try:
+        return dict(yaml.safe_load(path.read_text())[NODE_NAME]['ros__parameters'])
+    except (OSError, yaml.YAMLError, KeyError, TypeError) as exc:
+        raise ConfigError(f'{path}: cannot read the node defaults: {exc}') from exc
+
+
+def _number(values: dict, name: str, low: float, high: float, low_open: bool = False) -> float:
+    value = values[name]
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \
+            or not (low < value if low_open else low <= value) or not value <= high:
+        bracket = '(' if low_open else '['
+        raise ParameterError(f'{name} must be a number in {bracket}{low}, {high}], got {value!r}')
+    return float(value)
+
+
+@dataclass(frozen=True)
+class WholeBodyIkParams:
+    """The node's parameters, validated (see config/whole_body_ik.yaml for the meanings)."""
+
+    robot: str
+    rate_hz: float
+    ik_family: int
+    fallback_step_height_m: float
+    max_iterations: int
+    position_tolerance_m: float
+    com_tolerance_m: float
+    com_extrapolation_s: float
+    stale_timeout_s: float
+    diagnostics_period_s: float
+
+    @classmethod
+    def from_values(cls, values: dict) -> WholeBodyIkParams:
+        """Validate raw parameter values; ParameterError naming the value and the range."""
+        robot = values['robot']
+        if not isinstance(robot, str) or not robot:
+            raise ParameterError(f'robot must be a robot name or YAML path, got {robot!r}')
+        family = values['ik_family']
+        if isinstance(family, bool) or not isinstance(family, int) or not -1 <= family <= 7:
+            raise ParameterError(f'ik_family must be an integer in [-1, 7], got {family!r}')
+        iterations = values['max_iterations']
+        if isinstance(iterations, bool) or not isinstance(iterations, int) \
+                or not 1 <= iterations <= 1000:
+            raise ParameterError(f'max_iterations must be an integer in [1, 1000], got '
+                                 f'{iterations!r}')
+        return cls(
+            robot=robot,
+            rate_hz=_number(values, 'rate_hz', 0.0, 2000.0, low_open=True),
+            ik_family=family,
+            fallback_step_height_m=_number(values, 'fallback_step_height_m', 0.0, 0.5),
+            max_iterations=iterations,
+            position_tolerance_m=_number(values, 'position_tolerance_m', 1e-12, 1e-2),
+            com_tolerance_m=_number(values, 'com_tolerance_m', 1e-12, 1e-2),
+            com_extrapolation_s=_number(values, 'com_extrapolation_s', 0.0, 1.0),
+            stale_timeout_s=_number(values, 'stale_timeout_s', 0.0, 60.0, low_open=True),
+            diagnostics_period_s=_number(values, 'diagnostics_period_s', 0.0, 60.0,
+                                         low_open=True),
+        )
+
+    def ik_settings(self) -> IkSettings:
+        """Solver settings from these parameters."""
+        return IkSettings(max_iterations=self.max_iterations,
+                          position_tolerance_m=self.position_tolerance_m,
+                          orientation_tolerance_rad=self.position_tolerance_m,
+                          com_tolerance_m=self.com_tolerance_m)
+
+
+class _Window:
+    """What happened since the last diagnostics summary."""
+
+    def __init__(self):
+        self.ticks = 0
+        self.saturated_ticks = 0
+        self.max_ratio = 0.0
+        self.saturated_joints: dict[str, float] = {}
+        self.max_foot_error_m = 0.0
+        self.max_orientation_error_rad = 0.0
+        self.max_com_error_m = 0.0
+        self.unconverged_ticks = 0
+        self.joints_at_limit: set[str] = set()
+        self.fallback_ticks = 0
+
+
+class WholeBodyIk(Node):
+    """The whole-body IK node (see the module docstring)."""
+
+    def __init__(self):
+        super().__init__(NODE_NAME)
+        defaults = node_defaults()
+        for name, value in defaults.items():
+            self.declare_parameter(name, value)
+        self.params = WholeBodyIkParams.from_values(
+            {name: self.get_parameter(name).value for name in defaults})
+        self.robot = load_robot_model(self.params.robot)
+        self._family = self._checked_family(self.params.ik_family)
+        self.solver = WholeBodyIkSolver(self.robot, self.params.ik_settings())
+        self.q_nominal = nominal_configuration(self.robot, self._family)
+        self._q_solution = self.q_nominal.copy()
+        self._q_command = self.q_nominal.copy()
+        self._reseed = False
+        self._plan = None
+        self._com_states = None
+        self._com_received_ns = None
+        self._swings: dict = {}
+        self._last_tick_ns = None
+        self._window = _Window()
+        self._last_summary_ns = None
+        self.add_on_set_parameters_callback(self._on_set_parameters)
+
+        self.diagnostics = DiagnosticsReporter(self, self.robot.name)
+        self.publisher = self.create_publisher(get_message('sensor_msgs/msg/JointState'),
+                                               '/joint_commands', 10)
+        trajectory = get_message('trajectory_msgs/msg/MultiDOFJointTrajectory')
+        self.create_subscription(trajectory, '/gait/com_reference', self._on_com_reference, 10)
+        self.create_subscription(trajectory, '/gait/footsteps', self._on_footsteps,
+                                 QoSProfile(depth=1, durability=qos_profile_latched.durability))
+        self.create_subscription(trajectory, '/gait/swing_trajectory', self._on_swing, 10)
+        self.timer = self.create_timer(1.0 / self.params.rate_hz, self.tick)
+        self.get_logger().info(f'{self.robot.name}: {len(self.robot.joint_names)} joints, '
+                               f'{len(self.robot.ik_joint_names)} moved by the IK, '
+                               f'{self.params.rate_hz:g} Hz')
+
+    # -- parameters ----------------------------------------------------------------------------
+
+    def _checked_family(self, requested: int) -> int | None:
+        default = limb_ik_family(self.robot)
+        if requested == -1:
+            return default
+        if default is None:
+            raise ParameterError(f'ik_family {requested} needs a robot with closed-form limb IK '
+                                 f'(extra.limb_ik); {self.robot.name} has none: use -1')
+        return requested
+
+    def _on_set_parameters(self, parameters) -> SetParametersResult:
+        values = {name: getattr(self.params, name) for name in node_defaults()}
+        for parameter in parameters:
+            if parameter.name in values:
+                values[parameter.name] = parameter.value
+        try:
+            params = WholeBodyIkParams.from_values(values)
+            if params.robot != self.params.robot:
+                raise ParameterError(f'robot is fixed at start ({self.params.robot}); restart '
+                                     f'the node to change it')
+            family = self._checked_family(params.ik_family)
+            settings = params.ik_settings()
+        except GaitNodesError as exc:
+            return SetParametersResult(successful=False, reason=str(exc))
+        if params.rate_hz != self.params.rate_hz:
+            self.timer.cancel()
+            self.timer = self.create_timer(1.0 / params.rate_hz, self.tick)
+        if family != self._family:
+            self._family = family
+            self._reseed = True
+        self.solver.settings = settings
+        self.params = params
+        return SetParametersResult(successful=True)
+
+    # -- inputs --------------------------------------------------------------------------------
+
+    def _on_com_reference(self, msg) -> None:
+        try:
+            states = com_reference_from_msg(msg)
+        except ContractError as exc:
+            self.diagnostics.drop('/gait/com_reference', str(exc))
+            return
+        self._com_states = states
+        self._com_received_ns = self.get_clock().now().nanoseconds
+
+    def _on_footsteps(self, msg) -> None:
+        try:
+            plan = footsteps_from_msg(msg)
+            if set(plan.foot_names) != set(self.robot.foot_names):
+                raise ContractError(f'feet {list(plan.foot_names)} are not the robot\'s '
+                                    f'{list(self.robot.foot_names)}')
+        except ContractError as exc:
+            self.diagnostics.drop('/gait/footsteps', str(exc))
+            return
+        self._plan = plan
+
+    def _on_swing(self, msg) -> None:
+        try:
+            swing = swing_trajectory_from_msg(msg)
+            if swing.foot not in self.robot.foot_names:
+                raise ContractError(f'foot {swing.foot!r} is not one of the robot\'s '
+                                    f'{list(self.robot.foot_names)}')
+        except ContractError as exc:
+            self.diagnostics.drop('/gait/swing_trajectory', str(exc))
+            return
+        self._swings[swing.foot] = swing
+
+    # -- tick ----------------------------------------------------------------------------------
+
+    def _targets_at(self, now_ns: int) -> tuple[IkTargets, int]:
+        """IK targets at ``now_ns`` and how many feet follow the fallback swing."""
+        plan = self._plan
+        t_plan = (now_ns - plan.start_ns) * 1e-9
+        index = plan.index_at(t_plan)
+        order = [plan.foot_names.index(name) for name in self.robot.foot_names]
+        feet = np.array(plan.positions_in_world[index][order])
+        yaws = np.array(plan.yaws_rad[index][order])
+        fallbacks = 0
+        for k, name in enumerate(self.robot.foot_names):
+            swing = current_swing(plan, name, t_plan)
+            if swing is None:
+                continue
+            trajectory = self._swings.get(name)
+            if trajectory is not None and trajectory.start_ns <= now_ns <= (
+                    trajectory.start_ns + int(round(trajectory.duration_s * 1e9))):
+                feet[k], yaws[k] = swing_pose_at(trajectory, now_ns)
+            else:
+                feet[k], yaws[k] = fallback_swing_pose(swing, t_plan,
+                                                       self.params.fallback_step_height_m)
+                fallbacks += 1
+        com, yaw = com_state_at(self._com_states, now_ns, self.params.com_extrapolation_s)
+        return IkTargets(feet, yaws, yaw, com_in_world=com), fallbacks
+
+    def tick(self) -> None:
+        """Solve the IK for now, limit the joint velocities, publish /joint_commands."""
+        now_ns = self.get_clock().now().nanoseconds
+        period_s = 1.0 / self.params.rate_hz
+        dt_s = period_s if self._last_tick_ns is None or now_ns <= self._last_tick_ns \
+            else (now_ns - self._last_tick_ns) * 1e-9
+        self._last_tick_ns = now_ns
+        window = self._window
+        window.ticks += 1
+        if self._com_states is not None and self._plan is not None:
+            targets, fallbacks = self._targets_at(now_ns)
+            window.fallback_ticks += fallbacks > 0
+            if self._reseed:
+                self._q_solution = seed_configuration(self.robot, targets, self._family,
+                                                      self._q_solution[:3])
+                self._reseed = False
+            result = self.solver.solve(targets, self._q_solution)
+            self._q_solution = result.q
+            window.max_foot_error_m = max(window.max_foot_error_m,
+                                          float(result.foot_position_errors_m.max()))
+            window.max_orientation_error_rad = max(
+                window.max_orientation_error_rad, float(result.foot_orientation_errors_rad.max()))
+            window.max_com_error_m = max(window.max_com_error_m, result.com_error_m)
+            window.unconverged_ticks += not result.converged
+            window.joints_at_limit.update(result.joints_at_limit)
+            target = result.q
+        else:
+            target = self.q_nominal
+        q, velocities, saturation = limit_joint_velocity(self.robot, self._q_command, target,
+                                                         dt_s)
+        self._q_command = q
+        if saturation.saturated:
+            window.saturated_ticks += 1
+            window.max_ratio = max(window.max_ratio, saturation.ratio)
+            for joint, ratio in zip(saturation.joints, saturation.demanded_over_limit,
+                                    strict=True):
+                window.saturated_joints[joint] = max(window.saturated_joints.get(joint, 0.0),
+                                                     ratio)
+        self._publish(now_ns, q, velocities)
+        if self._last_summary_ns is None:
+            self._last_summary_ns = now_ns
+        elif (now_ns - self._last_summary_ns) * 1e-9 >= self.params.diagnostics_period_s - 1e-9:
+            self._publish_summary(now_ns)
+
+    def _publish(self, now_ns: int, q: np.ndarray, velocities: np.ndarray) -> None:
+        msg = get_message('sensor_msgs/msg/JointState')()
+        msg.header.stamp = self.get_clock().now().to_msg()
+        msg.name = list(self.robot.joint_names)
+        msg.position = [float(v) for v in self.robot.joint_positions(q)]
+        msg.velocity = [float(v) for v in velocities]
+        self.publisher.publish(msg)
+
+    def _publish_summary(self, now_ns: int) -> None:
+        window, self._window = self._window, _Window()
+        self._last_summary_ns = now_ns
+        statuses = []
+        ticks = max(window.ticks, 1)
+        joints = sorted(window.saturated_joints, key=lambda j: -window.saturated_joints[j])
+        statuses.append((
+            'velocity saturation', WARN if window.saturated_ticks else OK,
+            (f'{window.saturated_ticks} of {window.ticks} ticks saturated, up to '
+             f'{window.max_ratio:.3g}x the limit: {", ".join(joints)}')
+            if window.saturated_ticks else 'joint velocities within limits',
+            {'saturated_ticks': window.saturated_ticks, 'ticks': window.ticks,
+             'saturated_fraction': window.saturated_ticks / ticks,
+             'max_demanded_over_limit': window.max_ratio,
+             'joints': ','.join(joints),
+             'joint_ratios': ','.join(f'{j}:{window.saturated_joints[j]:.3g}' for j in joints)}))
+        off_target = (window.max_foot_error_m > FOOT_ERROR_WARN_M
+                      or window.max_com_error_m > COM_ERROR_WARN_M)
+        statuses.append((
+            'tracking', WARN if off_target else OK,
+            'targets out of reach (best effort)' if off_target else 'feet and COM on target',
+            {'max_foot_error_m': window.max_foot_error_m,
+             'max_foot_orientation_error_rad': window.max_orientation_error_rad,
+             'max_com_error_m': window.max_com_error_m,
+             'unconverged_ticks': window.unconverged_ticks,
+             'joints_at_limit': ','.join(sorted(window.joints_at_limit))}))
+        statuses.append(self._input_status(now_ns, window))
+        if self._family is not None:
+            statuses.append(self._family_status())
+        self.diagnostics.publish(statuses)
+        if window.saturated_ticks:
+            self.get_logger().warning(statuses[0][2])
+
+    def _input_status(self, now_ns: int, window: _Window):
+        waiting = [topic for topic, value in (('/gait/com_reference', self._com_states),
+                                              ('/gait/footsteps', self._plan)) if value is None]
+        age_s = None if self._com_received_ns is None else (now_ns - self._com_received_ns) * 1e-9
+        stale = age_s is not None and age_s > self.params.stale_timeout_s
+        if waiting:
+            message, level = f'holding the nominal stance, waiting for {", ".join(waiting)}', OK
+        elif stale:
+            message, level = f'/gait/com_reference is {age_s:.3g} s old', WARN
+        else:
+            message, level = 'inputs fresh', OK
+        return ('inputs', level, message,
+                {'waiting_for': ','.join(waiting), 'com_reference_age_s': age_s
+                 if age_s is not None else 'none',
+                 'fallback_swing_ticks': window.fallback_ticks,
+                 'dropped': ','.join(f'{t}:{n}' for t, n in self.diagnostics.dropped.items())})
+
+    def _family_status(self):
+        limb_ik = robosimian_limb_ik(self.robot)
+        joints = self.robot.joint_positions(self._q_command)
+        families = {}
+        for foot in self.robot.description.feet:
+            angles = joints[self.robot.indices(foot.joints)]
+            families[foot.name] = int(limb_ik.family_of(angles[None], foot.name, 1e-4)[0])
+        off = [name for name, family in families.items() if family != self._family]
+        return ('ik family', WARN if off else OK,
+                f'limbs {off} left family {self._family}' if off
+                else f'every limb in family {self._family}',
+                {'family': self._family, **{f'{name}_family': family
+                                            for name, family in families.items()}})
+
+
+def main(args: list[str] | None = None) -> int:
+    """Entry point: ``python -m gait_nodes.whole_body_ik [--ros-args ...]``."""
+    return run_node(lambda options: WholeBodyIk(), args, prog='python -m gait_nodes.whole_body_ik',
+                    description=__doc__.split('\n\n')[0])
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,452 @@
+"""Whole-body IK: core solver checked by independent FK, velocity limits, references, the node."""
+
+import math
+
+import numpy as np
+import pinocchio as pin
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from gait_nodes import runtime
+from gait_nodes.contract import (
+    ComState,
+    FootstepPlan,
+    Swing,
+    SwingTrajectory,
+    com_reference_to_msg,
+    footsteps_to_msg,
+    swing_trajectory_to_msg,
+)
+from gait_nodes.diagnostics import WARN, level_value
+from gait_nodes.errors import ConfigError, ParameterError
+from gait_nodes.interfaces import get_message
+from gait_nodes.robot.description import example_robot_data_dir
+from gait_nodes.robot.model import load_robot_model
+from gait_nodes.robot.whole_body_ik import (
+    IkSettings,
+    IkTargets,
+    WholeBodyIkSolver,
+    com_state_at,
+    fallback_swing_pose,
+    limit_joint_velocity,
+    nominal_configuration,
+    swing_pose_at,
+)
+from gait_nodes.runtime import Parameter, qos_profile_latched
+
+NS = 1_000_000_000
+
+
+def _example_robot_data_present() -> bool:
+    try:
+        example_robot_data_dir()
+    except ConfigError:
+        return False
+    return True
+
+
+ROBOTS = ['robosimian', 'biped'] + (['go2', 'solo12', 'talos']
+                                    if _example_robot_data_present() else [])
+
+
+def independent_errors(robot, q, targets):
+    """Foot and COM errors of ``q`` by a fresh Pinocchio FK (no solver code involved)."""
+    model = robot.model
+    data = model.createData()
+    pin.framesForwardKinematics(model, data, q)
+    feet = []
+    orientations = []
+    for k, frame in enumerate(robot.foot_frame_ids):
+        placement = data.oMf[frame]
+        contact = placement.translation - [0.0, 0.0, robot.foot_frame_height_m]
+        feet.append(np.linalg.norm(contact - targets.feet_in_world[k]))
+        level = placement.rotation @ robot.foot_rotation_offsets[k].T
+        wanted = pin.rpy.rpyToMatrix(0.0, 0.0, targets.foot_yaws_rad[k])
+        orientations.append(np.linalg.norm(pin.log3(wanted.T @ level)))
+    com = pin.centerOfMass(model, data, q)
+    return np.array(feet), np.array(orientations), np.linalg.norm(com - targets.com_in_world)
+
+
+@pytest.fixture(scope='module', params=ROBOTS)
+def setup(request):
+    robot = load_robot_model(request.param)
+    return robot, WholeBodyIkSolver(robot), nominal_configuration(robot)
+
+
+def perturbed_targets(robot, q0, rng, com_shift_m=0.03, swing_m=0.06, yaw_rad=0.15):
+    feet, yaws = robot.foot_poses(q0)
+    com = robot.com(q0)
+    swing = rng.integers(len(feet))
+    feet[swing] += rng.uniform(-swing_m, swing_m, 3) * [1, 1, 0.5] + [0, 0, swing_m / 2]
+    base_yaw = rng.uniform(-yaw_rad, yaw_rad)
+    yaws = yaws + rng.uniform(-yaw_rad, yaw_rad, len(yaws))
+    com = com + rng.uniform(-com_shift_m, com_shift_m, 3) * [1, 1, 0.3]
+    return IkTargets(feet, yaws, base_yaw, com_in_world=com)
+
+
+def test_feasible_targets_are_reached_by_independent_fk(setup):
+    robot, solver, q0 = setup
+    rng = np.random.default_rng(3)
+    q = q0
+    for _ in range(15):
+        targets = perturbed_targets(robot, q0, rng)
+        result = solver.solve(targets, q)
+        assert result.converged, result
+        feet, orientations, com = independent_errors(robot, result.q, targets)
+        assert feet.max() <= 1e-4  # 0.1 mm, the issue's accuracy
+        assert com <= 1e-3
+        if robot.foot_orientation == 'yaw':
+            assert orientations.max() <= 1e-4
+        joints = robot.joint_positions(result.q)
+        assert np.all(robot.within_limits(joints))
+        # Joints the IK does not move hold the posture.
+        still = robot.indices([j for j in robot.joint_names if j not in robot.ik_joint_names])
+        np.testing.assert_allclose(joints[still], robot.posture[still])
+        # The body stays level with the commanded yaw.
+        rotation = pin.Quaternion(result.q[3:7]).toRotationMatrix()
+        np.testing.assert_allclose(rotation, pin.rpy.rpyToMatrix(0, 0, targets.base_yaw_rad),
+                                   atol=1e-12)
+        q = result.q
+
+
+def test_unreachable_targets_give_best_effort_without_nan(setup):
+    robot, solver, q0 = setup
+    feet, yaws = robot.foot_poses(q0)
+    feet[0] += [0.0, 0.0, 5.0]  # five metres up: out of reach
+    targets = IkTargets(feet, yaws, 0.0, com_in_world=robot.com(q0))
+    result = solver.solve(targets, q0)
+    assert not result.converged
+    assert np.all(np.isfinite(result.q))
+    assert result.foot_position_errors_m[0] > 1.0
+    joints = robot.joint_positions(result.q)
+    assert np.all(robot.within_limits(joints))
+    # The residual in the result is the real one.
+    measured, _, com = independent_errors(robot, result.q, targets)
+    np.testing.assert_allclose(measured, result.foot_position_errors_m, atol=1e-9)
+    assert com == pytest.approx(result.com_error_m, abs=1e-9)
+
+
+def test_robosimian_stays_in_its_family_while_walking_the_body():
+    robot = load_robot_model('robosimian')
+    from gait_nodes.robot.limb_ik import RoboSimianLimbIk
+
+    limb_ik = RoboSimianLimbIk(robot)
+    for family in (2, 7):
+        solver = WholeBodyIkSolver(robot)
+        q = nominal_configuration(robot, family)
+        feet, yaws = robot.foot_poses(q)
+        com0 = robot.com(q)
+        for k in range(60):
+            com = com0 + [0.1 * math.sin(0.05 * k), 0.05 * math.sin(0.07 * k), 0.0]
+            result = solver.solve(IkTargets(feet, yaws, 0.0, com_in_world=com), q)
+            assert result.converged
+            q = result.q
+            joints = robot.joint_positions(q)
+            for foot in robot.description.feet:
+                angles = joints[robot.indices(foot.joints)]
+                assert limb_ik.family_of(angles[None], foot.name, 1e-5)[0] == family
+
+
+def test_settings_are_validated():
+    with pytest.raises(ParameterError, match=r'max_iterations must be an integer in \[1, 1000\]'):
+        IkSettings(max_iterations=0)
+    with pytest.raises(ParameterError, match='com_tolerance_m'):
+        IkSettings(com_tolerance_m=1.0)
+    with pytest.raises(ValueError, match='NaN'):
+        IkTargets(np.full((4, 3), np.nan), np.zeros(4), 0.0, com_in_world=np.zeros(3))
+
+
+@settings(max_examples=50, deadline=None)
+@given(scale=st.floats(0.0, 20.0), dt=st.floats(1e-4, 0.1), seed=st.integers(0, 1000))
+def test_velocity_limit_is_never_exceeded_and_saturation_is_reported(scale, dt, seed):
+    robot = load_robot_model('robosimian')
+    rng = np.random.default_rng(seed)
+    q0 = robot.configuration([0, 0, 0.65], 0.0, rng.uniform(-1, 1, 28))
+    step = rng.normal(size=28) * scale * dt
+    q1 = robot.configuration([0.1, 0, 0.65], 0.0, robot.joint_positions(q0) + step)
+    q, velocities, saturation = limit_joint_velocity(robot, q0, q1, dt)
+    limits = robot.velocity_limits_rad_s
+    assert np.all(np.abs(velocities) <= limits)
+    moved = (robot.joint_positions(q) - robot.joint_positions(q0)) / dt
+    assert np.all(np.abs(moved) <= limits * (1 + 1e-9))
+    np.testing.assert_allclose(moved, velocities, atol=1e-9)
+    demanded = np.abs(step) / dt / limits
+    assert saturation.ratio == pytest.approx(demanded.max())
+    assert set(saturation.joints) == {robot.joint_names[k] for k in np.flatnonzero(demanded > 1)}
+    if saturation.saturated:
+        # Same direction, scaled: the fastest joint exactly at its limit.
+        assert np.abs(moved / limits).max() == pytest.approx(1.0)
+        np.testing.assert_allclose(moved * saturation.ratio, step / dt, rtol=1e-9, atol=1e-12)
+    else:
+        np.testing.assert_allclose(q, q1)
+
+
+def test_fallback_swing_lifts_and_lands_smoothly():
+    swing = Swing('front_left', 1.0, 3.0, np.array([0.5, 0.5, 0.0]), np.array([0.8, 0.6, 0.02]),
+                  0.0, 0.4)
+    height = 0.06
+    start, yaw0 = fallback_swing_pose(swing, 1.0, height)
+    end, yaw1 = fallback_swing_pose(swing, 3.0, height)
+    np.testing.assert_allclose(start, swing.start_in_world, atol=1e-12)
+    np.testing.assert_allclose(end, swing.end_in_world, atol=1e-12)
+    assert (yaw0, yaw1) == pytest.approx((0.0, 0.4))
+    middle, _ = fallback_swing_pose(swing, 2.0, height)
+    assert middle[2] == pytest.approx(0.01 + height)
+    # At rest at lift-off and touch-down (finite differences), upward at first.
+    h = 1e-5
+    for t in (1.0, 3.0):
+        before, _ = fallback_swing_pose(swing, t - h, height)
+        after, _ = fallback_swing_pose(swing, t + h, height)
+        assert np.linalg.norm(after - before) / (2 * h) < 1e-3
+    early, _ = fallback_swing_pose(swing, 1.2, height)
+    assert early[2] > 0.0 and abs(early[0] - 0.5) < early[2]
+
+
+def test_com_reference_and_swing_sampling():
+    states = [ComState(NS * k // 10, [0.1 * k, 0.0, 0.5], [1.0, 0.0, 0.0], [0.0, 0.0, 0.0],
+                       yaw_rad=0.1 * k, yaw_rate_rad_s=1.0) for k in range(3)]
+    position, yaw = com_state_at(states, NS // 20)
+    assert position == pytest.approx([0.05, 0.0, 0.5]) and yaw == pytest.approx(0.05)
+    position, _ = com_state_at(states, NS * 3 // 10, max_extrapolation_s=0.05)
+    assert position[0] == pytest.approx(0.2 + 0.05)  # extrapolated 50 ms at most
+    swing = SwingTrajectory('rear_right', NS, np.array([0.0, 1.0]),
+                            np.array([[0.0, 0.0, 0.0], [0.2, 0.0, 0.1]]), np.array([3.0, -3.0]))
+    position, yaw = swing_pose_at(swing, NS + NS // 2)
+    assert position == pytest.approx([0.1, 0.0, 0.05])
+    # Yaw interpolates the short way round (3 -> -3 rad crosses pi).
+    assert abs(math.remainder(yaw - math.pi, 2 * math.pi)) < 1e-9
+
+
+# -- the node in the inproc runtime ------------------------------------------------------------
+
+
+@pytest.fixture
+def inproc():
+    runtime.init(args=[], runtime='inproc', signal_handlers=False)
+    yield
+    runtime.shutdown()
+
+
+class Collector(runtime.Node):
+    """Keeps /joint_commands and /diagnostics."""
+
+    def __init__(self):
+        super().__init__('collector')
+        self.commands, self.statuses = [], []
+        self.create_subscription(get_message('sensor_msgs/msg/JointState'), '/joint_commands',
+                                 self.commands.append, 100)
+        self.create_subscription(get_message('diagnostic_msgs/msg/DiagnosticArray'),
+                                 '/diagnostics',
+                                 lambda msg: self.statuses.extend(msg.status), 100)
+
+    def status(self, aspect):
+        """Statuses received for ``aspect``."""
+        return [s for s in self.statuses if s.name.endswith(f': {aspect}')]
+
+
+def stamp_ns(msg) -> int:
+    return msg.header.stamp.sec * NS + msg.header.stamp.nanosec
+
+
+class CrawlSource(runtime.Node):
+    """A synthetic gait: footstep plan (latched), COM reference each tick, one swing message."""
+
+    def __init__(self, robot, q0, com_amplitude_m=0.03, com_period_s=4.0, nan_at_ns=None):
+        super().__init__('crawl_source')
+        self.period = com_period_s
+        self.feet0, _ = robot.foot_poses(q0)
+        self.com0 = robot.com(q0)
+        self.amplitude = com_amplitude_m
+        self.nan_at_ns = nan_at_ns
+        names = robot.foot_names
+        positions = [self.feet0.copy()]
+        for foot in ('front_left', 'rear_right'):
+            moved = positions[-1].copy()
+            moved[names.index(foot)] += [0.1, 0.0, 0.0]
+            positions += [positions[-1], moved]
+        self.plan = FootstepPlan(NS // 2, names, np.array([0.0, 1.0, 3.0, 4.0, 6.0]),
+                                 np.array(positions), np.zeros((5, len(names))))
+        trajectory = runtime.Node.create_publisher(
+            self, get_message('trajectory_msgs/msg/MultiDOFJointTrajectory'), '/gait/footsteps',
+            qos_profile_latched)
+        trajectory.publish(footsteps_to_msg(self.plan))
+        self.com_publisher = self.create_publisher(
+            get_message('trajectory_msgs/msg/MultiDOFJointTrajectory'), '/gait/com_reference', 10)
+        self.swing_publisher = self.create_publisher(
+            get_message('trajectory_msgs/msg/MultiDOFJointTrajectory'), '/gait/swing_trajectory',
+            10)
+        start = self.feet0[names.index('rear_right')]
+        end = start + [0.1, 0.0, 0.0]
+        self.swing = SwingTrajectory(
+            'rear_right', self.plan.start_ns + 4 * NS, np.array([0.0, 0.5, 1.5, 2.0]),
+            np.array([start, start + [0, 0, 0.05], end + [0, 0, 0.05], end]), np.zeros(4))
+        self.create_timer(0.005, self.tick)
+        self.sent_swing = False
+
+    def com_at(self, t_ns: int) -> np.ndarray:
+        """COM reference at ``t_ns``: slow forward drift and a lateral sway."""
+        t = t_ns * 1e-9
+        sway = self.amplitude * math.sin(2 * math.pi * t / self.period)
+        return self.com0 + [0.01 * t, sway, 0.0]
+
+    def tick(self):
+        """Publish the COM reference now, and the swing trajectory one second early."""
+        now = self.get_clock().now().nanoseconds
+        position = self.com_at(now)
+        if self.nan_at_ns is not None and now == self.nan_at_ns:
+            msg = com_reference_to_msg([ComState(now, self.com_at(now), np.zeros(3),
+                                                 np.zeros(3))])
+            msg.points[0].transforms[0].translation.x = float('nan')
+            self.com_publisher.publish(msg)
+        else:
+            self.com_publisher.publish(com_reference_to_msg([ComState(
+                now, position, np.zeros(3), np.zeros(3))]))
+        if not self.sent_swing and now >= self.swing.start_ns - NS:
+            self.swing_publisher.publish(swing_trajectory_to_msg(self.swing))
+            self.sent_swing = True
+
+
+def base_from_stance(robot, joints, stance_targets, stance):
+    """Base position that best puts the stance feet on their targets with these joints."""
+    q = robot.configuration(np.zeros(3), 0.0, joints)
+    in_base = robot.feet_in_base(q)
+    return np.mean(stance_targets[stance] - in_base[stance], axis=0)
+
+
+def run_node(seconds, **source_kwargs):
+    from gait_nodes.whole_body_ik import WholeBodyIk
+
+    node = WholeBodyIk()
+    source = CrawlSource(node.robot, node.q_nominal, **source_kwargs)
+    collector = Collector()
+    executor = runtime.SingleThreadedExecutor()
+    for n in (node, source, collector):
+        executor.add_node(n)
+    executor.spin_for(seconds)
+    return node, source, collector
+
+
+def test_node_tracks_the_contract_references_checked_by_fk(inproc):
+    node, source, collector = run_node(7.0)
+    robot = node.robot
+    assert len(collector.commands) == pytest.approx(7.0 * 200, abs=2)
+    plan = source.plan
+    limits = robot.velocity_limits_rad_s
+    previous = None
+    checked_swings = {'front_left': 0, 'rear_right': 0}
+    for msg in collector.commands:
+        assert list(msg.name) == list(robot.joint_names)
+        positions = np.array(msg.position)
+        velocities = np.array(msg.velocity)
+        assert np.all(np.isfinite(positions))
+        assert np.all(np.abs(velocities) <= limits)
+        if previous is not None:
+            dt = (stamp_ns(msg) - stamp_ns(previous)) * 1e-9
+            assert np.all(np.abs(positions - np.array(previous.position)) / dt
+                          <= limits * (1 + 1e-9))
+        previous = msg
+        now = stamp_ns(msg)
+        t_plan = (now - plan.start_ns) * 1e-9
+        if t_plan < 0.05:
+            continue
+        stance = plan.contacts_at(t_plan)
+        targets = np.array(plan.stance_positions_at(t_plan))
+        base = base_from_stance(robot, positions, targets, stance)
+        q = robot.configuration(base, 0.0, positions)
+        feet, _ = robot.foot_poses(q)
+        # Stance feet where the plan holds them, COM on the reference (0.1 mm, 1 mm).
+        assert np.abs(feet[stance] - targets[stance]).max() <= 1e-4
+        assert np.linalg.norm(robot.com(q) - source.com_at(now)) <= 1e-3
+        for k in np.flatnonzero(~stance):
+            name = robot.foot_names[k]
+            if name == 'rear_right':
+                expected, _ = swing_pose_at(source.swing, now)
+            else:
+                swing = [s for s in plan.swings() if s.foot == name][0]
+                expected, _ = fallback_swing_pose(swing, t_plan, 0.06)
+            assert np.linalg.norm(feet[k] - expected) <= 1e-4
+            checked_swings[name] += 1
+    assert min(checked_swings.values()) > 300
+    tracking = collector.status('tracking')
+    assert tracking and all(level_value(s.level) == 0 for s in tracking)
+    inputs = collector.status('inputs')
+    values = {kv.key: kv.value for kv in inputs[-1].values}
+    assert int(values['fallback_swing_ticks']) == 0  # last second: no swing in progress
+    assert any(int({kv.key: kv.value for kv in s.values}['fallback_swing_ticks']) > 0
+               for s in inputs)
+
+
+def test_node_holds_the_nominal_stance_before_the_references(inproc):
+    from gait_nodes.whole_body_ik import WholeBodyIk
+
+    node = WholeBodyIk()
+    collector = Collector()
+    executor = runtime.SingleThreadedExecutor()
+    executor.add_node(node)
+    executor.add_node(collector)
+    executor.spin_for(1.5)
+    nominal = node.robot.joint_positions(node.q_nominal)
+    assert len(collector.commands) == 300
+    for msg in collector.commands:
+        np.testing.assert_allclose(msg.position, nominal)
+        np.testing.assert_allclose(msg.velocity, 0.0)
+    [status] = collector.status('inputs')
+    assert 'waiting for /gait/com_reference, /gait/footsteps' in status.message
+
+
+def test_node_saturates_a_fast_reference_and_reports_the_joints(inproc):
+    node, source, collector = run_node(2.0, com_amplitude_m=0.1, com_period_s=0.5)
+    limits = node.robot.velocity_limits_rad_s
+    for msg in collector.commands:
+        assert np.all(np.abs(np.array(msg.velocity)) <= limits)
+    saturation = collector.status('velocity saturation')
+    assert any(level_value(s.level) == WARN for s in saturation)
+    warned = [s for s in saturation if level_value(s.level) == WARN][0]
+    values = {kv.key: kv.value for kv in warned.values}
+    assert float(values['max_demanded_over_limit']) > 1.0
+    assert 0.0 < float(values['saturated_fraction']) <= 1.0
+    assert values['joints'] and all(j in node.robot.joint_names
+                                    for j in values['joints'].split(','))
+
+
+def test_node_drops_nan_input_and_keeps_going(inproc):
+    nan_at = 2 * NS
+    node, source, collector = run_node(2.5, nan_at_ns=nan_at)
+    drops = collector.status('input /gait/com_reference')
+    assert len(drops) == 1 and 'NaN' in drops[0].message
+    assert node.diagnostics.dropped == {'/gait/com_reference': 1}
+    around = [m for m in collector.commands if abs(stamp_ns(m) - nan_at) <= 10_000_000]
+    assert len(around) >= 3
+    for msg in collector.commands:
+        assert np.all(np.isfinite(msg.position)) and np.all(np.isfinite(msg.velocity))
+
+
+def test_node_parameters_are_validated_and_a_rejected_change_changes_nothing(inproc):
+    from gait_nodes.whole_body_ik import WholeBodyIk
+
+    node = WholeBodyIk()
+    before = node.params
+    for name, value in (('rate_hz', -5.0), ('ik_family', 9), ('robot', 'biped'),
+                        ('fallback_step_height_m', 2.0)):
+        [result] = node.set_parameters([Parameter(name, value=value)])
+        assert not result.successful
+        assert name in result.reason or 'robot' in result.reason
+        assert node.params == before
+    [result] = node.set_parameters([Parameter('ik_family', value=7)])
+    assert result.successful and node.params.ik_family == 7
+    [result] = node.set_parameters([Parameter('rate_hz', value=100.0)])
+    assert result.successful
+    assert node.timer.timer_period_ns == 10_000_000
+
+
+def test_node_refuses_an_ik_family_for_a_robot_without_limb_ik():
+    runtime.init(args=['--ros-args', '-p', 'robot:=biped', '-p', 'ik_family:=3'],
+                 runtime='inproc', signal_handlers=False)
+    try:
+        from gait_nodes.whole_body_ik import WholeBodyIk
+
+        with pytest.raises(ParameterError, match='closed-form limb IK'):
+            WholeBodyIk()
+    finally:
+        runtime.shutdown()
