@@ -10,6 +10,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -20,12 +21,14 @@ from pathlib import Path
 import yaml
 
 from gait_nodes import graph
-from gait_nodes.cli import ArgumentParser, fail, split_args
+from gait_nodes.cli import READY_FILE_ENV, ArgumentParser, fail, split_args
 from gait_nodes.errors import ArgumentError, GaitNodesError
 from gait_nodes.runtime.args import parse_ros_args
 
 PROG = 'python -m gait_nodes'
 STOP_TIMEOUT_S = 10.0
+#: Longest wait for a node to start (imports, robot model, a value table built on first use).
+START_TIMEOUT_S = 900.0
 
 
 def _positive_float(text: str) -> float:
@@ -169,8 +172,14 @@ def run_processes(options, names: list[str], ros: list[str], runtime_name: str) 
         counter = TopicCounter(monitor)
         executor = runtime.SingleThreadedExecutor()
         executor.add_node(monitor)
+        ready_dir = tempfile.mkdtemp(prefix='gait_nodes_ready_')
+        ready_files = {name: Path(ready_dir) / f'{name}.ready' for name in commands}
         for name, command in commands.items():
-            processes[name] = subprocess.Popen(command)
+            # Own session: a Ctrl-C in the terminal reaches this launcher only, which then
+            # stops the nodes in order (a node interrupted while importing would crash).
+            env = dict(os.environ, **{READY_FILE_ENV: str(ready_files[name])})
+            processes[name] = subprocess.Popen(command, env=env, start_new_session=True)
+        _wait_ready(processes, ready_files, exit_codes, executor)
         start = time.perf_counter()
         deadline = start + options.duration
         while time.perf_counter() < deadline and runtime.ok() and \
@@ -183,16 +192,54 @@ def run_processes(options, names: list[str], ros: list[str], runtime_name: str) 
                           file=sys.stderr)
         wall = time.perf_counter() - start
     finally:
-        exit_codes.update(_stop(processes, exit_codes))
+        exit_codes.update(_stop(processes, exit_codes, ready_files if processes else {}))
         runtime.shutdown()
+        if processes:
+            shutil.rmtree(ready_dir, ignore_errors=True)
     return {
         'runtime': runtime_name, 'nodes': names, 'simulated_s': None, 'wall_s': round(wall, 3),
         'real_time_factor': None, 'topics': counter.table(), 'exit_codes': exit_codes,
     }
 
 
-def _stop(processes: dict[str, subprocess.Popen], done: dict[str, int]) -> dict[str, int]:
-    """SIGINT every node, as Ctrl-C would; SIGKILL only what ignores it for STOP_TIMEOUT_S."""
+def _stopping() -> bool:
+    from gait_nodes import runtime
+
+    return not runtime.ok() or runtime.default_context().shutdown_requested.is_set()
+
+
+def _wait_ready(processes, ready_files, exit_codes, executor) -> None:
+    """Spin until every node has written its ready file (or exited, or the run is stopped)."""
+    deadline = time.monotonic() + START_TIMEOUT_S
+    announced = time.monotonic() + 5.0
+    while time.monotonic() < deadline and not _stopping():
+        waiting = [name for name, process in processes.items()
+                   if not ready_files[name].exists() and process.poll() is None]
+        if not waiting:
+            return
+        if time.monotonic() > announced:
+            print(f'{PROG}: waiting for {", ".join(waiting)} to start', file=sys.stderr)
+            announced = time.monotonic() + 30.0
+        executor.spin_once(timeout_sec=0.1)
+    for name, process in processes.items():
+        if process.poll() is not None and name not in exit_codes:
+            exit_codes[name] = process.returncode
+            print(f'{PROG}: node {name} exited during start-up with status '
+                  f'{process.returncode}', file=sys.stderr)
+
+
+def _stop(processes: dict[str, subprocess.Popen], done: dict[str, int],
+          ready_files: dict[str, Path]) -> dict[str, int]:
+    """SIGINT every node, as Ctrl-C would; SIGKILL only what ignores it for STOP_TIMEOUT_S.
+
+    A node still starting up gets its SIGINT once it is up (a few seconds at most), so that
+    no node dies in the middle of its imports.
+    """
+    settle = time.monotonic() + STOP_TIMEOUT_S
+    while time.monotonic() < settle and any(
+            not ready_files[name].exists() and process.poll() is None
+            for name, process in processes.items() if name in ready_files):
+        time.sleep(0.05)
     for name, process in processes.items():
         if name not in done and process.poll() is None:
             process.send_signal(signal.SIGINT)

@@ -7,7 +7,9 @@ stderr, no traceback), 1 when a tool reports a negative outcome (e.g. a rejected
 from __future__ import annotations
 
 import argparse
+import os
 import sys
+from pathlib import Path
 
 from gait_nodes.errors import GaitNodesError
 from gait_nodes.runtime.args import split_ros_args
@@ -19,6 +21,10 @@ ROS_ARGS_EPILOG = (
     '-r from:=to, --log-level LEVEL. Runtime: --runtime or GAIT_NODES_RUNTIME '
     f'({"|".join(RUNTIMES)}; default rclpy when importable, else dds).'
 )
+
+
+#: A launcher (``run``) names a file here; the node writes it once it is up and spinning.
+READY_FILE_ENV = 'GAIT_NODES_READY_FILE'
 
 
 class ArgumentParser(argparse.ArgumentParser):
@@ -83,6 +89,9 @@ def run_node(node_factory, args: list[str] | None = None, *, prog: str,
         node = node_factory(options)
         executor = runtime.SingleThreadedExecutor()
         executor.add_node(node)
+        ready_file = os.environ.get(READY_FILE_ENV)
+        if ready_file:
+            Path(ready_file).write_text(f'{os.getpid()}\n')
         executor.spin()
     except GaitNodesError as exc:
         return fail(prog, exc)
