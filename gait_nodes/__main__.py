@@ -24,6 +24,7 @@ from gait_nodes import graph
 from gait_nodes.cli import READY_FILE_ENV, ArgumentParser, fail, split_args
 from gait_nodes.errors import ArgumentError, GaitNodesError
 from gait_nodes.runtime.args import parse_ros_args
+from gait_nodes.scenarios import DEFAULT_SCENARIO, SCENARIOS, CommandDriver, get_scenario
 
 PROG = 'python -m gait_nodes'
 STOP_TIMEOUT_S = 10.0
@@ -52,13 +53,17 @@ def build_parser() -> ArgumentParser:
     run.add_argument('--runtime', choices=['dds', 'inproc', 'rclpy'], default=None,
                      help='dds: one process per node; inproc: one process, simulated time '
                           '(default: GAIT_NODES_RUNTIME, else rclpy when importable, else dds)')
-    run.add_argument('--duration', type=str, default='20',
-                     help='seconds to run, wall time (dds) or simulated time (inproc); '
-                          'default 20')
+    run.add_argument('--scenario', default=DEFAULT_SCENARIO, metavar='NAME',
+                     help=f'walk to run: {", ".join(SCENARIOS)} (default {DEFAULT_SCENARIO})')
+    run.add_argument('--duration', type=str, default=None,
+                     help='seconds to run once every node is up, wall time (dds) or simulated '
+                          "time (inproc); default: the scenario's (20 s for most)")
     run.add_argument('--record', metavar='DIR', nargs='?', const='', default=None,
                      help='record every contract topic to a rosbag2 MCAP directory '
                           '(default name bags/gait_<date-time>)')
-    run.add_argument('--robot', default='robosimian', help='robot name in config/robots/')
+    run.add_argument('--robot', default=None,
+                     help="robot name in config/robots/ or a robot YAML (default: the "
+                          "scenario's)")
     run.add_argument('--gait', default=None, help='gait: biped | crawl | trot | auto')
     run.add_argument('--nodes', default=None,
                      help=f'comma-separated subset of {",".join(graph.NODES)}')
@@ -67,7 +72,8 @@ def build_parser() -> ArgumentParser:
 
 
 def _graph_params(options) -> dict:
-    values = {'robot': options.robot}
+    scenario = get_scenario(options.scenario)
+    values = {'robot': options.robot or scenario.robot, **scenario.settings}
     if options.gait:
         values['gait'] = options.gait
     return {'/**': {'ros__parameters': values}}
@@ -141,7 +147,9 @@ def run_inproc(options, names: list[str], ros: list[str]) -> dict:
         # run_processes, where it never sees them).
         monitor = runtime.Node('gait_run_monitor', use_global_arguments=False)
         counter = TopicCounter(monitor)
+        driver = CommandDriver(monitor, get_scenario(options.scenario).commands)
         executor.add_node(monitor)
+        driver.start()
         start = time.perf_counter()
         executor.spin_for(options.duration)
         wall = time.perf_counter() - start
@@ -151,7 +159,7 @@ def run_inproc(options, names: list[str], ros: list[str]) -> dict:
     return {
         'runtime': 'inproc', 'nodes': names, 'simulated_s': sim, 'wall_s': round(wall, 3),
         'real_time_factor': round(sim / wall, 1) if wall > 0 else None,
-        'topics': counter.table(), 'exit_codes': {},
+        'topics': counter.table(), 'exit_codes': {}, 'commands': driver.statuses,
     }
 
 
@@ -170,6 +178,7 @@ def run_processes(options, names: list[str], ros: list[str], runtime_name: str) 
     try:
         monitor = runtime.Node('gait_run_monitor')
         counter = TopicCounter(monitor)
+        driver = CommandDriver(monitor, get_scenario(options.scenario).commands)
         executor = runtime.SingleThreadedExecutor()
         executor.add_node(monitor)
         ready_dir = tempfile.mkdtemp(prefix='gait_nodes_ready_')
@@ -180,6 +189,7 @@ def run_processes(options, names: list[str], ros: list[str], runtime_name: str) 
             env = dict(os.environ, **{READY_FILE_ENV: str(ready_files[name])})
             processes[name] = subprocess.Popen(command, env=env, start_new_session=True)
         _wait_ready(processes, ready_files, exit_codes, executor)
+        driver.start()
         start = time.perf_counter()
         deadline = start + options.duration
         while time.perf_counter() < deadline and runtime.ok() and \
@@ -199,6 +209,7 @@ def run_processes(options, names: list[str], ros: list[str], runtime_name: str) 
     return {
         'runtime': runtime_name, 'nodes': names, 'simulated_s': None, 'wall_s': round(wall, 3),
         'real_time_factor': None, 'topics': counter.table(), 'exit_codes': exit_codes,
+        'commands': driver.statuses,
     }
 
 
@@ -262,7 +273,8 @@ def print_summary(summary: dict, as_json: bool) -> None:
         print(json.dumps(summary, indent=2, sort_keys=True))
         return
     nodes = ', '.join(summary['nodes']) or 'none'
-    print(f'gait_nodes run: runtime {summary["runtime"]}, nodes: {nodes}')
+    print(f'gait_nodes run: scenario {summary.get("scenario")}, runtime {summary["runtime"]}, '
+          f'nodes: {nodes}')
     if not summary['nodes']:
         print('  no gait nodes are installed in this version yet; the graph ran empty')
     timing = f'  wall time {summary["wall_s"]:.2f} s'
@@ -275,6 +287,13 @@ def print_summary(summary: dict, as_json: bool) -> None:
         print(f'  {topic:28s} {row["messages"]:8d} msgs  {rate}')
     if not summary['topics']:
         print('  no messages on the contract topics')
+    statuses = summary.get('commands') or []
+    if statuses:
+        rejected = [s for s in statuses if s.get('accepted') is False]
+        print(f'  gait commands: {len(statuses) - len(rejected)} accepted, {len(rejected)} '
+              f'rejected')
+        for status in rejected:
+            print(f'    rejected: {status.get("reason")}')
     for name, code in summary['exit_codes'].items():
         if code != 0:
             print(f'  node {name} exited with status {code}')
@@ -318,7 +337,8 @@ def main(args: list[str] | None = None) -> int:
     try:
         from gait_nodes.runtime.selection import select_runtime
 
-        options.duration = _positive_float(options.duration)
+        scenario = get_scenario(options.scenario)
+        options.duration = _positive_float(options.duration or str(scenario.duration_s))
         parse_ros_args(ros[1:])  # refuse a bad --params-file or -p before starting anything
         runtime_name = select_runtime(options.runtime)
         names = _selected_nodes(options)
@@ -337,6 +357,7 @@ def main(args: list[str] | None = None) -> int:
                 summary = run_processes(options, names, ros, runtime_name)
     except GaitNodesError as exc:
         return fail(PROG, exc)
+    summary['scenario'] = options.scenario
     if options.record:
         summary['bag'] = os.path.abspath(options.record)
         summary['inspect'] = _inspect_recording(options.record)

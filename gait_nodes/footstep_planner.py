@@ -96,6 +96,7 @@ class FootstepPlanner(Node):
         self._pending: tuple[GaitParameters, dict] | None = None
         self._last_plan = None
         self.diagnostics = DiagnosticsReporter(self, self.robot.name)
+        self._last_velocity_notes: list[str] = []
         self.footsteps_publisher = self.create_publisher(
             get_message('trajectory_msgs/msg/MultiDOFJointTrajectory'), '/gait/footsteps',
             qos_profile_latched)
@@ -150,7 +151,9 @@ class FootstepPlanner(Node):
         changed = twist != self.planner.requested_twist
         _, now_s = self.now_s()
         applied, notes = self.planner.set_velocity(twist, now_s)
-        if notes or changed:
+        # /cmd_vel is usually streamed: report a clamp when it starts or changes, not per message.
+        if changed or notes != self._last_velocity_notes:
+            self._last_velocity_notes = notes
             self.diagnostics.report(
                 'velocity', WARN if notes else OK,
                 '; '.join(notes) if notes else 'velocity command accepted',

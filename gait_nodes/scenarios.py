@@ -1,0 +1,161 @@
+"""Named walks for ``python -m gait_nodes run --scenario NAME``.
+
+Each names a robot, gait settings, and the velocity and gait commands a user would send while
+the robot walks.
+
+A scenario's settings go to every node as a ``/**`` params file; its timed commands are published
+by the launcher on /cmd_vel and /gait/command, exactly as ``python -m gait_nodes.command`` or
+``ros2 topic pub`` would, so the nodes cannot tell a scenario from a person.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+
+from gait_nodes.errors import ArgumentError
+
+
+@dataclass(frozen=True)
+class TimedCommand:
+    """One command, ``at_s`` seconds after every node is up.
+
+    Attributes:
+        at_s: When to send it [s].
+        velocity: (vx [m/s], vy [m/s], wz [rad/s]) for /cmd_vel, or None.
+        command: JSON text for /gait/command (valid or deliberately not), or None.
+    """
+
+    at_s: float
+    velocity: tuple[float, float, float] | None = None
+    command: str | None = None
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """A walk: robot, settings for every node, commands, default duration."""
+
+    name: str
+    description: str
+    robot: str
+    settings: dict = field(default_factory=dict)
+    commands: tuple[TimedCommand, ...] = ()
+    duration_s: float = 20.0
+
+
+def _vel(at_s: float, vx: float, vy: float = 0.0, wz: float = 0.0) -> TimedCommand:
+    return TimedCommand(at_s, velocity=(vx, vy, wz))
+
+
+def _cmd(at_s: float, text_or_object) -> TimedCommand:
+    text = text_or_object if isinstance(text_or_object, str) else json.dumps(text_or_object)
+    return TimedCommand(at_s, command=text)
+
+
+SCENARIOS: dict[str, Scenario] = {s.name: s for s in (
+    Scenario('robosimian_crawl',
+             'RoboSimian-like quadruped, crawl, preview-control COM, value-table swing',
+             'robosimian', {'gait': 'crawl', 'swing': 'value_table', 'com_method': 'preview',
+              'step_period_s': 4.0},
+             (_vel(0.0, 0.04),)),
+    Scenario('robosimian_crawl_polynomial',
+             'the same crawl with a polynomial swing, to compare speeds',
+             'robosimian', {'gait': 'crawl', 'swing': 'polynomial', 'com_method': 'preview',
+              'step_period_s': 4.0},
+             (_vel(0.0, 0.04),)),
+    Scenario('biped_walk',
+             'small humanoid: start, walk with a stair-like swing height (Lucy), stop',
+             'biped', {'gait': 'biped', 'swing': 'polynomial', 'com_method': 'preview',
+                       'step_height_m': 0.1},
+             (_vel(0.0, 0.1), _vel(10.0, 0.0)), 16.0),
+    Scenario('go2_trot',
+             'Unitree Go2 (example-robot-data), trot with sway compensation',
+             'go2', {'gait': 'trot', 'swing': 'polynomial', 'com_method': 'sway'},
+             (_vel(0.0, 0.1),)),
+    Scenario('online',
+             'RoboSimian crawl changed while it walks: step length, velocity, gait, and '
+             'invalid commands that must be rejected',
+             'robosimian', {'gait': 'crawl', 'swing': 'polynomial', 'com_method': 'preview',
+              'step_period_s': 4.0},
+             (_vel(0.0, 0.05),
+              _cmd(4.0, {'step_length_m': 0.2}),
+              _cmd(5.0, '{"step_length_m": 0.3'),            # invalid JSON
+              _cmd(5.5, {'step_lenght_m': 0.3}),             # unknown key
+              _cmd(6.0, {'step_period_s': -1.0}),            # negative duration
+              _cmd(6.5, {'duty_factor': 0.5}),               # below a crawl's 0.75
+              _cmd(7.0, {'gait': 'biped'}),                  # not a quadruped's gait
+              _vel(8.0, 0.08, 0.0, 0.05),
+              _cmd(12.0, {'gait': 'trot', 'duty_factor': 0.6}),
+              _vel(16.0, 0.0)), 20.0),
+)}
+
+DEFAULT_SCENARIO = 'robosimian_crawl'
+
+
+def get_scenario(name: str) -> Scenario:
+    """The scenario called ``name``; ArgumentError listing the names otherwise."""
+    if name not in SCENARIOS:
+        raise ArgumentError(f'unknown scenario {name!r}; scenarios: {", ".join(SCENARIOS)}')
+    return SCENARIOS[name]
+
+
+class CommandDriver:
+    """Publishes a scenario's timed commands from a node, and keeps /cmd_vel streaming.
+
+    /cmd_vel is re-sent every ``repeat_period_s`` (as a teleop does), so a planner that
+    joins late still gets the current velocity; a gait command waits until /gait/command has
+    a subscriber, so it is not sent into the void.
+
+    Args:
+        node: The launcher's node.
+        commands: The scenario's commands.
+        repeat_period_s: /cmd_vel repetition period [s].
+    """
+
+    def __init__(self, node, commands: tuple[TimedCommand, ...], repeat_period_s: float = 0.5):
+        from gait_nodes.interfaces import get_message
+
+        self._node = node
+        self._twist = get_message('geometry_msgs/msg/Twist')
+        self._string = get_message('std_msgs/msg/String')
+        self._vel_publisher = node.create_publisher(self._twist, '/cmd_vel', 10)
+        self._command_publisher = node.create_publisher(self._string, '/gait/command', 10)
+        self._pending = sorted(commands, key=lambda c: c.at_s)
+        self._velocity: tuple[float, float, float] | None = None
+        self._repeat_ns = int(repeat_period_s * 1e9)
+        self._last_vel_ns = 0
+        self._start_ns: int | None = None
+        self.statuses: list[dict] = []
+        node.create_subscription(self._string, '/gait/command_status', self._on_status, 10)
+        node.create_timer(0.02, self._tick)
+
+    def start(self) -> None:
+        """Count scenario time from now."""
+        self._start_ns = self._node.get_clock().now().nanoseconds
+
+    def _on_status(self, msg) -> None:
+        try:
+            self.statuses.append(json.loads(msg.data))
+        except json.JSONDecodeError:
+            self.statuses.append({'accepted': None, 'reason': 'unreadable status'})
+
+    def _tick(self) -> None:
+        if self._start_ns is None:
+            return
+        now_ns = self._node.get_clock().now().nanoseconds
+        elapsed_s = (now_ns - self._start_ns) * 1e-9
+        while self._pending and self._pending[0].at_s <= elapsed_s:
+            command = self._pending[0]
+            if command.command is not None:
+                if self._command_publisher.get_subscription_count() == 0:
+                    break  # the planner is not matched yet: try again next tick
+                self._command_publisher.publish(self._string(data=command.command))
+            if command.velocity is not None:
+                self._velocity = command.velocity
+                self._last_vel_ns = 0
+            self._pending.pop(0)
+        if self._velocity is not None and now_ns - self._last_vel_ns >= self._repeat_ns:
+            twist = self._twist()
+            twist.linear.x, twist.linear.y, twist.angular.z = (float(v) for v in self._velocity)
+            self._vel_publisher.publish(twist)
+            self._last_vel_ns = now_ns
