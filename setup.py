@@ -142,7 +142,8 @@ setup(
     # ros2 pkg create also writes tests_require=['pytest']; setuptools >= 72 no longer knows that
     # option and warns on every build. colcon reads the 'test' extra the same way.
     extras_require={
-        'test': ['pytest', 'hypothesis', 'ruff'],
+        # The tests also check the real robot models, so they need example-robot-data.
+        'test': ['pytest', 'hypothesis', 'ruff', 'example-robot-data'],
         'robots': ['example-robot-data'],
     },
     zip_safe=True,

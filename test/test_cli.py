@@ -72,7 +72,7 @@ def test_run_inproc_prints_a_summary(tmp_path):
                  cwd=tmp_path)
     assert result.returncode == 0, result.stderr
     assert 'Traceback' not in result.stderr
-    assert 'gait_nodes run: runtime inproc' in result.stdout
+    assert 'runtime inproc' in result.stdout
     assert 'simulated 2.00 s' in result.stdout
 
 
@@ -123,7 +123,7 @@ def test_run_overrides_do_not_address_the_internal_monitor(tmp_path):
     result = run(['-m', 'gait_nodes', 'run', '--runtime', 'inproc', '--nodes', '',
                   '--duration', '1', '--ros-args', '-p', 'robot:=biped'], cwd=tmp_path)
     assert result.returncode == 0, result.stderr
-    assert 'gait_nodes run: runtime inproc' in result.stdout
+    assert 'runtime inproc' in result.stdout
 
 
 def test_run_without_command_is_refused(tmp_path):
