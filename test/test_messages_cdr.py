@@ -458,9 +458,12 @@ def _first_difference(ours: bytes, reference: bytes) -> str:
 # Tests.
 
 RANDOM = settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+# Long sequences of big elements overrun Hypothesis' buffer now and then; the discarded draws
+# show up as 'filtering', which is not a problem with the strategy.
 LONG = settings(max_examples=4, deadline=None,
                 suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large,
-                                       HealthCheck.large_base_example])
+                                       HealthCheck.large_base_example,
+                                       HealthCheck.filter_too_much])
 FEW = settings(max_examples=8, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 
 
