@@ -115,7 +115,8 @@ class SwingPolicy:
         """(W, 4) greedy waypoints from ``start`` (clamped to the grid) to the goal.
 
         Each step takes the action minimizing one-step time + interpolated value; the move
-        straight to the goal is one of the candidates once the goal is within one action.
+        straight to the goal is one of the candidates once the goal is within one action. A
+        move that the grid's edge clamps back onto the current state is not a candidate.
 
         Raises:
             SwingPolicyError: The start is infeasible or the descent does not reach the goal.
@@ -139,7 +140,9 @@ class SwingPolicy:
                 candidates = np.vstack([candidates, goal])
             q_next, feasible = self.timing.joints(candidates)
             cost = self.timing.move_time(q_current, q_next) + self.value(candidates)
-            cost[~feasible] = INFEASIBLE_S
+            # A move clamped back onto the current state costs nothing and leads nowhere.
+            stays = np.all(np.abs(candidates - current) <= GOAL_TOLERANCE, axis=1)
+            cost[~feasible | stays] = INFEASIBLE_S
             k = int(np.argmin(cost))
             current, q_current = candidates[k], q_next[k:k + 1]
             path.append(current)
