@@ -32,7 +32,7 @@ from gait_nodes.paths import config_file
 from gait_nodes.robot.model import load_robot_model
 from gait_nodes.runtime import Node, SetParametersResult, qos_profile_latched
 from gait_nodes.swing.cache import load_or_build
-from gait_nodes.swing.policy import SwingPolicy, place_swing
+from gait_nodes.swing.policy import SwingPolicy, limb_step, place_swing
 from gait_nodes.swing.polynomial import polynomial_swing
 
 NODE_NAME = 'swing_leg_policy'
@@ -233,13 +233,8 @@ class SwingLegPolicy(Node):
         table = policy.table
         ik = policy.timing.ik
         mirror = ik.mirrors[ik.foot_index[swing.foot]]
-        sign = float(mirror[0] * mirror[1])
         yaw = body_yaw(plan, swing.lift_off_s)
-        c, s = math.cos(yaw), math.sin(yaw)
-        step = np.asarray(swing.end_in_world[:2]) - np.asarray(swing.start_in_world[:2])
-        step_in_base = np.array([c * step[0] + s * step[1], -s * step[0] + c * step[1]])
-        step_fr = step_in_base * mirror[:2]
-        turn = sign * math.remainder(swing.end_yaw_rad - swing.start_yaw_rad, 2 * math.pi)
+        step_fr, turn = limb_step(swing, mirror, yaw)
         key = (round(step_fr[0], 6), round(step_fr[1], 6), round(turn, 6))
         if key not in self._lookups:
             self._lookups[key] = policy.path_for_step(step_fr, turn)

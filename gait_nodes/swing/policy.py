@@ -62,6 +62,13 @@ class SwingPath:
         """Lift-off to touch-down at the limit [s]."""
         return float(self.times_s[-1])
 
+    def reversed(self) -> SwingPath:
+        """The same path run backwards (same segment times: ``max |dq| / W`` is symmetric)."""
+        last = len(self.states) - 1
+        return SwingPath(self.states[::-1].copy(), self.times_s[-1] - self.times_s[::-1],
+                         self.lower_s, self.lift_s, self.predicted_s, last - self.grid_last,
+                         last - self.grid_first)
+
     @property
     def swing_states(self) -> np.ndarray:
         """The waypoints on the grid (without the vertical lift and lowering)."""
@@ -175,6 +182,10 @@ class SwingPolicy:
                       free_yaw: bool = False) -> tuple[SwingPath, float]:
         """The swing that lands on the goal after a given displacement.
 
+        A step backwards in front-right coordinates (a rear limb walking forwards: its x is
+        mirrored) is the reverse of the forwards step: the table's path to the goal, run from
+        the goal back (the one-step cost is symmetric, so the reversed path is as fast).
+
         Args:
             step_in_base: (2,) landing minus lift-off, front-right coordinates in the base
                 frame [m].
@@ -184,11 +195,35 @@ class SwingPolicy:
         Returns:
             ``(path, clamped_m)``: the path and how far the lift-off place lies off the grid [m].
         """
+        step_in_base = np.asarray(step_in_base, dtype=float)
+        if step_in_base[0] < 0:
+            path, clamped = self.path_for_step(-step_in_base, -step_yaw_rad, free_yaw)
+            return path.reversed(), clamped
         goal = self.table.goal
         start_xy = goal[:2] - np.asarray(step_in_base, dtype=float)
         start = self.start_state(start_xy[0], start_xy[1],
                                  None if free_yaw else float(goal[3] - step_yaw_rad))
         return self.path_from(start), float(np.linalg.norm(start[:2] - start_xy))
+
+
+def limb_step(swing: Swing, mirror: np.ndarray, body_yaw_rad: float) -> tuple[np.ndarray, float]:
+    """A planned swing's displacement in front-right base coordinates.
+
+    Args:
+        swing: The planned swing.
+        mirror: (3,) signs taking this limb's base coordinates to the front-right limb's.
+        body_yaw_rad: Body yaw during the swing [rad].
+
+    Returns:
+        ``(step, turn)``: (2,) landing minus lift-off [m] and the yaw change [rad], both in the
+        front-right limb's mirrored coordinates.
+    """
+    c, s = math.cos(body_yaw_rad), math.sin(body_yaw_rad)
+    step = np.asarray(swing.end_in_world[:2], dtype=float) - swing.start_in_world[:2]
+    in_base = np.array([c * step[0] + s * step[1], -s * step[0] + c * step[1]])
+    sign = float(mirror[0] * mirror[1])
+    turn = sign * math.remainder(swing.end_yaw_rad - swing.start_yaw_rad, 2 * math.pi)
+    return in_base * np.asarray(mirror[:2], dtype=float), turn
 
 
 def place_swing(path: SwingPath, swing: Swing, start_ns: int, mirror: np.ndarray,
