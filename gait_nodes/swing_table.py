@@ -212,12 +212,22 @@ def _crossover(options) -> int:
     from gait_nodes.swing.crossover import compare_gaits
 
     for limit in options.joint_vel_limits:
-        result = compare_gaits(options.robot, limit, family=options.family,
-                               step_height_m=options.step_height_m)
-        zmp = (f'{result.zmp_speed_m_s:.4f} m/s (step {result.zmp_step_m:.3f} m, period '
-               f'{result.zmp_period_s:.2f} s)' if result.zmp_feasible else 'infeasible')
-        print(f'{limit:g} rad/s: value-iteration crawl {result.crawl_speed_m_s:.4f} m/s, ZMP '
-              f'trot {zmp} -> {result.faster}')
+        choices = compare_gaits(options.robot, limit, family=options.family,
+                                step_height_m=options.step_height_m)
+        parts = []
+        for choice in choices:
+            if choice.speed_m_s <= 0:
+                parts.append(f'{choice.name} infeasible')
+            elif choice.step_period_s:
+                parts.append(f'{choice.name} {choice.speed_m_s:.4f} m/s (stride '
+                             f'{choice.step_length_m:.3f} m, step period '
+                             f'{choice.step_period_s:g} s)')
+            else:
+                parts.append(f'{choice.name} {choice.speed_m_s:.4f} m/s (step '
+                             f'{choice.step_length_m:.3f} m)')
+        best = max(choices, key=lambda c: c.speed_m_s)
+        print(f'{limit:g} rad/s: ' + '; '.join(parts) + f' -> {best.name} (gait {best.gait}, '
+              f'swing {best.swing})')
     return 0
 
 
