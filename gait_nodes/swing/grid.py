@@ -12,7 +12,6 @@ Everything is in the front-right limb's frame; the other limbs use mirrored coor
 
 from __future__ import annotations
 
-import itertools
 import math
 from dataclasses import dataclass
 
@@ -74,6 +73,14 @@ class SwingGrid:
     def __post_init__(self):
         for name in AXIS_NAMES:
             object.__setattr__(self, name, _axis(getattr(self, name), name))
+        shape = tuple(len(getattr(self, name)) for name in AXIS_NAMES)
+        strides = [math.prod(shape[d + 1:]) for d in range(4)]
+        # Per axis, for interpolation: nodes, 1 / spacing and the flat-index stride.
+        lookup = tuple((getattr(self, name), 1.0 / np.diff(getattr(self, name)), stride)
+                       for name, stride in zip(AXIS_NAMES, strides, strict=True))
+        object.__setattr__(self, '_lookup', lookup)
+        object.__setattr__(self, '_box', (np.array([a[0] for a, _, _ in lookup]),
+                                          np.array([a[-1] for a, _, _ in lookup])))
 
     @property
     def axes(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -124,23 +131,34 @@ class SwingGrid:
         """Multilinear interpolation of node ``values`` at ``states`` (clamped to the mesh).
 
         Args:
-            values: (nx, ny, nz, nyaw) values at the nodes.
+            values: (nx, ny, nz, nyaw, ...) values at the nodes (trailing axes interpolated
+                alike).
             states: (N, 4) states.
 
         Returns:
-            (N,) interpolated values.
+            (N, ...) interpolated values.
         """
         states = np.atleast_2d(np.asarray(states, dtype=float))
-        weights = [axis_weights(a, states[:, d]) for d, a in enumerate(self.axes)]
-        result = np.zeros(len(states))
-        for corner in itertools.product((0, 1), repeat=4):
-            index, weight = [], np.ones(len(states))
-            for d, bit in enumerate(corner):
-                lo, hi, f = weights[d]
-                index.append(hi if bit else lo)
-                weight = weight * (f if bit else 1.0 - f)
-            result += weight * values[tuple(index)]
-        return result
+        count = len(states)
+        lower, upper = self._box
+        clamped = np.minimum(np.maximum(states, lower), upper)
+        base = np.zeros(count, dtype=np.intp)
+        offsets = np.zeros((count, 1), dtype=np.intp)
+        weights = np.ones((count, 1))
+        for d, (axis, inverse_spacing, stride) in enumerate(self._lookup):
+            if len(axis) == 1:
+                continue
+            t = clamped[:, d]
+            lo = np.minimum(np.searchsorted(axis, t, side='right') - 1, len(axis) - 2)
+            f = (t - axis[lo]) * inverse_spacing[lo]
+            base += lo * stride
+            offsets = np.concatenate([offsets, offsets + stride], axis=1)
+            weights = np.concatenate([weights * (1.0 - f)[:, None], weights * f[:, None]],
+                                     axis=1)
+        values = np.asarray(values)
+        flat = values.reshape(self.size, -1)
+        result = np.einsum('nck,nc->nk', flat[base[:, None] + offsets], weights)
+        return result.reshape(count, *values.shape[4:])
 
 
 def make_grid(x_range_m, y_range_m, z_levels: int, z_spacing_m: float, yaw_range_rad,

@@ -78,16 +78,36 @@ class SwingPath:
 class SwingPolicy:
     """Greedy lookups in a :class:`ValueTable` (thesis Appendix A).
 
+    The one-step time of each candidate move needs the joint angles at the candidate. With
+    ``exact_lookahead`` they come from the closed-form IK (as in the value iteration); otherwise
+    from multilinear interpolation of the IK at the grid nodes, interpolated in the same call as
+    the value (several times faster; joint angles are smooth within a family, so the choice
+    rarely differs). Either way the returned path is timed by the exact IK of its waypoints.
+
     Args:
         table: The converged table.
         robot: The RobotModel it was built for (checked by its URDF hash).
+        exact_lookahead: Use the IK for the candidates' joint angles.
     """
 
-    def __init__(self, table: ValueTable, robot):
+    def __init__(self, table: ValueTable, robot, exact_lookahead: bool = False):
         table.check_for(robot)
         self.table = table
         self.timing = LimbTiming(robot, table.family, table.joint_velocity_limit_rad_s)
         self.displacements = table.actions.displacements()
+        self.exact_lookahead = exact_lookahead
+        q_nodes, _ = self.timing.joints(table.grid.points())
+        #: Per node: the value, then the 6 walking joint angles.
+        self._node_data = np.concatenate([table.values_s[..., None],
+                                          q_nodes.reshape(*table.grid.shape, -1)], axis=-1)
+
+    def _lookahead(self, candidates: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Values, joint angles and feasibility at candidate states."""
+        if self.exact_lookahead:
+            q, feasible = self.timing.joints(candidates)
+            return self.value(candidates), q, feasible
+        data = self.table.grid.interpolate(self._node_data, candidates)
+        return data[:, 0], data[:, 1:], data[:, 0] < FEASIBLE_BELOW_S
 
     # -- values --------------------------------------------------------------------------------
 
@@ -131,8 +151,8 @@ class SwingPolicy:
         table, grid = self.table, self.table.grid
         goal = table.goal
         current = grid.clamp(np.asarray(start, dtype=float))
-        q_current, ok = self.timing.joints(current)
-        if not ok[0] or self.value(current[None])[0] >= FEASIBLE_BELOW_S:
+        value, q_current, ok = self._lookahead(current[None])
+        if not ok[0] or value[0] >= FEASIBLE_BELOW_S:
             raise SwingPolicyError(f'no feasible swing from {np.round(current, 4).tolist()} in '
                                    f'IK family {table.family}')
         path = [current]
@@ -145,8 +165,8 @@ class SwingPolicy:
             to_goal = goal - current
             if np.linalg.norm(to_goal[:3]) <= reach and abs(to_goal[3]) <= turn:
                 candidates = np.vstack([candidates, goal])
-            q_next, feasible = self.timing.joints(candidates)
-            cost = self.timing.move_time(q_current, q_next) + self.value(candidates)
+            values, q_next, feasible = self._lookahead(candidates)
+            cost = self.timing.move_time(q_current, q_next) + values
             # A move clamped back onto the current state costs nothing and leads nowhere.
             stays = np.all(np.abs(candidates - current) <= GOAL_TOLERANCE, axis=1)
             cost[~feasible | stays] = INFEASIBLE_S
