@@ -187,12 +187,18 @@ def _plot_sweep(results, path, limit) -> None:
 
     from gait_nodes.swing.sweep import FT_PER_MIN
 
+    def feet_per_min(curve):
+        return np.where(curve.speeds_m_s > 0, curve.speeds_m_s * FT_PER_MIN, np.nan)
+
+    families = sorted({family for family, _, _, _ in results})
+    styles = ('-', '--', ':', '-.')
     figure, axes = plt.subplots(figsize=(8, 5))
     for family, height, curves, best in results:
-        line, = axes.plot(best.steps_m, best.speeds_m_s * FT_PER_MIN, marker='o', ms=3,
+        line, = axes.plot(best.steps_m, feet_per_min(best), marker='o', ms=3,
+                          ls=styles[families.index(family) % len(styles)],
                           label=f'family {family + 1} (thesis numbering), {height * 100:g} cm')
         for curve in curves:
-            axes.plot(curve.steps_m, curve.speeds_m_s * FT_PER_MIN, color=line.get_color(),
+            axes.plot(curve.steps_m, feet_per_min(curve), color=line.get_color(),
                       alpha=0.25, lw=0.8)
         k = best.best
         axes.plot(best.steps_m[k], best.speeds_m_s[k] * FT_PER_MIN, marker='*', ms=12,

@@ -309,3 +309,12 @@ def test_node_refuses_a_table_for_another_limit(start, tmp_path):
     start('-p', f'table:={path}', '-p', 'joint_velocity_limit_rad_s:=1.7')
     with pytest.raises(SwingTableError, match=r'tiny\.npz.*1.0 rad/s, not 1.7'):
         SwingLegPolicy()
+
+
+def test_interpolated_lookahead_finds_the_same_swing_times_as_the_exact_ik():
+    table = default_table()
+    fast, exact = SwingPolicy(table, robot()), SwingPolicy(table, robot(), exact_lookahead=True)
+    for step in ([0.15, 0.0], [0.3, 0.02], [0.42, -0.02]):
+        a, _ = fast.path_for_step(np.array(step))
+        b, _ = exact.path_for_step(np.array(step))
+        assert a.duration_s == pytest.approx(b.duration_s, rel=0.01)
