@@ -318,3 +318,16 @@ def test_interpolated_lookahead_finds_the_same_swing_times_as_the_exact_ik():
         a, _ = fast.path_for_step(np.array(step))
         b, _ = exact.path_for_step(np.array(step))
         assert a.duration_s == pytest.approx(b.duration_s, rel=0.01)
+
+
+def test_default_table_is_built_once_in_the_cache(tmp_path, monkeypatch):
+    from gait_nodes.swing.cache import load_or_build
+
+    monkeypatch.setenv('XDG_CACHE_HOME', str(tmp_path))
+    messages = []
+    table, path = load_or_build(robot(), FAMILY, STEP_HEIGHT_M, 1.0, log=messages.append)
+    assert path.parent == tmp_path / 'gait_nodes' and path.is_file()
+    assert len(messages) == 1 and 'building' in messages[0] and str(path) in messages[0]
+    again, same = load_or_build(robot(), FAMILY, STEP_HEIGHT_M, 1.0, log=messages.append)
+    assert same == path and len(messages) == 1
+    assert np.array_equal(again.values_s, table.values_s)
