@@ -55,3 +55,14 @@ class GaitParameterError(ParameterError):
 
 class GaitCommandError(GaitParameterError):
     """A /gait/command message is not a valid command (JSON, schema, unknown key, type)."""
+
+
+class SwingTableError(GaitNodesError):
+    """A swing-leg value table was refused: corrupt file, another robot or joint limit, bad grid.
+
+    The message names the file and what differs.
+    """
+
+
+class SwingPolicyError(GaitNodesError):
+    """The swing-leg policy found no feasible swing (start or goal outside the table's region)."""

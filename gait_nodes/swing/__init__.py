@@ -1,0 +1,1 @@
+"""Swing-leg planning: value iteration, table files, policy lookup, polynomial swings."""

@@ -1,0 +1,61 @@
+"""Where default swing value tables live, and building one on first use.
+
+A node asked for ``swing: value_table`` without a ``table`` file uses
+``$XDG_CACHE_HOME/gait_nodes/`` (default ``~/.cache/gait_nodes/``), one file per robot URDF,
+family, step height and joint velocity limit, built with the default grid when missing.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable
+from pathlib import Path
+
+from gait_nodes.swing.kinematics import urdf_sha256
+from gait_nodes.swing.table import ValueTable, load_table
+
+
+def cache_dir() -> Path:
+    """``$XDG_CACHE_HOME/gait_nodes`` or ``~/.cache/gait_nodes``."""
+    base = os.environ.get('XDG_CACHE_HOME') or str(Path.home() / '.cache')
+    return Path(base) / 'gait_nodes'
+
+
+def default_table_path(robot, family: int, step_height_m: float,
+                       joint_velocity_limit_rad_s: float) -> Path:
+    """The cache file of a table for these settings (the URDF hash is in the name)."""
+    digest = urdf_sha256(robot.description.urdf_path)[:12]
+    return cache_dir() / (f'swing_{robot.name}_{digest}_f{family}_h{step_height_m:g}'
+                          f'_w{joint_velocity_limit_rad_s:g}.npz')
+
+
+def load_or_build(robot, family: int, step_height_m: float, joint_velocity_limit_rad_s: float,
+                  path: str | os.PathLike | None = None,
+                  log: Callable[[str], None] | None = None) -> tuple[ValueTable, Path]:
+    """Load a table (checked against robot, limit and family) or build the default one.
+
+    Args:
+        robot: The RobotModel.
+        family: IK family 0..7.
+        step_height_m: Step height [m] (only used to name and build the default table).
+        joint_velocity_limit_rad_s: Joint velocity limit [rad/s].
+        path: A table file; None or '' for the cache file, built when missing.
+        log: Called with a message when a table is being built.
+
+    Raises:
+        SwingTableError: A given file is missing or refused, or the build fails.
+    """
+    if path:
+        path = Path(path).expanduser()
+        return load_table(path, robot, joint_velocity_limit_rad_s, family), path
+    path = default_table_path(robot, family, step_height_m, joint_velocity_limit_rad_s)
+    if not path.is_file():
+        from gait_nodes.swing.value_iteration import build_table
+
+        if log is not None:
+            log(f'building the swing value table {path} (default grid, family {family}, step '
+                f'height {step_height_m:g} m, {joint_velocity_limit_rad_s:g} rad/s); this '
+                f'happens once')
+        table, _ = build_table(robot, family, step_height_m, joint_velocity_limit_rad_s)
+        table.save(path)
+    return load_table(path, robot, joint_velocity_limit_rad_s, family), path

@@ -1,0 +1,268 @@
+"""swing_leg_policy node: /gait/footsteps in, one /gait/swing_trajectory per swing out.
+
+``python -m gait_nodes.swing_leg_policy --ros-args -p swing:=value_table -p family:=2``
+
+With ``swing: value_table`` (thesis 000, III.C and Appendix A) the node loads a swing value table
+at start (``table``, or a cache file under ``$XDG_CACHE_HOME/gait_nodes`` built on first use) and
+refuses a corrupt file or one made for another robot (URDF hash), joint velocity limit, IK family
+or step height, naming the file and what differs. For each swing of the latched footstep plan it
+publishes, ``lead_time_s`` before lift-off, the greedy minimum-time path from the table: the
+table's goal mapped onto the planned landing place, the path rotated with the body and mirrored
+for the limb, lift-off and landing exactly where planned, each segment timed with the fastest
+joint at ``joint_velocity_limit_rad_s`` and the whole stretched to the swing's planned duration.
+When the plan gives less time than the table needs the timing is compressed to fit and the
+shortfall is reported on /diagnostics. With ``swing: polynomial`` it publishes a sixth-order
+swing with a via point at ``step_height_m`` (Lucy, seed 004) instead.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+
+import numpy as np
+import yaml
+
+from gait_nodes import contract
+from gait_nodes.cli import run_node
+from gait_nodes.diagnostics import ERROR, OK, WARN, DiagnosticsReporter
+from gait_nodes.errors import GaitNodesError, ParameterError, SwingPolicyError
+from gait_nodes.interfaces import get_message
+from gait_nodes.paths import config_file
+from gait_nodes.robot.model import load_robot_model
+from gait_nodes.runtime import Node, SetParametersResult, qos_profile_latched
+from gait_nodes.swing.cache import load_or_build
+from gait_nodes.swing.policy import SwingPolicy, limb_step, place_swing
+from gait_nodes.swing.polynomial import polynomial_swing
+
+NODE_NAME = 'swing_leg_policy'
+FOOTSTEPS_TOPIC = '/gait/footsteps'
+SWING_TOPIC = '/gait/swing_trajectory'
+SWING_METHODS = ('value_table', 'polynomial')
+NS_PER_S = 1_000_000_000
+#: A lift-off place further than this off the table's grid is reported [m].
+CLAMP_REPORT_M = 0.01
+
+
+def shipped_defaults() -> dict[str, object]:
+    """``ros__parameters`` of ``config/swing_leg_policy.yaml``."""
+    data = yaml.safe_load(config_file(f'{NODE_NAME}.yaml').read_text())
+    return dict(data[NODE_NAME]['ros__parameters'])
+
+
+def check_values(values: dict) -> None:
+    """Raise ParameterError naming the first invalid setting and its allowed range."""
+    def number(name, low, high, low_open=False):
+        value = values[name]
+        ok = (not isinstance(value, bool) and isinstance(value, (int, float))
+              and math.isfinite(value) and value <= high
+              and (value > low if low_open else value >= low))
+        if not ok:
+            raise ParameterError(f'{name} must be in {"(" if low_open else "["}{low:g}, '
+                                 f'{high:g}], got {value!r}')
+
+    if values['swing'] not in SWING_METHODS:
+        raise ParameterError(f'swing must be one of {list(SWING_METHODS)}, got '
+                             f'{values["swing"]!r}')
+    if isinstance(values['family'], bool) or not isinstance(values['family'], int) \
+            or not -1 <= values['family'] <= 7:
+        raise ParameterError(f'family must be an integer in [-1, 7] (-1: the robot YAML\'s), '
+                             f'got {values["family"]!r}')
+    if not isinstance(values['table'], str):
+        raise ParameterError(f'table must be a path string, got {values["table"]!r}')
+    number('step_height_m', 0.0, 1.0, low_open=True)
+    number('joint_velocity_limit_rad_s', 0.0, 100.0)
+    number('lead_time_s', 0.0, 10.0)
+    number('rate_hz', 0.0, 1000.0, low_open=True)
+    if isinstance(values['polynomial_samples'], bool) \
+            or not isinstance(values['polynomial_samples'], int) \
+            or not 3 <= values['polynomial_samples'] <= 1000:
+        raise ParameterError(f'polynomial_samples must be an integer in [3, 1000], got '
+                             f'{values["polynomial_samples"]!r}')
+
+
+def body_yaw(plan: contract.FootstepPlan, t_s: float) -> float:
+    """Circular mean of the planned foot yaws at the contact change before ``t_s`` [rad]."""
+    yaws = plan.yaws_rad[plan.index_at(t_s)]
+    return float(np.angle(np.exp(1j * yaws).sum()))
+
+
+class SwingLegPolicy(Node):
+    """Publishes a swing trajectory for every planned swing (see the module docstring)."""
+
+    def __init__(self):
+        super().__init__(NODE_NAME)
+        defaults = shipped_defaults()
+        values = {name: self.declare_parameter(name, default).value
+                  for name, default in defaults.items()}
+        check_values(values)
+        self.robot = load_robot_model(values['robot'])
+        self.diagnostics = DiagnosticsReporter(self, self.robot.name)
+        self._values = values
+        self._policy, self._table_path = self._load_policy(values)
+        self._plan = None
+        self._published: dict[tuple[str, int], tuple] = {}
+        self._lookups: dict[tuple, tuple] = {}
+        self.published_count = 0
+        self._publisher = self.create_publisher(
+            get_message('trajectory_msgs/msg/MultiDOFJointTrajectory'), SWING_TOPIC, 10)
+        self.create_subscription(get_message('trajectory_msgs/msg/MultiDOFJointTrajectory'),
+                                 FOOTSTEPS_TOPIC, self._on_footsteps, qos_profile_latched)
+        self._timer = self.create_timer(1.0 / values['rate_hz'], self._tick)
+        self.add_on_set_parameters_callback(self._on_set_parameters)
+        self.get_logger().info(self._describe())
+
+    # --- settings -----------------------------------------------------------------------------
+
+    def _limit(self, values: dict) -> float:
+        return float(values['joint_velocity_limit_rad_s']
+                     or self.robot.description.joint_velocity_limit_rad_s)
+
+    def _family(self, values: dict) -> int:
+        if values['family'] >= 0:
+            return int(values['family'])
+        setting = self.robot.description.extra.get('limb_ik') or {}
+        return int(setting.get('family', 2)) if isinstance(setting, dict) else 2
+
+    def _load_policy(self, values: dict):
+        """(SwingPolicy, path) for value_table, (None, None) for polynomial; raises if refused."""
+        if values['swing'] != 'value_table':
+            return None, None
+        family, limit = self._family(values), self._limit(values)
+        table, path = load_or_build(self.robot, family, float(values['step_height_m']), limit,
+                                    values['table'] or None, self.get_logger().info)
+        if not math.isclose(table.step_height_m, values['step_height_m'], abs_tol=1e-9):
+            raise SwingPolicyError(f'{path}: refused: its step height is '
+                                   f'{table.step_height_m} m, not {values["step_height_m"]} m')
+        return SwingPolicy(table, self.robot), path
+
+    def _describe(self) -> str:
+        values = self._values
+        if self._policy is None:
+            return (f'{self.robot.name}: polynomial swings (sixth order, via at '
+                    f'{values["step_height_m"]:g} m)')
+        table = self._policy.table
+        return (f'{self.robot.name}: value-table swings from {self._table_path} (family '
+                f'{table.family}, {table.joint_velocity_limit_rad_s:g} rad/s, step height '
+                f'{table.step_height_m:g} m, {table.grid.size} states)')
+
+    def _on_set_parameters(self, parameters) -> SetParametersResult:
+        values = dict(self._values)
+        values.update({p.name: p.value for p in parameters if p.name in values})
+        if values['robot'] != self._values['robot']:
+            return SetParametersResult(successful=False,
+                                       reason='robot is fixed at start; restart the node')
+        try:
+            check_values(values)
+            reload = any(values[k] != self._values[k] for k in
+                         ('swing', 'table', 'family', 'step_height_m',
+                          'joint_velocity_limit_rad_s'))
+            policy, path = self._load_policy(values) if reload \
+                else (self._policy, self._table_path)
+        except GaitNodesError as exc:
+            return SetParametersResult(successful=False, reason=str(exc))
+        if values['rate_hz'] != self._values['rate_hz']:
+            self.destroy_timer(self._timer)
+            self._timer = self.create_timer(1.0 / values['rate_hz'], self._tick)
+        self._values, self._policy, self._table_path = values, policy, path
+        self._lookups.clear()
+        self.diagnostics.report('settings', OK, self._describe())
+        return SetParametersResult(successful=True)
+
+    # --- input --------------------------------------------------------------------------------
+
+    def _on_footsteps(self, msg) -> None:
+        try:
+            plan = contract.footsteps_from_msg(msg)
+            unknown = set(plan.foot_names) - set(self.robot.foot_names)
+            if unknown:
+                raise contract.ContractError(f'feet {sorted(unknown)} are not feet of '
+                                             f'{self.robot.name}')
+        except contract.ContractError as exc:
+            self.diagnostics.drop(FOOTSTEPS_TOPIC, str(exc))
+            return
+        self._plan = plan
+        self._tick()
+
+    # --- output -------------------------------------------------------------------------------
+
+    def _tick(self) -> None:
+        plan = self._plan
+        if plan is None:
+            return
+        now_ns = self.get_clock().now().nanoseconds
+        lead_ns = int(round(self._values['lead_time_s'] * NS_PER_S))
+        busy_until: dict[str, int] = {}
+        for swing in plan.swings():
+            lift_ns = plan.start_ns + int(round(swing.lift_off_s * NS_PER_S))
+            touch_ns = plan.start_ns + int(round(swing.touch_down_s * NS_PER_S))
+            previous = busy_until.get(swing.foot)
+            busy_until[swing.foot] = touch_ns
+            if touch_ns <= now_ns or lift_ns - lead_ns > now_ns:
+                continue
+            if previous is not None and previous > now_ns:
+                continue  # this foot's earlier swing is still under way
+            key = (swing.foot, lift_ns)
+            signature = (tuple(np.round(swing.end_in_world, 9)), round(swing.end_yaw_rad, 9),
+                         touch_ns)
+            sent = self._published.get(key)
+            if sent is not None and (sent == signature or lift_ns <= now_ns):
+                continue
+            self._publish(plan, swing, lift_ns)
+            self._published[key] = signature
+        self._published = {k: v for k, v in self._published.items()
+                           if k[1] + 60 * NS_PER_S > now_ns}
+
+    def _publish(self, plan: contract.FootstepPlan, swing: contract.Swing, lift_ns: int) -> None:
+        values = self._values
+        trajectory = None
+        if self._policy is not None:
+            try:
+                trajectory = self._value_table_swing(plan, swing, lift_ns)
+            except GaitNodesError as exc:
+                self.diagnostics.report('swing', ERROR, f'{swing.foot} at {swing.lift_off_s:.3f}'
+                                        f' s: {exc}; sending the polynomial swing instead')
+        if trajectory is None:
+            trajectory, _ = polynomial_swing(swing, lift_ns, values['step_height_m'],
+                                             values['polynomial_samples'])
+        self._publisher.publish(contract.swing_trajectory_to_msg(trajectory))
+        self.published_count += 1
+
+    def _value_table_swing(self, plan, swing, lift_ns: int) -> contract.SwingTrajectory:
+        policy = self._policy
+        table = policy.table
+        ik = policy.timing.ik
+        mirror = ik.mirrors[ik.foot_index[swing.foot]]
+        yaw = body_yaw(plan, swing.lift_off_s)
+        step_fr, turn = limb_step(swing, mirror, yaw)
+        key = (round(step_fr[0], 6), round(step_fr[1], 6), round(turn, 6))
+        if key not in self._lookups:
+            self._lookups[key] = policy.path_for_step(step_fr, turn)
+        path, clamped = self._lookups[key]
+        trajectory, needed = place_swing(path, swing, lift_ns, mirror, yaw, table.ground_z_m,
+                                         swing.duration_s)
+        report = {'foot': swing.foot, 'lift_off_s': swing.lift_off_s,
+                  'planned_s': swing.duration_s, 'needed_s': needed,
+                  'joint_velocity_limit_rad_s': table.joint_velocity_limit_rad_s,
+                  'start_off_grid_m': clamped}
+        if needed > swing.duration_s + 1e-9:
+            self.diagnostics.report(
+                'timing', WARN, f'{swing.foot}: the plan gives {swing.duration_s:.3f} s, the '
+                f'table needs {needed:.3f} s at {table.joint_velocity_limit_rad_s:g} rad/s; '
+                f'joints will exceed the limit', report)
+        elif clamped > CLAMP_REPORT_M:
+            self.diagnostics.report(
+                'timing', WARN, f'{swing.foot}: the lift-off place is {clamped:.3f} m off the '
+                f'table grid; the path was stretched to it', report)
+        return trajectory
+
+
+def main(args: list[str] | None = None) -> int:
+    """Entry point: ``python -m gait_nodes.swing_leg_policy [--ros-args ...]``."""
+    return run_node(lambda options: SwingLegPolicy(), args,
+                    prog='python -m gait_nodes.swing_leg_policy',
+                    description=__doc__.split('\n\n')[0])
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,283 @@
+"""Build swing-leg value tables and sweep step size against crawl speed (thesis 000, III.C, IV).
+
+``python -m gait_nodes.swing_table build --robot robosimian --family 2 --step-height-m 0.1
+--joint-vel-limit 1.0 --out table.npz`` runs the value iteration and writes the table file.
+The default grid (x 0.2-0.8 m in 13, y -0.65 to -0.4 m in 11, 3 z levels 0.05 m apart from the
+swing plane up, yaw +-0.3 rad in 5: 2,145 states; 3 radii x 8 azimuths x 3 elevations x 3 yaw
+steps: 218 actions) builds in about a second; a finer one, e.g. ``--x-range 0.2 0.8 31
+--y-range -0.65 -0.4 14 --z-levels 7 --yaw-range -0.45 0.45 11`` (33,418 states), in tens of
+seconds.
+
+``python -m gait_nodes.swing_table sweep --families 2 7 --step-heights-m 0.06 0.1 --plot
+sweep.png [--perturb]`` builds one table per goal, family and step height, plots step size
+against the crawl speed of thesis eq. (2) (thesis Fig. 14, 17-19), prints the optimal step and
+speed, and with ``--perturb`` repeats the optimality test of thesis IV.B.7.
+
+``python -m gait_nodes.swing_table crossover --joint-vel-limits 1 1.5 2 2.5 3`` compares the
+value-iteration crawl with the ZMP-based trot under the same joint velocity limits (thesis IV.C).
+
+Exit status: 0 on success, 2 on bad input (one line on stderr).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+import numpy as np
+
+from gait_nodes.cli import ArgumentParser, fail
+from gait_nodes.errors import GaitNodesError
+
+PROG = 'python -m gait_nodes.swing_table'
+
+
+def _add_table_options(parser: argparse.ArgumentParser, single: bool) -> None:
+    parser.add_argument('--robot', default='robosimian', help='robot name or YAML path')
+    if single:
+        parser.add_argument('--family', type=int, default=2,
+                            help='IK family 0..7 (thesis k-th family = k - 1; default 2)')
+        parser.add_argument('--step-height-m', type=float, default=0.1,
+                            help='swing height above the ground [m] (default 0.1)')
+        parser.add_argument('--joint-vel-limit', type=float, default=None,
+                            help='joint velocity limit [rad/s] (default: the robot YAML\'s)')
+    parser.add_argument('--x-range', type=float, nargs=3, metavar=('MIN', 'MAX', 'COUNT'),
+                        default=None, help='x axis of the grid [m] (front-right foot, base '
+                        'frame)')
+    parser.add_argument('--y-range', type=float, nargs=3, metavar=('MIN', 'MAX', 'COUNT'),
+                        default=None, help='y axis of the grid [m]')
+    parser.add_argument('--z-levels', type=int, default=None,
+                        help='z levels from the swing plane up (default 3)')
+    parser.add_argument('--z-spacing-m', type=float, default=None,
+                        help='spacing of the z levels [m] (default 0.05)')
+    parser.add_argument('--yaw-range', type=float, nargs=3, metavar=('MIN', 'MAX', 'COUNT'),
+                        default=None, help='yaw axis of the grid [rad]')
+    parser.add_argument('--radii-m', type=float, nargs='+', default=None,
+                        help='action sphere radii [m] (default 0.03 0.06 0.12)')
+    parser.add_argument('--azimuths', type=int, default=None,
+                        help='azimuths per sphere (default 8)')
+    parser.add_argument('--elevations-rad', type=float, nargs='+', default=None,
+                        help='action elevations [rad] (default -0.5 0 0.5)')
+    parser.add_argument('--yaw-steps-rad', type=float, nargs='+', default=None,
+                        help='action yaw changes [rad] (default -0.15 0 0.15)')
+    parser.add_argument('--quiet', action='store_true', help='no progress bars')
+
+
+def _grid_and_actions(options, base=None):
+    from dataclasses import replace
+
+    from gait_nodes.swing.grid import SwingActions
+    from gait_nodes.swing.value_iteration import GridSpec
+
+    spec = base or GridSpec()
+    changes = {}
+    for name, field in (('x_range', 'x_range_m'), ('y_range', 'y_range_m'),
+                        ('yaw_range', 'yaw_range_rad')):
+        value = getattr(options, name)
+        if value is not None:
+            changes[field] = (value[0], value[1], value[2])
+    if options.z_levels is not None:
+        changes['z_levels'] = options.z_levels
+    if options.z_spacing_m is not None:
+        changes['z_spacing_m'] = options.z_spacing_m
+    spec = replace(spec, **changes)
+    defaults = SwingActions()
+    actions = SwingActions(
+        tuple(options.radii_m or defaults.radii_m),
+        options.azimuths if options.azimuths is not None else defaults.azimuth_count,
+        tuple(options.elevations_rad or defaults.elevations_rad),
+        tuple(options.yaw_steps_rad or defaults.yaw_steps_rad))
+    return spec, actions
+
+
+def _build(options) -> int:
+    from gait_nodes.robot.model import load_robot_model
+    from gait_nodes.swing.value_iteration import build_table
+
+    robot = load_robot_model(options.robot)
+    limit = options.joint_vel_limit or robot.description.joint_velocity_limit_rad_s
+    spec, actions = _grid_and_actions(options)
+    goal = None
+    if options.goal is not None:
+        goal = np.array(options.goal, dtype=float)
+    table, report = build_table(robot, options.family, options.step_height_m, limit, spec,
+                                actions, goal, progress=not options.quiet)
+    path = table.save(options.out)
+    print(f'{path}: {report.states} states x {report.actions} actions, {report.iterations} '
+          f'sweeps to a change of {report.max_change_s:.2e} s; costs {report.cost_seconds:.2f} '
+          f's, iteration {report.iteration_seconds:.2f} s '
+          f'({report.state_actions_per_second:.3g} state-actions/s)')
+    print(f'goal {np.round(table.goal, 4).tolist()}, lowering {table.lower_s:.3f} s, '
+          f'{100 * table.feasible_fraction():.1f} % of the states reach the goal, family '
+          f'{table.family}, {table.joint_velocity_limit_rad_s:g} rad/s')
+    return 0
+
+
+def _sweep(options) -> int:
+    from gait_nodes.robot.model import load_robot_model
+    from gait_nodes.swing.policy import SwingPolicy
+    from gait_nodes.swing.sweep import (
+        FT_PER_MIN,
+        envelope,
+        perturbation_test,
+        speed_curve,
+    )
+    from gait_nodes.swing.value_iteration import GridSpec, build_table, default_goal
+
+    robot = load_robot_model(options.robot)
+    limit = options.joint_vel_limit or robot.description.joint_velocity_limit_rad_s
+    spec, actions = _grid_and_actions(options, GridSpec(x_range_m=(-0.4, 1.1, 31)))
+    results = []
+    for family in options.families:
+        for height in options.step_heights_m:
+            curves, tables = [], []
+            for goal_x in options.goal_x:
+                goal = default_goal(robot, height)
+                goal[0] = goal_x
+                try:
+                    table, _ = build_table(robot, family, height, limit, spec, actions, goal,
+                                           progress=not options.quiet)
+                except GaitNodesError as exc:
+                    print(f'family {family}, step height {height:g} m, goal x {goal_x:g} m: '
+                          f'skipped: {exc}', file=sys.stderr)
+                    continue
+                curves.append(speed_curve(table))
+                tables.append(table)
+            if not curves:
+                continue
+            best_curve = envelope(curves)
+            k = best_curve.best
+            interior = 0 < k < len(best_curve.steps_m) - 1
+            results.append((family, height, curves, best_curve))
+            print(f'family {family} (thesis {family + 1}), step height {height:g} m: optimal '
+                  f'step {best_curve.steps_m[k]:.3f} m, {best_curve.speeds_m_s[k]:.4f} m/s = '
+                  f'{best_curve.speeds_m_s[k] * FT_PER_MIN:.3f} ft/min, swing '
+                  f'{best_curve.swing_s[k]:.3f} s'
+                  + ('' if interior else ' (at the end of the swept steps: widen the grid)'))
+            if options.perturb:
+                owner = next(t for t, c in zip(tables, curves, strict=True)
+                             if np.any(np.isclose(c.steps_m, best_curve.steps_m[k])
+                                       & np.isclose(c.speeds_m_s, best_curve.speeds_m_s[k])))
+                policy = SwingPolicy(owner, robot)
+                path = policy.path_from(best_curve.starts[k])
+                for result in perturbation_test(policy, path, options.trials,
+                                                options.amplitude_m):
+                    print(f'  perturbed in {result.mode:>3}: mean speed lost '
+                          f'{result.mean_loss_m_s * FT_PER_MIN:+.4f} ft/min, '
+                          f'{100 * result.slower_fraction:.0f} % of '
+                          f'{len(result.speeds_m_s)} copies slower')
+    if not results:
+        raise GaitNodesError('no table could be built for the families and step heights given')
+    overall = max(results, key=lambda r: r[3].speeds_m_s[r[3].best])
+    k = overall[3].best
+    print(f'optimal overall: family {overall[0]}, step height {overall[1]:g} m, step '
+          f'{overall[3].steps_m[k]:.3f} m, {overall[3].speeds_m_s[k] * FT_PER_MIN:.3f} ft/min '
+          f'(thesis: 0.34 m, 8.542 ft/min for RoboSimian)')
+    if options.plot:
+        _plot_sweep(results, options.plot, limit)
+        print(f'plot: {options.plot}')
+    return 0
+
+
+def _plot_sweep(results, path, limit) -> None:
+    import matplotlib
+
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+
+    from gait_nodes.swing.sweep import FT_PER_MIN
+
+    def feet_per_min(curve):
+        return np.where(curve.speeds_m_s > 0, curve.speeds_m_s * FT_PER_MIN, np.nan)
+
+    families = sorted({family for family, _, _, _ in results})
+    styles = ('-', '--', ':', '-.')
+    figure, axes = plt.subplots(figsize=(8, 5))
+    for family, height, curves, best in results:
+        line, = axes.plot(best.steps_m, feet_per_min(best), marker='o', ms=3,
+                          ls=styles[families.index(family) % len(styles)],
+                          label=f'family {family + 1} (thesis numbering), {height * 100:g} cm')
+        for curve in curves:
+            axes.plot(curve.steps_m, feet_per_min(curve), color=line.get_color(),
+                      alpha=0.25, lw=0.8)
+        k = best.best
+        axes.plot(best.steps_m[k], best.speeds_m_s[k] * FT_PER_MIN, marker='*', ms=12,
+                  color=line.get_color())
+    axes.set_xlabel('step size [m]')
+    axes.set_ylabel('gait speed [ft/min] (thesis eq. (2))')
+    axes.set_title(f'Step size vs. gait speed at {limit:g} rad/s (faint: one goal each)')
+    axes.set_ylim(bottom=0)
+    axes.grid(True, alpha=0.3)
+    axes.legend()
+    figure.tight_layout()
+    figure.savefig(path, dpi=120)
+    plt.close(figure)
+
+
+def _crossover(options) -> int:
+    from gait_nodes.swing.crossover import compare_gaits
+
+    for limit in options.joint_vel_limits:
+        choices = compare_gaits(options.robot, limit, family=options.family,
+                                step_height_m=options.step_height_m)
+        parts = []
+        for choice in choices:
+            if choice.speed_m_s <= 0:
+                parts.append(f'{choice.name} infeasible')
+            elif choice.step_period_s:
+                parts.append(f'{choice.name} {choice.speed_m_s:.4f} m/s (stride '
+                             f'{choice.step_length_m:.3f} m, step period '
+                             f'{choice.step_period_s:g} s)')
+            else:
+                parts.append(f'{choice.name} {choice.speed_m_s:.4f} m/s (step '
+                             f'{choice.step_length_m:.3f} m)')
+        best = max(choices, key=lambda c: c.speed_m_s)
+        print(f'{limit:g} rad/s: ' + '; '.join(parts) + f' -> {best.name} (gait {best.gait}, '
+              f'swing {best.swing})')
+    return 0
+
+
+def main(args: list[str] | None = None) -> int:
+    """Entry point: ``python -m gait_nodes.swing_table build|sweep|crossover ...``."""
+    parser = ArgumentParser(prog=PROG, description=__doc__.split('\n\n')[0], epilog=None)
+    commands = parser.add_subparsers(dest='command', required=True)
+    build = commands.add_parser('build', help='run the value iteration, write a table file')
+    _add_table_options(build, single=True)
+    build.add_argument('--goal', type=float, nargs=4, metavar=('X', 'Y', 'Z', 'YAW'),
+                       default=None, help='goal of the front-right foot in the base frame '
+                       '(default: half a 0.3 m stride ahead of the nominal foot, on the swing '
+                       'plane)')
+    build.add_argument('--out', required=True, help='table file to write (.npz)')
+    sweep = commands.add_parser('sweep', help='step size against crawl speed (thesis eq. (2))')
+    _add_table_options(sweep, single=False)
+    sweep.add_argument('--families', type=int, nargs='+', default=[2, 7],
+                       help='IK families (default 2 7: the thesis\' 3rd and 8th)')
+    sweep.add_argument('--step-heights-m', type=float, nargs='+', default=[0.06, 0.1],
+                       help='step heights [m] (default 0.06 0.1)')
+    sweep.add_argument('--joint-vel-limit', type=float, default=None,
+                       help='joint velocity limit [rad/s] (default: the robot YAML\'s)')
+    sweep.add_argument('--goal-x', type=float, nargs='+', default=[0.6, 0.7, 0.8, 0.9],
+                       help='goal x positions, one table each [m] (default 0.6 0.7 0.8 0.9)')
+    sweep.add_argument('--plot', default=None, help='PNG file of the sweep')
+    sweep.add_argument('--perturb', action='store_true',
+                       help='perturbation test of the optimal path (thesis IV.B.7)')
+    sweep.add_argument('--trials', type=int, default=50, help='perturbed copies per axis')
+    sweep.add_argument('--amplitude-m', type=float, default=0.02,
+                       help='largest perturbation of a waypoint [m]')
+    crossover = commands.add_parser('crossover', help='value-iteration crawl vs ZMP gait '
+                                    '(thesis IV.C)')
+    crossover.add_argument('--robot', default='robosimian')
+    crossover.add_argument('--family', type=int, default=2)
+    crossover.add_argument('--step-height-m', type=float, default=0.1)
+    crossover.add_argument('--joint-vel-limits', type=float, nargs='+',
+                           default=[1.0, 1.5, 2.0, 2.5, 3.0])
+    options = parser.parse_args(args)
+    try:
+        return {'build': _build, 'sweep': _sweep, 'crossover': _crossover}[options.command](
+            options)
+    except GaitNodesError as exc:
+        return fail(PROG, exc)
+
+
+if __name__ == '__main__':
+    sys.exit(main())

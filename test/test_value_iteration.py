@@ -1,0 +1,121 @@
+"""Swing value iteration (thesis 000, III.C): Bellman equation, goal, 1/W scaling, lift time."""
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from swing_helpers import TINY_ACTIONS, TINY_GRID, fine_time, robot, tiny_table
+
+from gait_nodes.errors import SwingTableError
+from gait_nodes.swing.grid import SwingActions, SwingGrid, make_grid
+from gait_nodes.swing.kinematics import FEASIBLE_BELOW_S, INFEASIBLE_S, LimbTiming
+from gait_nodes.swing.value_iteration import build_table
+
+
+def independent_backup(table, timing):
+    """T(V) at every node with direct IK and 16-corner interpolation (no shared code path)."""
+    grid = table.grid
+    states = grid.points()
+    q, ok = timing.joints(states)
+    best = np.full(len(states), np.inf)
+    for move in table.actions.displacements():
+        following = np.clip(states + move, grid.lower, grid.upper)
+        q_next, ok_next = timing.joints(following)
+        cost = np.abs(q_next - q).max(axis=1) / timing.joint_velocity_limit_rad_s
+        cost = np.where(ok & ok_next, cost, INFEASIBLE_S)
+        best = np.minimum(best, cost + grid.interpolate(table.values_s, following))
+    return best.reshape(grid.shape)
+
+
+def test_value_function_satisfies_bellman_equation_at_convergence():
+    table, report = tiny_table()
+    assert report.max_change_s < 1e-4 and table.converged
+    timing = LimbTiming(robot(), table.family, table.joint_velocity_limit_rad_s)
+    backup = independent_backup(table, timing)
+    goal = table.grid.nearest_node(table.goal)
+    finite = table.values_s < FEASIBLE_BELOW_S
+    finite[goal] = False
+    assert finite.sum() > 0.9 * table.grid.size
+    residual = np.abs(backup - table.values_s)[finite]
+    assert residual.max() < 2e-4
+
+
+def test_goal_value_is_zero_and_every_other_value_positive():
+    table, _ = tiny_table()
+    goal = table.grid.nearest_node(table.goal)
+    assert table.values_s[goal] == 0.0
+    others = np.ones(table.grid.shape, dtype=bool)
+    others[goal] = False
+    assert np.all(table.values_s[others] > 0)
+    # The goal is a node of the grid: its coordinates are exactly the table's goal.
+    assert np.array_equal([a[i] for a, i in zip(table.grid.axes, goal, strict=True)],
+                          table.goal)
+
+
+def test_swing_time_scales_as_one_over_the_limit():
+    slow, _ = tiny_table(1.0)
+    fast, _ = tiny_table(2.5)
+    finite = slow.values_s < FEASIBLE_BELOW_S
+    assert np.allclose(fast.values_s[finite] * 2.5, slow.values_s[finite], atol=5e-4)
+    assert fast.lower_s * 2.5 == pytest.approx(slow.lower_s)
+    assert np.allclose(fast.lift_s * 2.5, slow.lift_s)
+
+
+def test_lift_time_is_the_vertical_move_from_the_ground():
+    table, _ = tiny_table()
+    timing = LimbTiming(robot(), table.family, 1.0)
+    state = table.goal
+    path = timing.vertical_path(state)
+    assert path[0, 2] == pytest.approx(table.ground_z_m)
+    assert path[-1, 2] == pytest.approx(state[2])
+    times, feasible = timing.path_times(path)
+    assert feasible and table.lower_s == pytest.approx(times.sum())
+    # Finer sampling of the vertical line can only find more joint travel, but not much more.
+    assert fine_time(timing, path[[0, -1]], 200) == pytest.approx(table.lower_s, rel=0.02)
+    assert table.step_height_m == pytest.approx(state[2] - table.ground_z_m)
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.lists(st.floats(-1.0, 1.0), min_size=4, max_size=4))
+def test_interpolation_is_exact_on_multilinear_functions(coefficients):
+    grid = SwingGrid([0.0, 0.3, 1.0], [-1.0, 0.0], [0.0, 0.5, 0.7, 2.0], [-0.2, 0.2])
+    states = grid.points()
+    a, b, c, d = coefficients
+    values = (1 + a * states[:, 0]) * (1 + b * states[:, 1]) * (1 + c * states[:, 2]) \
+        * (1 + d * states[:, 3])
+    rng = np.random.default_rng(0)
+    probes = rng.uniform(grid.lower, grid.upper, (50, 4))
+    expected = (1 + a * probes[:, 0]) * (1 + b * probes[:, 1]) * (1 + c * probes[:, 2]) \
+        * (1 + d * probes[:, 3])
+    assert np.allclose(grid.interpolate(values.reshape(grid.shape), probes), expected)
+
+
+def test_actions_lie_on_spheres_of_the_given_radii():
+    actions = SwingActions((0.02, 0.07), 6, (-0.4, 0.0, 0.4), (-0.1, 0.0, 0.1))
+    moves = actions.displacements()
+    radii = np.linalg.norm(moves[:, :3], axis=1)
+    on_sphere = np.isclose(radii[:, None], [0.0, 0.02, 0.07]).any(axis=1)
+    assert on_sphere.all()
+    assert len(moves) == 2 * 3 * 6 * 3 + 2
+    assert not np.any(np.all(moves == 0, axis=1))
+
+
+def test_grid_puts_the_goal_on_a_node_and_refuses_a_goal_outside():
+    grid = make_grid((0.2, 0.8, 7), (-0.65, -0.4, 6), 2, 0.05, (-0.3, 0.3, 3), -0.55,
+                     goal=np.array([0.57, -0.52, -0.55, 0.05]))
+    assert grid.nearest_node([0.57, -0.52, -0.55, 0.05]) is not None
+    assert 0.57 in grid.x_m and -0.52 in grid.y_m and 0.05 in grid.yaw_rad
+    with pytest.raises(SwingTableError, match='outside the grid'):
+        make_grid((0.2, 0.8, 7), (-0.65, -0.4, 6), 2, 0.05, (-0.3, 0.3, 3), -0.55,
+                  goal=np.array([0.9, -0.5, -0.55, 0.0]))
+
+
+def test_build_refuses_bad_settings():
+    with pytest.raises(SwingTableError, match='step height'):
+        build_table(robot(), 2, -0.1, 1.0, TINY_GRID, TINY_ACTIONS)
+    with pytest.raises(SwingTableError, match='joint velocity limit'):
+        build_table(robot(), 2, 0.1, 0.0, TINY_GRID, TINY_ACTIONS)
+    with pytest.raises(SwingTableError, match='family'):
+        build_table(robot(), 8, 0.1, 1.0, TINY_GRID, TINY_ACTIONS)
+    with pytest.raises(SwingTableError, match='radii'):
+        SwingActions(radii_m=(0.0, 0.1))
