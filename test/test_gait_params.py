@@ -7,6 +7,7 @@ the JSON Schema of /gait/command agrees with the dataclass.
 
 import json
 import math
+from pathlib import Path
 
 import pytest
 from hypothesis import given, settings
@@ -167,3 +168,18 @@ def test_schema_agrees_with_the_dataclass():
     # Every default passes the schema.
     defaults = GaitParameters.for_robot(QUADRUPED).to_dict()
     assert parse_command(json.dumps(defaults)) == defaults
+
+
+def test_auto_follows_the_thesis_crossover_on_the_robot_that_has_it():
+    # RoboSimian-like robot with closed-form limb IK: 'auto' is whichever of the value-table
+    # crawl and the ZMP trot is faster at its joint limit; a robot without it: its first gait.
+    from gait_nodes.planning.gait_params import auto_gait
+    from gait_nodes.robot.description import load_robot_description
+    from gait_nodes.swing.crossover import choose_gait
+
+    robosimian = load_robot_description('robosimian')
+    assert auto_gait(robosimian) == choose_gait(str(robosimian.path),
+                                                robosimian.joint_velocity_limit_rad_s)
+    fixture = load_robot_description(Path(__file__).parent / 'data' / 'robots' /
+                                     'quadruped.yaml')
+    assert auto_gait(fixture) == fixture.gaits[0]

@@ -34,13 +34,16 @@ Admissible duty factors (open intervals):
   ``1/2 < beta < 1``.
 * crawl: ``3/4 < beta < 1`` (one foot at a time, with a four-foot phase for each ZMP move).
 
-``gait = 'auto'`` resolves to the robot's first gait (its YAML ``gaits`` list). The thesis'
-crossover between the crawl and the ZMP gait (joint speed limit) is not applied yet.
+``gait = 'auto'`` resolves, for a robot with closed-form limb IK and both quadruped gaits, to the
+faster of the value-iteration crawl and the ZMP trot at the robot's joint velocity limit (thesis
+IV.C, :func:`gait_nodes.swing.crossover.choose_gait`, computed once per robot and cached); for
+any other robot to its first gait (its YAML ``gaits`` list).
 """
 
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -166,8 +169,8 @@ class GaitParameters:
         return self.step_period_s - SWING_SLOTS[gait] * self.swing_s
 
     def resolved_gait(self, robot: RobotDescription) -> str:
-        """The gait to walk: ``gait``, or the robot's first gait for 'auto'."""
-        return robot.gaits[0] if self.gait == 'auto' else self.gait
+        """The gait to walk: ``gait``, or for 'auto' the faster one at the joint limit."""
+        return auto_gait(robot) if self.gait == 'auto' else self.gait
 
     def check_robot(self, robot: RobotDescription) -> None:
         """Raise :class:`GaitParameterError` if the robot cannot walk with these parameters."""
@@ -304,3 +307,22 @@ def parse_command(text: str) -> dict[str, object]:
         raise GaitCommandError(f'{where + ": " if where else ""}{error.message}')
     return {key: float(value) if key in NUMERIC_RANGES else value
             for key, value in values.items()}
+
+
+@functools.lru_cache(maxsize=8)
+def _crossover_gait(robot_path: str, joint_velocity_limit_rad_s: float) -> str | None:
+    from gait_nodes.errors import GaitNodesError
+    from gait_nodes.swing.crossover import choose_gait
+
+    try:
+        return choose_gait(robot_path, joint_velocity_limit_rad_s)
+    except GaitNodesError:
+        return None
+
+
+def auto_gait(robot: RobotDescription) -> str:
+    """The gait ``auto`` walks on ``robot`` (see the module docstring)."""
+    if robot.extra.get('limb_ik') is None or not {'crawl', 'trot'} <= set(robot.gaits):
+        return robot.gaits[0]
+    chosen = _crossover_gait(str(robot.path), robot.joint_velocity_limit_rad_s)
+    return chosen if chosen in robot.gaits else robot.gaits[0]
