@@ -13,12 +13,13 @@ and ``w_k, W_k`` where it was latched at touch-down. Three or more non-collinear
 the whole pose, roll and pitch included, from their positions (Kabsch's closed form; the
 orientation term is then left out); with fewer, flat feet add their orientation term (one flat
 foot fixes the pose) and what the stance still leaves free (the rotation about the line of two
-point feet) keeps its previous value through a tiny prior on the previous pose, solved by
-Gauss-Newton on SE(3) from the previous pose.
+point feet) keeps its previous value: Gauss-Newton on SE(3) from the previous pose with a tiny
+Levenberg-Marquardt damping, whose steps do not enter the directions the feet leave free.
 
 Which feet are in contact is the caller's choice (the footstep plan's contact schedule); without
-one, a foot is in contact when its contact point is within a tolerance of the ground. A foot that
-touches down is latched where it lands; a foot that lifts off is released.
+one, a foot is in contact when its contact point is within a tolerance of the ground (a foot in
+the air lands there once it stops descending). A foot that touches down is latched where it
+lands; a foot that lifts off is released.
 """
 
 from __future__ import annotations
@@ -32,10 +33,14 @@ import pinocchio as pin
 from gait_nodes.errors import ParameterError
 from gait_nodes.robot.model import RobotModel
 
-#: Weight of the previous base pose in the base fit: only decides what the feet leave free.
-BASE_PRIOR_WEIGHT = 1e-6
+#: Levenberg-Marquardt damping of the base fit's steps: what the feet leave free does not move
+#: (the fixed points, where the gradient vanishes, are not biased by it).
+STEP_DAMPING = 1e-9
 #: Gauss-Newton stops when the update is below this [m or rad].
 BASE_FIT_TOLERANCE = 1e-11
+#: Without a contact schedule, a foot still descending more than this per step [m] has not
+#: landed yet.
+DESCENT_TOLERANCE_M = 1e-7
 #: Feet whose second principal spread is below this fraction of the first are collinear.
 COLLINEAR_TOLERANCE = 1e-6
 BASE_FIT_ITERATIONS = 10
@@ -136,9 +141,9 @@ def fit_base_pose(base_guess: pin.SE3, feet_in_base: list[pin.SE3], feet_in_worl
 
     Three or more non-collinear feet fix the pose from their positions alone: least squares in
     closed form (:func:`kabsch`). Fewer feet: least squares over the positions and, for flat
-    feet (``rotation_weight_m`` [m/rad] > 0), the sole orientations, with a tiny prior on
-    ``base_guess`` for what they leave free (the rotation about the line of two point feet);
-    Gauss-Newton on SE(3) from ``base_guess``.
+    feet (``rotation_weight_m`` [m/rad] > 0), the sole orientations; damped Gauss-Newton on
+    SE(3) from ``base_guess``, which keeps what the feet leave free (the rotation about the line
+    of two point feet) at its value in ``base_guess``.
 
     Args:
         base_guess: The previous base pose.
@@ -157,7 +162,6 @@ def fit_base_pose(base_guess: pin.SE3, feet_in_base: list[pin.SE3], feet_in_worl
     if closed_form is not None:
         return closed_form
     skews = _skew(p)
-    sqrt_prior = math.sqrt(BASE_PRIOR_WEIGHT)
     pose = pin.SE3(base_guess)
     for _ in range(BASE_FIT_ITERATIONS):
         rotation, translation = pose.rotation, pose.translation
@@ -173,11 +177,10 @@ def fit_base_pose(base_guess: pin.SE3, feet_in_base: list[pin.SE3], feet_in_worl
                 block[:, 3:] = rotation_weight_m * pin.Jlog3(error) @ foot_base.rotation.T
                 residuals.append(rotation_weight_m * pin.log3(error))
                 jacobians.append(block)
-        residuals.append(sqrt_prior * pin.log6(base_guess.actInv(pose)).vector)
-        jacobians.append(sqrt_prior * np.eye(6))
         r = np.concatenate(residuals)
         jacobian = np.vstack(jacobians)
-        step = -np.linalg.solve(jacobian.T @ jacobian, jacobian.T @ r)
+        step = -np.linalg.solve(jacobian.T @ jacobian + STEP_DAMPING * np.eye(6),
+                                jacobian.T @ r)
         pose = pose * pin.exp6(step)
         if np.max(np.abs(step)) < BASE_FIT_TOLERANCE:
             break
@@ -254,6 +257,7 @@ class KinematicSimulation:
         self.base = pin.XYZQUATToSE3(self.q[:7])
         feet = self._feet_in_base(self.joints)
         self.latched: list[pin.SE3 | None] = [self.base * foot for foot in feet]
+        self._heights: np.ndarray | None = None
 
     @property
     def contacts(self) -> np.ndarray:
@@ -268,6 +272,20 @@ class KinematicSimulation:
         pin.forwardKinematics(model, data, q)
         return [pin.updateFramePlacement(model, data, f).copy()
                 for f in self.robot.foot_frame_ids]
+
+    def _contacts_by_height(self, feet: list[pin.SE3]) -> np.ndarray:
+        """Contacts without a schedule, from the foot heights.
+
+        A stance foot stays down while within the tolerance of the ground; a foot in the air
+        touches down once within it and no longer descending.
+        """
+        heights = np.array([(self.base * foot).translation[2] for foot in feet]) \
+            - self.robot.foot_frame_height_m - self.settings.ground_height_m
+        near = heights <= self.settings.contact_height_tolerance_m
+        previous = self._heights if self._heights is not None else heights
+        settled = heights >= previous - DESCENT_TOLERANCE_M
+        self._heights = heights
+        return near & (self.contacts | settled)
 
     def contact_points(self) -> np.ndarray:
         """(F, 3) contact points of the latched feet; NaN rows for feet in the air [m]."""
@@ -291,9 +309,7 @@ class KinematicSimulation:
         actuators = self.actuators.step(self.joints, commanded_joints, dt_s)
         feet = self._feet_in_base(actuators.positions_rad)
         if contacts is None:
-            height = self.settings.ground_height_m + self.settings.contact_height_tolerance_m \
-                + self.robot.foot_frame_height_m
-            contacts = np.array([(self.base * foot).translation[2] <= height for foot in feet])
+            contacts = self._contacts_by_height(feet)
         contacts = np.asarray(contacts, dtype=bool)
         kept = [k for k, down in enumerate(contacts) if down and self.latched[k] is not None]
         base = self.base
