@@ -203,6 +203,8 @@ class KinematicSimulator(Node):
         self._window = _Window()
         self._last_summary_ns: int | None = None
         self._sim_ns = 0
+        self._polygon_key = None
+        self._polygon_cache: tuple[list, list] = ([], [])
         self._owns_time = self.params.publish_clock and not self.get_clock().ros_time_is_active
 
         self.diagnostics = DiagnosticsReporter(self, self.robot.name)
@@ -398,16 +400,26 @@ class KinematicSimulator(Node):
         msg = self._msg['PolygonStamped']()
         msg.header.stamp = stamp
         msg.header.frame_id = WORLD_FRAME
-        point32 = self._msg['Point32']
-        z = self.params.ground_height_m
-        msg.polygon.points = [point32(x=float(x), y=float(y), z=z) for x, y in polygon]
+        vertices, outline = self._polygon_points(polygon)
+        msg.polygon.points = list(vertices)
         self._polygon.publish(msg)
         if self.params.publish_markers:
-            self._markers.publish(self._marker_array(stamp, state, polygon))
+            self._markers.publish(self._marker_array(stamp, state, outline))
 
-    def _marker_array(self, stamp, state: ZmpState, polygon: np.ndarray):
+    def _polygon_points(self, polygon: np.ndarray) -> tuple[list, list]:
+        """Point32 vertices and the closed marker outline, rebuilt only when the hull changes."""
+        z = self.params.ground_height_m
+        key = (polygon.tobytes(), z)
+        if key != self._polygon_key:
+            point32, point = self._msg['Point32'], self._msg['Point']
+            vertices = [point32(x=float(x), y=float(y), z=z) for x, y in polygon]
+            outline = [point(x=float(x), y=float(y), z=z) for x, y in polygon]
+            self._polygon_cache = (vertices, outline + outline[:1])
+            self._polygon_key = key
+        return self._polygon_cache
+
+    def _marker_array(self, stamp, state: ZmpState, outline_points: list):
         marker_type = self._msg['Marker']
-        point = self._msg['Point']
         markers = []
         for marker_id, (xyz, rgb, size) in enumerate((
                 (state.zmp_in_world, (1.0, 0.1, 0.1), 0.04),
@@ -422,10 +434,7 @@ class KinematicSimulator(Node):
             markers.append((marker, rgb))
         outline = marker_type(type=marker_type.LINE_STRIP, id=2)
         outline.scale.x = 0.01
-        z = self.params.ground_height_m
-        outline.points = [point(x=float(x), y=float(y), z=z)
-                          for x, y in (np.vstack([polygon, polygon[:1]]) if len(polygon)
-                                       else polygon)]
+        outline.points = list(outline_points)
         markers.append((outline, (0.2, 0.4, 1.0)))
         array = self._msg['MarkerArray']()
         for marker, (red, green, blue) in markers:

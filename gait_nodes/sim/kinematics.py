@@ -102,7 +102,7 @@ class PositionActuators:
         """
         if not dt_s > 0.0:
             raise ParameterError(f'dt_s must be > 0 s, got {dt_s!r}')
-        target = np.clip(commanded_rad, self.lower, self.upper)
+        target = np.minimum(np.maximum(commanded_rad, self.lower), self.upper)
         clamped = np.abs(target - commanded_rad) > 1e-12
         delta = target - positions_rad
         if self.continuous.any():
@@ -110,8 +110,8 @@ class PositionActuators:
             delta = np.where(self.continuous, wrapped, delta)
         allowed = self.velocity_limits_rad_s * dt_s
         ratio = np.abs(delta) / allowed
-        moved = np.clip(delta, -allowed, allowed)
-        positions = np.clip(positions_rad + moved, self.lower, self.upper)
+        moved = np.minimum(np.maximum(delta, -allowed), allowed)
+        positions = np.minimum(np.maximum(positions_rad + moved, self.lower), self.upper)
         velocities = (positions - positions_rad) / dt_s
         return ActuatorStep(positions, velocities, ratio, clamped)
 
@@ -121,18 +121,25 @@ def kabsch(points_in_base: np.ndarray, points_in_world: np.ndarray) -> pin.SE3 |
 
     None when the points do not fix the rotation (fewer than three, or collinear).
     """
-    if len(points_in_base) < 3:
+    count = len(points_in_base)
+    if count < 3:
         return None
-    centre_base = points_in_base.mean(axis=0)
-    centre_world = points_in_world.mean(axis=0)
-    spread_base = points_in_base - centre_base
-    u, singular, vt = np.linalg.svd(spread_base.T @ (points_in_world - centre_world))
+    centre_base = points_in_base.sum(axis=0) / count
+    centre_world = points_in_world.sum(axis=0) / count
+    u, singular, vt = np.linalg.svd((points_in_base - centre_base).T
+                                    @ (points_in_world - centre_world))
     if singular[1] <= COLLINEAR_TOLERANCE * max(singular[0], 1e-300):
         return None
-    # Kabsch: R = V diag(1, 1, det(V U^T)) U^T.
-    d = np.sign(np.linalg.det(vt.T @ u.T)) or 1.0
-    rotation = vt.T @ np.diag([1.0, 1.0, d]) @ u.T
+    # Kabsch: R = V diag(1, 1, d) U^T with d = det(V U^T) = +-1 (no reflection).
+    rotation = vt.T @ u.T
+    if _det3(rotation) < 0.0:
+        rotation = vt.T @ (u * [1.0, 1.0, -1.0]).T
     return pin.SE3(rotation, centre_world - rotation @ centre_base)
+
+
+def _det3(m: np.ndarray) -> float:
+    (a, b, c), (d, e, f), (g, h, i) = m.tolist()
+    return a * (e * i - f * h) - b * (d * i - f * g) + c * (d * h - e * g)
 
 
 def fit_base_pose(base_guess: pin.SE3, feet_in_base: list[pin.SE3], feet_in_world: list[pin.SE3],
@@ -318,8 +325,9 @@ class KinematicSimulation:
             base = fit_base_pose(self.base, [feet[k] for k in kept],
                                  [self.latched[k] for k in kept],
                                  self.settings.rotation_weight_m if self._flat_feet else 0.0)
-            slip = max(float(np.linalg.norm((base * feet[k]).translation
-                                            - self.latched[k].translation)) for k in kept)
+            placed = np.array([(base * feet[k]).translation - self.latched[k].translation
+                               for k in kept])
+            slip = float(np.sqrt((placed * placed).sum(axis=1).max()))
         touched = []
         for k, down in enumerate(contacts):
             if not down:

@@ -113,13 +113,15 @@ class ZmpMonitor:
         data = self.data
         pin.computeCentroidalMomentumTimeVariation(self.model, data, q, v, a)
         com = data.com[0].copy()
-        force = data.dhg.linear - self.mass_kg * self.gravity
-        origin = np.array([0.0, 0.0, self.ground_height_m])
-        moment = data.dhg.angular + np.cross(com - origin, force)
-        fz = float(force[2])
+        fx, fy, fz = data.dhg.linear - self.mass_kg * self.gravity
+        lx, ly, _ = data.dhg.angular
+        cx, cy, cz = com[0], com[1], com[2] - self.ground_height_m
+        # tau_O = dL_G + (c - O) x f, x and y components (np.cross costs more than the dynamics).
+        tau_x = lx + cy * fz - cz * fy
+        tau_y = ly + cz * fx - cx * fz
         if fz <= MIN_NORMAL_FORCE_N:
-            return com, np.full(3, np.nan), fz
-        return com, np.array([-moment[1] / fz, moment[0] / fz, self.ground_height_m]), fz
+            return com, np.full(3, np.nan), float(fz)
+        return com, np.array([-tau_y / fz, tau_x / fz, self.ground_height_m]), float(fz)
 
     def _hulls(self, contact_points_in_world: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         points = np.asarray(contact_points_in_world, dtype=float).reshape(-1, 3)
