@@ -205,7 +205,12 @@ class KinematicSimulator(Node):
         self._sim_ns = 0
         self._polygon_key = None
         self._polygon_cache: tuple[list, list] = ([], [])
-        self._owns_time = self.params.publish_clock and not self.get_clock().ros_time_is_active
+        # Under inproc the executor owns time; elsewhere publish_clock makes the simulator the
+        # source of time (even with use_sim_time, which would make it wait for itself).
+        self._owns_time = self.params.publish_clock and self.context.runtime != 'inproc'
+        if self._owns_time and hasattr(self.get_clock(), 'set_source'):
+            # Logs and diagnostics carry the simulated time too (rclpy: use_sim_time does it).
+            self.get_clock().set_source(lambda: self._sim_ns)
 
         self.diagnostics = DiagnosticsReporter(self, self.robot.name)
         self._msg = {name.rsplit('/', 1)[1]: get_message(name) for name in (
@@ -243,7 +248,15 @@ class KinematicSimulator(Node):
     def _make_timer(self, rate_hz: float):
         # Owning time, the simulator is paced by the steady clock: its own ROS time is what it
         # publishes on /clock, and a timer on it would wait for itself.
-        clock = Clock(clock_type=ClockType.STEADY_TIME) if self._owns_time else None
+        clock = None
+        if self._owns_time:
+            if self.context.runtime == 'rclpy':
+                from rclpy.clock import Clock as RclpyClock
+                from rclpy.clock import ClockType as RclpyClockType
+
+                clock = RclpyClock(clock_type=RclpyClockType.STEADY_TIME)
+            else:
+                clock = Clock(clock_type=ClockType.STEADY_TIME)
         return self.create_timer(1.0 / rate_hz, self.tick, clock=clock)
 
     def _stamp(self, stamp_ns: int):
