@@ -523,3 +523,23 @@ def test_clock_is_published_every_tick_with_the_simulated_time(inproc):
     clocks = [m.clock.sec * NS + m.clock.nanosec for m in collector.messages['/clock']]
     assert clocks == [k * NS // 200 for k in range(1, 41)]
     assert clocks == [stamp_ns(m) for m in collector.messages['/joint_states']]
+
+
+def test_a_command_beyond_the_velocity_limit_saturates_and_is_reported(inproc, robot,
+                                                                        q_nominal):
+    start = robot.joint_positions(q_nominal)
+    jump = start.copy()
+    k = robot.joint_names.index('fr_joint_1')
+    jump[k] += 0.5  # 0.5 s at 1 rad/s
+    simulator, collector = run_simulator(1.2, [(NS // 10, joint_command(robot.joint_names,
+                                                                        jump))])
+    velocities = np.array([m.velocity[k] for m in collector.messages['/joint_states']])
+    limit = robot.velocity_limits_rad_s[k]
+    assert np.all(np.abs(velocities) <= limit * (1 + 1e-12))
+    assert np.sum(np.isclose(velocities, limit)) >= 99
+    assert collector.messages['/joint_states'][-1].position[k] == pytest.approx(jump[k])
+    summaries = [s for _, s in collector.statuses('velocity saturation')]
+    assert level_value(summaries[0].level) == WARN
+    assert values_of(summaries[0])['joints'] == 'fr_joint_1'
+    assert float(values_of(summaries[0])['max_demanded_over_limit']) == pytest.approx(
+        0.5 / (limit * 0.005))
