@@ -32,8 +32,11 @@ from gait_nodes.sim.kinematics import (
     fit_base_pose,
     kabsch,
 )
+from gait_nodes.sim.zmp_monitor import POLYGON_SEGMENTS_PER_FOOT
 
 NS = 1_000_000_000
+#: How far the drawn polygon's edges lie outside the foot circles, per metre of radius.
+CIRCUMSCRIBED = 1 / math.cos(math.pi / POLYGON_SEGMENTS_PER_FOOT) - 1
 
 
 @pytest.fixture(scope='module')
@@ -345,8 +348,9 @@ def test_published_polygon_and_margins_agree_with_the_contacts(crawl):
         feet = robot.foot_poses(qs[i], data)[0][in_contact[i]]
         exact = disc_support_margin(zmp[stamp], feet[:, :2], radius)[0]
         drawn = signed_distance(zmp[stamp], polygons[stamp])[0]
-        # The drawn polygon circumscribes the discs: its margins exceed the exact ones by < 1 mm.
-        assert exact - 1e-6 <= drawn <= exact + radius * (1 / math.cos(math.pi / 16) - 1) + 1e-6
+        # The drawn polygon circumscribes the discs: its margins exceed the exact ones by 0.07 mm
+        # at most.
+        assert exact - 1e-6 <= drawn <= exact + CIRCUMSCRIBED * radius + 1e-6
         exact_margins.append(exact)
     assert len(exact_margins) > 1700
     summaries = [float(values_of(s)['min_margin_m'])
@@ -433,7 +437,7 @@ def test_a_gait_that_loses_balance_is_flagged_at_the_first_sample_outside(inproc
         point = np.array([[msg.point.x, msg.point.y]])
         assert signed_distance(point, polygons[stamp])[0] == pytest.approx(
             disc_support_margin(point, feet[[1, 3], :2] if stamp > NS // 2 else feet[:, :2],
-                                robot.description.foot_radius_m)[0], abs=1.1e-3)
+                                robot.description.foot_radius_m)[0], abs=1e-4)
         if first_outside is None and signed_distance(point, polygons[stamp])[0] < 0:
             first_outside = stamp
     assert first_outside == NS // 2 + NS // 200  # the first tick with the left feet up

@@ -12,12 +12,15 @@ from gait_nodes.geometry import disc_support_margin, foot_discs_polygon, signed_
 from gait_nodes.robot.model import load_robot_model
 from gait_nodes.robot.whole_body_ik import nominal_configuration
 from gait_nodes.sim.zmp_monitor import (
+    POLYGON_SEGMENTS_PER_FOOT,
     STANDARD_GRAVITY_M_S2,
     ZmpMonitor,
     central_differences,
 )
 
 G = STANDARD_GRAVITY_M_S2
+#: How far the drawn polygon's edges lie outside the foot circles, per metre of radius.
+CIRCUMSCRIBED = 1 / math.cos(math.pi / POLYGON_SEGMENTS_PER_FOOT) - 1
 
 ONE_BODY_URDF = """<?xml version="1.0"?>
 <robot name="one_body">
@@ -182,13 +185,14 @@ def test_margin_matches_the_shared_geometry(robosimian):
         assert monitor.margin(zmp, feet) == pytest.approx(
             disc_support_margin(point[None], feet[:, :2], 0.055)[0], abs=1e-12)
     polygon = monitor.support_polygon(feet)
-    np.testing.assert_allclose(polygon, foot_discs_polygon(feet[:, :2], 0.055))
+    np.testing.assert_allclose(polygon, foot_discs_polygon(feet[:, :2], 0.055,
+                                                             POLYGON_SEGMENTS_PER_FOOT))
     # The drawn polygon contains every disc: its margin is never below the exact one.
     points = rng.uniform(-1.0, 1.0, (200, 2))
     exact = disc_support_margin(points, feet[:, :2], 0.055)
     drawn = signed_distance(points, polygon)
     assert np.all(drawn >= exact - 1e-12)
-    assert np.all(drawn - exact <= 0.055 * (1 / math.cos(math.pi / 16) - 1) + 1e-12)
+    assert np.all(drawn - exact <= 0.055 * CIRCUMSCRIBED + 1e-12)
     # No contact or no ground force: no support.
     assert monitor.margin(np.zeros(3), np.zeros((0, 3))) == -np.inf
     assert monitor.margin(np.full(3, np.nan), feet) == -np.inf

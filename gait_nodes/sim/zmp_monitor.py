@@ -35,6 +35,10 @@ import pinocchio as pin
 from gait_nodes.geometry import convex_hull, foot_discs_polygon, signed_distance
 
 STANDARD_GRAVITY_M_S2 = 9.80665
+#: Vertices per foot disc in the published support polygon: the drawn polygon circumscribes
+#: the discs, so a margin read off it (as ``inspect`` does) exceeds the exact one by at most
+#: ``r (1 / cos(pi / 64) - 1)`` = 0.07 mm for a 0.055 m foot.
+POLYGON_SEGMENTS_PER_FOOT = 64
 #: Below this vertical ground force [N] the ZMP is undefined (the robot is falling freely).
 MIN_NORMAL_FORCE_N = 1e-6
 
@@ -131,7 +135,8 @@ class ZmpMonitor:
                 self._hull_cache = (np.zeros((0, 2)), np.zeros((0, 2)))
             else:
                 self._hull_cache = (convex_hull(points[:, :2]),
-                                    foot_discs_polygon(points[:, :2], self.foot_radius_m))
+                                    foot_discs_polygon(points[:, :2], self.foot_radius_m,
+                                                       POLYGON_SEGMENTS_PER_FOOT))
             self._hull_key = key
         return self._hull_cache
 
