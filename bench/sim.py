@@ -1,0 +1,269 @@
+#!/usr/bin/env python3
+"""Kinematic simulator and ZMP monitor: per-tick cost, and the inproc graph's real-time factor.
+
+    python bench/sim.py [--ticks 2000] [--robots robosimian,talos] [--duration 20]
+                        [--vx 0.03] [--no-graph] [--profile]
+
+1. Per tick, for each robot, on a 200 Hz walking-like joint trajectory (whole-body IK of a
+   swaying, drifting COM with one foot at a time swinging, as bench/ik.py builds it):
+   ``step``: :meth:`KinematicSimulation.step` (actuators, forward kinematics, base fit);
+   ``monitor``: central differences + :meth:`ZmpMonitor.evaluate` (centroidal momentum rate,
+   ZMP, margin); ``node``: the kinematic_simulator node's whole tick under inproc, messages
+   included (the trajectory replayed as /joint_commands). Median and p99 [ms].
+2. The inproc graph (every installed contract node, the recorder writing a bag, a /cmd_vel of
+   ``--vx`` m/s) crawling robosimian at 200 Hz for ``--duration`` s of simulated time: wall
+   time, real-time factor (target >= 20x), and where the wall time goes (each node's timer and
+   subscription callbacks, and the executor's own share).
+
+Figures only: nothing is asserted.
+"""
+
+from __future__ import annotations
+
+import argparse
+import collections
+import shutil
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+REPO = Path(__file__).resolve().parent.parent
+for path in (REPO, REPO / 'bench'):
+    if str(path) not in sys.path:
+        sys.path.insert(0, str(path))
+
+from ik import walking_targets  # noqa: E402
+
+from gait_nodes.errors import ConfigError  # noqa: E402
+from gait_nodes.robot.model import load_robot_model  # noqa: E402
+from gait_nodes.robot.whole_body_ik import (  # noqa: E402
+    IkSettings,
+    WholeBodyIkSolver,
+    nominal_configuration,
+)
+from gait_nodes.sim.kinematics import KinematicSimulation  # noqa: E402
+from gait_nodes.sim.zmp_monitor import ZmpMonitor, central_differences  # noqa: E402
+
+RATE_HZ = 200.0
+DT_S = 1.0 / RATE_HZ
+NS = 1_000_000_000
+
+
+def joint_trajectory(robot, ticks: int) -> tuple[np.ndarray, list[np.ndarray]]:
+    """Nominal configuration and a walking-like joint trajectory (one joint vector per tick)."""
+    q0 = nominal_configuration(robot)
+    solver = WholeBodyIkSolver(robot, IkSettings())
+    q = q0.copy()
+    joints = []
+    for targets in walking_targets(robot, q0, ticks):
+        q = solver.solve(targets, q).q
+        joints.append(robot.joint_positions(q))
+    return q0, joints
+
+
+def percentiles(samples_s: list[float]) -> str:
+    """Median and p99 of samples [s], in [ms]."""
+    ms = np.array(samples_s) * 1e3
+    return f'median {np.median(ms):.3f} ms, p99 {np.percentile(ms, 99):.3f} ms'
+
+
+def core_costs(robot, q0, joints) -> dict[str, list[float]]:
+    """Seconds per tick of the simulation step and of the monitor update."""
+    simulation = KinematicSimulation(robot, q0)
+    monitor = ZmpMonitor(robot.model, robot.description.foot_radius_m)
+    history = collections.deque([(q0, simulation.contact_points())] * 2, maxlen=3)
+    costs = {'step': [], 'monitor': []}
+    for command in joints:
+        start = time.perf_counter()
+        step = simulation.step(command, DT_S)
+        middle = time.perf_counter()
+        history.append((step.q, step.contact_points_in_world))
+        (q_a, _), (q_b, points), (q_c, _) = history
+        v, a = central_differences(robot.model, q_a, q_b, q_c, DT_S)
+        monitor.evaluate(q_b, v, a, points[np.isfinite(points[:, 0])])
+        end = time.perf_counter()
+        costs['step'].append(middle - start)
+        costs['monitor'].append(end - middle)
+    return costs
+
+
+def node_costs(robot_name: str, joints: list[np.ndarray]) -> list[float]:
+    """Seconds per tick of the node (inproc), replaying ``joints`` as /joint_commands."""
+    from gait_nodes import runtime
+    from gait_nodes.interfaces import get_message
+
+    runtime.init(args=['bench', '--ros-args', '-p', f'robot:={robot_name}'], runtime='inproc',
+                 signal_handlers=False)
+    try:
+        from gait_nodes.kinematic_simulator import KinematicSimulator
+
+        simulator = KinematicSimulator()
+        names = list(simulator.robot.joint_names)
+        joint_state = get_message('sensor_msgs/msg/JointState')
+        messages = [joint_state(name=names, position=[float(v) for v in command])
+                    for command in joints]
+
+        class Replay(runtime.Node):
+            def __init__(self):
+                super().__init__('replay', use_global_arguments=False)
+                self.publisher = self.create_publisher(joint_state, '/joint_commands', 10)
+                self.index = 0
+                self.create_timer(DT_S, self.tick)
+
+            def tick(self):
+                if self.index < len(messages):
+                    self.publisher.publish(messages[self.index])
+                    self.index += 1
+
+        costs = []
+        tick = simulator.tick
+
+        def timed_tick():
+            start = time.perf_counter()
+            tick()
+            costs.append(time.perf_counter() - start)
+
+        simulator.timer.callback = timed_tick
+        executor = runtime.SingleThreadedExecutor()
+        executor.add_node(Replay())
+        executor.add_node(simulator)
+        executor.spin_for(len(joints) * DT_S)
+        return costs
+    finally:
+        runtime.shutdown()
+
+
+class CallbackClock:
+    """Accumulates the wall time of every timer and subscription callback, per node."""
+
+    def __init__(self):
+        self.seconds = collections.Counter()
+        self.calls = collections.Counter()
+
+    def wrap(self, node) -> None:
+        """Time every callback of ``node`` from now on."""
+        name = node.get_name()
+        for timer in node._timers:
+            timer.callback = self._timed(name, timer.callback)
+        for subscription in node._subscriptions:
+            subscription.callback = self._timed(name, subscription.callback)
+
+    def _timed(self, name: str, callback):
+        def timed(*args):
+            start = time.perf_counter()
+            try:
+                return callback(*args)
+            finally:
+                self.seconds[name] += time.perf_counter() - start
+                self.calls[name] += 1
+
+        return timed
+
+
+def graph_run(duration_s: float, vx_m_s: float, profile: bool) -> None:
+    """The inproc graph crawling with the recorder: real-time factor and where time goes."""
+    from gait_nodes import graph, runtime
+    from gait_nodes.bag.analysis import inspect_bag
+    from gait_nodes.interfaces import get_message
+
+    bag_dir = Path(tempfile.mkdtemp(prefix='bench_sim_')) / 'bag'
+    runtime.init(args=['bench'], runtime='inproc', signal_handlers=False)
+    clock = CallbackClock()
+    try:
+        twist = get_message('geometry_msgs/msg/Twist')
+
+        class VelocityCommand(runtime.Node):
+            def __init__(self):
+                super().__init__('velocity_command', use_global_arguments=False)
+                self.publisher = self.create_publisher(twist, '/cmd_vel', 10)
+                self.create_timer(1.0, self.tick)
+
+            def tick(self):
+                msg = twist()
+                msg.linear.x = vx_m_s
+                self.publisher.publish(msg)
+
+        setup_start = time.perf_counter()
+        names = graph.available_nodes()
+        nodes = [graph.load_class(graph.NODES[name])() for name in names]
+        nodes.append(graph.load_class(graph.RECORDER)(output=str(bag_dir)))
+        nodes.append(VelocityCommand())
+        executor = runtime.SingleThreadedExecutor()
+        for node in nodes:
+            clock.wrap(node)
+            executor.add_node(node)
+        setup = time.perf_counter() - setup_start
+        profiler = None
+        if profile:
+            import cProfile
+
+            profiler = cProfile.Profile()
+            profiler.enable()
+        start = time.perf_counter()
+        executor.spin_for(duration_s)
+        wall = time.perf_counter() - start
+        if profiler is not None:
+            profiler.disable()
+    finally:
+        close_start = time.perf_counter()
+        runtime.shutdown()
+        close = time.perf_counter() - close_start
+    print(f'\ninproc graph: {", ".join(names)} + recorder, /cmd_vel {vx_m_s} m/s, '
+          f'{duration_s:g} s simulated at {RATE_HZ:g} Hz')
+    print(f'  wall {wall:.2f} s -> real-time factor {duration_s / wall:.1f}x (target >= 20x); '
+          f'node start-up {setup:.2f} s, bag close {close:.2f} s (not counted)')
+    callbacks = sum(clock.seconds.values())
+    for name, seconds in clock.seconds.most_common():
+        print(f'  {name:24s} {seconds:7.3f} s  {100 * seconds / wall:5.1f} %  '
+              f'{seconds / duration_s * 1e3 / RATE_HZ * 1e3:7.1f} us per 5 ms tick  '
+              f'({clock.calls[name]} callbacks)')
+    print(f'  {"executor and delivery":24s} {wall - callbacks:7.3f} s  '
+          f'{100 * (wall - callbacks) / wall:5.1f} %')
+    report = inspect_bag(bag_dir).report
+    gait = report.get('gait', {})
+    margin = gait.get('zmp_margin') or {}
+    base = gait.get('base') or {}
+    print(f'  bag: {report["message_count"]} messages; walked {base.get("distance_m")} m; '
+          f'ZMP margin min {margin.get("min_m")} m, {margin.get("samples_outside")} of '
+          f'{margin.get("samples")} samples outside')
+    shutil.rmtree(bag_dir.parent, ignore_errors=True)
+    if profiler is not None:
+        import pstats
+
+        pstats.Stats(profiler).sort_stats('tottime').print_stats(25)
+
+
+def main() -> int:
+    """Run the benchmarks and print the figures."""
+    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    parser.add_argument('--ticks', type=int, default=2000)
+    parser.add_argument('--robots', default='robosimian,talos')
+    parser.add_argument('--duration', type=float, default=20.0)
+    parser.add_argument('--vx', type=float, default=0.03)
+    parser.add_argument('--no-graph', action='store_true')
+    parser.add_argument('--profile', action='store_true', help='cProfile the graph run')
+    options = parser.parse_args()
+    for name in options.robots.split(','):
+        try:
+            robot = load_robot_model(name)
+        except ConfigError as exc:
+            print(f'{name}: skipped ({exc})')
+            continue
+        q0, joints = joint_trajectory(robot, options.ticks)
+        costs = core_costs(robot, q0, joints)
+        node = node_costs(name, joints)
+        print(f'{name} ({len(robot.joint_names)} joints, {robot.model.nbodies - 1} bodies), '
+              f'{options.ticks} ticks:')
+        print(f'  step    {percentiles(costs["step"])}')
+        print(f'  monitor {percentiles(costs["monitor"])}')
+        print(f'  node    {percentiles(node)}  (whole tick, messages included)')
+    if not options.no_graph:
+        graph_run(options.duration, options.vx, options.profile)
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,567 @@
+"""kinematic_simulator node: /joint_commands in; joint states, base pose and the ZMP monitor out.
+
+``python -m gait_nodes.kinematic_simulator [--ros-args -p robot:=talos -p publish_clock:=true]``.
+Every tick (``rate_hz``) the simulator moves each joint toward its last commanded position as a
+position-controlled actuator with the robot's velocity limit would
+(:class:`gait_nodes.sim.kinematics.PositionActuators`), places the floating base on the stance
+feet so that they do not slip (:class:`gait_nodes.sim.kinematics.KinematicSimulation`; which
+feet stand comes from the latest /gait/footsteps plan, without one from the foot heights) and
+publishes /joint_states (positions, velocities) and /tf (odom -> base_link).
+
+The ZMP monitor (:mod:`gait_nodes.sim.zmp_monitor`) evaluates the full multi-body model one tick
+behind, by central differences of the integrated configurations: the /gait/zmp, /gait/com,
+/gait/support_polygon and /gait/markers messages are stamped at the instant they describe (the
+previous tick). /diagnostics: a stability report at once whenever the level changes (OK, WARN
+below ``warn_margin_m``, ERROR with the ZMP outside the support polygon) and a stale-input report
+when /joint_commands stop for ``stale_after_s``; every ``diagnostics_period_s`` a summary
+(stability margin, joint velocity saturation, foot slip, inputs). Joint commands with unknown
+joints, mismatched lengths, repeated names or NaN are dropped and reported; the simulator keeps
+tracking its last good command.
+
+With ``publish_clock`` the simulator owns time: it advances by one period per tick (paced by the
+wall clock) and publishes /clock, which every node started with ``use_sim_time:=true`` follows.
+Under the inproc runtime time is the executor's and /clock repeats it.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+from collections import deque
+from dataclasses import dataclass
+
+import numpy as np
+import yaml
+
+from gait_nodes.cli import run_node
+from gait_nodes.contract import (
+    BASE_FRAME,
+    WORLD_FRAME,
+    ContractError,
+    FootstepPlan,
+    footsteps_from_msg,
+)
+from gait_nodes.diagnostics import ERROR, OK, WARN, DiagnosticsReporter
+from gait_nodes.errors import ConfigError, GaitNodesError, ParameterError
+from gait_nodes.interfaces import get_message
+from gait_nodes.paths import config_file
+from gait_nodes.robot.model import RobotModel, load_robot_model
+from gait_nodes.robot.whole_body_ik import nominal_configuration
+from gait_nodes.runtime import (
+    Clock,
+    ClockType,
+    DurabilityPolicy,
+    Node,
+    QoSProfile,
+    SetParametersResult,
+)
+from gait_nodes.sim.kinematics import KinematicSimulation, SimulationSettings
+from gait_nodes.sim.zmp_monitor import ZmpMonitor, ZmpState, central_differences
+
+NODE_NAME = 'kinematic_simulator'
+LEVEL_WORDS = {OK: 'OK', WARN: 'WARN', ERROR: 'ERROR'}
+
+
+def node_defaults() -> dict:
+    """Parameter defaults from ``config/kinematic_simulator.yaml``."""
+    path = config_file(f'{NODE_NAME}.yaml')
+    try:
+        return dict(yaml.safe_load(path.read_text())[NODE_NAME]['ros__parameters'])
+    except (OSError, yaml.YAMLError, KeyError, TypeError) as exc:
+        raise ConfigError(f'{path}: cannot read the node defaults: {exc}') from exc
+
+
+def _number(values: dict, name: str, low: float, high: float, low_open: bool = False) -> float:
+    value = values[name]
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \
+            or not (low < value if low_open else low <= value) or not value <= high:
+        bracket = '(' if low_open else '['
+        raise ParameterError(f'{name} must be a number in {bracket}{low}, {high}], got {value!r}')
+    return float(value)
+
+
+def _flag(values: dict, name: str) -> bool:
+    value = values[name]
+    if not isinstance(value, bool):
+        raise ParameterError(f'{name} must be true or false, got {value!r}')
+    return value
+
+
+@dataclass(frozen=True)
+class KinematicSimulatorParams:
+    """The node's parameters, validated (meanings in config/kinematic_simulator.yaml)."""
+
+    robot: str
+    rate_hz: float
+    publish_clock: bool
+    warn_margin_m: float
+    stale_after_s: float
+    diagnostics_period_s: float
+    contact_height_tolerance_m: float
+    ground_height_m: float
+    publish_markers: bool
+
+    @classmethod
+    def from_values(cls, values: dict) -> KinematicSimulatorParams:
+        """Validate raw parameter values; ParameterError naming the value and the range."""
+        robot = values['robot']
+        if not isinstance(robot, str) or not robot:
+            raise ParameterError(f'robot must be a robot name or YAML path, got {robot!r}')
+        return cls(
+            robot=robot,
+            rate_hz=_number(values, 'rate_hz', 0.0, 2000.0, low_open=True),
+            publish_clock=_flag(values, 'publish_clock'),
+            warn_margin_m=_number(values, 'warn_margin_m', 0.0, 1.0),
+            stale_after_s=_number(values, 'stale_after_s', 0.0, 60.0, low_open=True),
+            diagnostics_period_s=_number(values, 'diagnostics_period_s', 0.0, 60.0,
+                                         low_open=True),
+            contact_height_tolerance_m=_number(values, 'contact_height_tolerance_m', 0.0, 0.5),
+            ground_height_m=_number(values, 'ground_height_m', -10.0, 10.0),
+            publish_markers=_flag(values, 'publish_markers'),
+        )
+
+    def simulation_settings(self) -> SimulationSettings:
+        """Settings of the simulation core."""
+        return SimulationSettings(ground_height_m=self.ground_height_m,
+                                  contact_height_tolerance_m=self.contact_height_tolerance_m)
+
+
+def joint_command_from_msg(msg, robot: RobotModel, previous: np.ndarray) -> np.ndarray:
+    """The commanded joint vector of a /joint_commands JointState over ``previous``.
+
+    A command may name a subset of the joints; the others keep their previous command.
+
+    Raises:
+        ContractError: No joints, an unknown or repeated joint name, ``position`` (or a
+            non-empty ``velocity``) not one value per name, or a NaN/infinite value.
+    """
+    names = list(msg.name)
+    if not names:
+        raise ContractError('a joint command names no joints')
+    if len(msg.position) != len(names):
+        raise ContractError(f'{len(names)} joint names but {len(msg.position)} positions')
+    if len(msg.velocity) not in (0, len(names)):
+        raise ContractError(f'{len(names)} joint names but {len(msg.velocity)} velocities')
+    if len(set(names)) != len(names):
+        repeated = sorted({n for n in names if names.count(n) > 1})
+        raise ContractError(f'joint names repeat: {repeated}')
+    unknown = [n for n in names if n not in robot.joint_names]
+    if unknown:
+        raise ContractError(f'unknown joints {unknown[:5]} for {robot.name}; joints: '
+                            f'{list(robot.joint_names)}')
+    positions = np.array(msg.position, dtype=float)
+    if not np.all(np.isfinite(positions)) or not np.all(np.isfinite(np.array(msg.velocity,
+                                                                              dtype=float))):
+        raise ContractError('a joint command holds a NaN or infinite value')
+    command = np.array(previous, dtype=float)
+    command[robot.indices(names)] = positions
+    return command
+
+
+class _Window:
+    """What happened since the last diagnostics summary."""
+
+    def __init__(self):
+        self.ticks = 0
+        self.saturated_ticks = 0
+        self.max_ratio = 0.0
+        self.saturated_joints: dict[str, float] = {}
+        self.clamped_joints: set[str] = set()
+        self.samples = 0
+        self.samples_outside = 0
+        self.samples_warn = 0
+        self.min_margin_m = math.inf
+        self.max_slip_m = 0.0
+        self.touch_downs = 0
+
+
+class KinematicSimulator(Node):
+    """The kinematic simulator and ZMP monitor node (see the module docstring)."""
+
+    def __init__(self):
+        super().__init__(NODE_NAME)
+        defaults = node_defaults()
+        for name, value in defaults.items():
+            self.declare_parameter(name, value)
+        self.params = KinematicSimulatorParams.from_values(
+            {name: self.get_parameter(name).value for name in defaults})
+        self.robot = load_robot_model(self.params.robot)
+        q_initial = nominal_configuration(self.robot)
+        self.simulation = KinematicSimulation(self.robot, q_initial,
+                                              self.params.simulation_settings())
+        self.monitor = ZmpMonitor(self.robot.model, self.robot.description.foot_radius_m,
+                                  self.params.ground_height_m)
+        self._command = self.robot.joint_positions(q_initial)
+        self._plan: FootstepPlan | None = None
+        self._plan_order: np.ndarray | None = None
+        self._last_command_ns: int | None = None
+        self._started_ns: int | None = None
+        self._stale = False
+        self._stability_level: int | None = None
+        # (stamp [ns], q, contact points) of the last three ticks, oldest first.
+        self._history: deque = deque(maxlen=3)
+        self._window = _Window()
+        self._last_summary_ns: int | None = None
+        self._sim_ns = 0
+        self._polygon_key = None
+        self._polygon_cache: tuple[list, list] = ([], [])
+        # Under inproc the executor owns time; elsewhere publish_clock makes the simulator the
+        # source of time (even with use_sim_time, which would make it wait for itself).
+        self._owns_time = self.params.publish_clock and self.context.runtime != 'inproc'
+        if self._owns_time and hasattr(self.get_clock(), 'set_source'):
+            # Logs and diagnostics carry the simulated time too (rclpy: use_sim_time does it).
+            self.get_clock().set_source(lambda: self._sim_ns)
+
+        self.diagnostics = DiagnosticsReporter(self, self.robot.name)
+        self._msg = {name.rsplit('/', 1)[1]: get_message(name) for name in (
+            'sensor_msgs/msg/JointState', 'geometry_msgs/msg/PointStamped',
+            'geometry_msgs/msg/PolygonStamped', 'geometry_msgs/msg/Point32',
+            'geometry_msgs/msg/Point', 'geometry_msgs/msg/TransformStamped',
+            'tf2_msgs/msg/TFMessage', 'visualization_msgs/msg/Marker',
+            'visualization_msgs/msg/MarkerArray', 'rosgraph_msgs/msg/Clock',
+            'builtin_interfaces/msg/Time')}
+        joint_state = self._msg['JointState']
+        point = self._msg['PointStamped']
+        self._joint_states = self.create_publisher(joint_state, '/joint_states', 10)
+        self._tf = self.create_publisher(get_message('tf2_msgs/msg/TFMessage'), '/tf', 100)
+        self._zmp = self.create_publisher(point, '/gait/zmp', 10)
+        self._com = self.create_publisher(point, '/gait/com', 10)
+        self._polygon = self.create_publisher(get_message('geometry_msgs/msg/PolygonStamped'),
+                                              '/gait/support_polygon', 10)
+        self._markers = self.create_publisher(get_message('visualization_msgs/msg/MarkerArray'),
+                                              '/gait/markers', 10)
+        self._clock_publisher = (
+            self.create_publisher(get_message('rosgraph_msgs/msg/Clock'), '/clock', 10)
+            if self.params.publish_clock else None)
+        self.create_subscription(joint_state, '/joint_commands', self._on_joint_commands, 10)
+        self.create_subscription(get_message('trajectory_msgs/msg/MultiDOFJointTrajectory'),
+                                 '/gait/footsteps', self._on_footsteps,
+                                 QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL))
+        self.timer = self._make_timer(self.params.rate_hz)
+        self.add_on_set_parameters_callback(self._on_set_parameters)
+        self.get_logger().info(f'{self.robot.name}: {len(self.robot.joint_names)} joints, '
+                               f'{self.robot.mass_kg:.1f} kg, {self.params.rate_hz:g} Hz'
+                               + (', publishing /clock' if self.params.publish_clock else ''))
+
+    # -- time ----------------------------------------------------------------------------------
+
+    def _make_timer(self, rate_hz: float):
+        # Owning time, the simulator is paced by the steady clock: its own ROS time is what it
+        # publishes on /clock, and a timer on it would wait for itself.
+        clock = None
+        if self._owns_time:
+            if self.context.runtime == 'rclpy':
+                from rclpy.clock import Clock as RclpyClock
+                from rclpy.clock import ClockType as RclpyClockType
+
+                clock = RclpyClock(clock_type=RclpyClockType.STEADY_TIME)
+            else:
+                clock = Clock(clock_type=ClockType.STEADY_TIME)
+        return self.create_timer(1.0 / rate_hz, self.tick, clock=clock)
+
+    def _stamp(self, stamp_ns: int):
+        sec, nanosec = divmod(int(stamp_ns), 1_000_000_000)
+        return self._msg['Time'](sec=sec, nanosec=nanosec)
+
+    def _now_ns(self) -> int:
+        if self._owns_time:
+            return self._sim_ns
+        return self.get_clock().now().nanoseconds
+
+    # -- parameters ----------------------------------------------------------------------------
+
+    def _on_set_parameters(self, parameters) -> SetParametersResult:
+        values = {name: getattr(self.params, name) for name in node_defaults()}
+        for parameter in parameters:
+            if parameter.name in values:
+                values[parameter.name] = parameter.value
+        try:
+            params = KinematicSimulatorParams.from_values(values)
+            for fixed in ('robot', 'publish_clock'):
+                if getattr(params, fixed) != getattr(self.params, fixed):
+                    raise ParameterError(f'{fixed} is fixed at start '
+                                         f'({getattr(self.params, fixed)}); restart the node')
+            settings = params.simulation_settings()
+        except GaitNodesError as exc:
+            return SetParametersResult(successful=False, reason=str(exc))
+        if params.rate_hz != self.params.rate_hz:
+            self.timer.cancel()
+            self.timer = self._make_timer(params.rate_hz)
+        self.simulation.settings = settings
+        self.monitor.ground_height_m = params.ground_height_m
+        self.params = params
+        return SetParametersResult(successful=True)
+
+    # -- inputs --------------------------------------------------------------------------------
+
+    def _on_joint_commands(self, msg) -> None:
+        try:
+            self._command = joint_command_from_msg(msg, self.robot, self._command)
+        except ContractError as exc:
+            self.diagnostics.drop('/joint_commands', str(exc))
+            return
+        self._last_command_ns = self._now_ns()
+
+    def _on_footsteps(self, msg) -> None:
+        try:
+            plan = footsteps_from_msg(msg)
+            if set(plan.foot_names) != set(self.robot.foot_names):
+                raise ContractError(f'feet {list(plan.foot_names)} are not the robot\'s '
+                                    f'{list(self.robot.foot_names)}')
+        except ContractError as exc:
+            self.diagnostics.drop('/gait/footsteps', str(exc))
+            return
+        self._plan = plan
+        self._plan_order = np.array([plan.foot_names.index(n) for n in self.robot.foot_names])
+
+    # -- tick ----------------------------------------------------------------------------------
+
+    def tick(self) -> None:
+        """Integrate one step, publish the state and the monitor's view of the previous tick."""
+        period_ns = int(round(1e9 / self.params.rate_hz))
+        if self._owns_time:
+            self._sim_ns += period_ns
+            now_ns = self._sim_ns
+        else:
+            now_ns = self.get_clock().now().nanoseconds
+        if self._clock_publisher is not None:
+            clock = self._msg['Clock']()
+            clock.clock = self._stamp(now_ns)
+            self._clock_publisher.publish(clock)
+        if self._started_ns is None:
+            self._started_ns = now_ns
+            q0 = self.simulation.q.copy()
+            points = self.simulation.contact_points()
+            self._history.extend([(now_ns - 2 * period_ns, q0, points),
+                                  (now_ns - period_ns, q0, points)])
+        previous_ns = self._history[-1][0]
+        dt_s = (now_ns - previous_ns) * 1e-9 if now_ns > previous_ns else period_ns * 1e-9
+
+        contacts = None
+        if self._plan is not None:
+            t_plan = (now_ns - self._plan.start_ns) * 1e-9
+            contacts = self._plan.contacts_at(t_plan)[self._plan_order]
+        step = self.simulation.step(self._command, dt_s, contacts)
+        self._history.append((now_ns, step.q, step.contact_points_in_world))
+        self._publish_state(now_ns, step.q, step.actuators.velocities_rad_s)
+        self._account(step)
+
+        (t0, q0, _), (t1, q1, points1), (t2, q2, _) = self._history
+        if t0 < t1 < t2:
+            v, a = central_differences(self.robot.model, q0, q1, q2, (t1 - t0) * 1e-9,
+                                       (t2 - t1) * 1e-9)
+            state = self.monitor.evaluate(q1, v, a, points1[np.isfinite(points1[:, 0])])
+            self._publish_monitor(t1, state)
+            self._check_stability(t1, state)
+        self._check_inputs(now_ns)
+        if self._last_summary_ns is None:
+            self._last_summary_ns = now_ns
+        elif (now_ns - self._last_summary_ns) * 1e-9 >= self.params.diagnostics_period_s - 1e-9:
+            self._publish_summary(now_ns)
+
+    def _account(self, step) -> None:
+        window = self._window
+        window.ticks += 1
+        saturated = step.actuators.saturated
+        if saturated.any():
+            window.saturated_ticks += 1
+            ratios = step.actuators.demanded_over_limit
+            window.max_ratio = max(window.max_ratio, float(ratios.max()))
+            for k in np.flatnonzero(saturated):
+                name = self.robot.joint_names[k]
+                window.saturated_joints[name] = max(window.saturated_joints.get(name, 0.0),
+                                                    float(ratios[k]))
+        for k in np.flatnonzero(step.actuators.clamped_to_limits):
+            window.clamped_joints.add(self.robot.joint_names[k])
+        window.max_slip_m = max(window.max_slip_m, step.slip_m)
+        window.touch_downs += len(step.touched_down)
+
+    # -- outputs -------------------------------------------------------------------------------
+
+    def _publish_state(self, now_ns: int, q: np.ndarray, velocities: np.ndarray) -> None:
+        stamp = self._stamp(now_ns)
+        joints = self._msg['JointState']()
+        joints.header.stamp = stamp
+        joints.name = list(self.robot.joint_names)
+        joints.position = self.robot.joint_positions(q).tolist()
+        joints.velocity = velocities.tolist()
+        self._joint_states.publish(joints)
+        transform = self._msg['TransformStamped']()
+        transform.header.stamp = stamp
+        transform.header.frame_id = WORLD_FRAME
+        transform.child_frame_id = BASE_FRAME
+        t, r = transform.transform.translation, transform.transform.rotation
+        t.x, t.y, t.z = (float(v) for v in q[:3])
+        r.x, r.y, r.z, r.w = (float(v) for v in q[3:7])
+        tf = self._msg['TFMessage']()
+        tf.transforms = [transform]
+        self._tf.publish(tf)
+
+    def _point(self, stamp, xyz):
+        msg = self._msg['PointStamped']()
+        msg.header.stamp = stamp
+        msg.header.frame_id = WORLD_FRAME
+        msg.point.x, msg.point.y, msg.point.z = (float(v) for v in xyz)
+        return msg
+
+    def _publish_monitor(self, stamp_ns: int, state: ZmpState) -> None:
+        stamp = self._stamp(stamp_ns)
+        if np.all(np.isfinite(state.zmp_in_world)):
+            self._zmp.publish(self._point(stamp, state.zmp_in_world))
+        self._com.publish(self._point(stamp, state.com_in_world))
+        polygon = self.monitor.support_polygon(state.contact_points_in_world)
+        msg = self._msg['PolygonStamped']()
+        msg.header.stamp = stamp
+        msg.header.frame_id = WORLD_FRAME
+        vertices, outline = self._polygon_points(polygon)
+        msg.polygon.points = list(vertices)
+        self._polygon.publish(msg)
+        if self.params.publish_markers:
+            self._markers.publish(self._marker_array(stamp, state, outline))
+
+    def _polygon_points(self, polygon: np.ndarray) -> tuple[list, list]:
+        """Point32 vertices and the closed marker outline, rebuilt only when the hull changes."""
+        z = self.params.ground_height_m
+        key = (polygon.tobytes(), z)
+        if key != self._polygon_key:
+            point32, point = self._msg['Point32'], self._msg['Point']
+            vertices = [point32(x=float(x), y=float(y), z=z) for x, y in polygon]
+            outline = [point(x=float(x), y=float(y), z=z) for x, y in polygon]
+            self._polygon_cache = (vertices, outline + outline[:1])
+            self._polygon_key = key
+        return self._polygon_cache
+
+    def _marker_array(self, stamp, state: ZmpState, outline_points: list):
+        marker_type = self._msg['Marker']
+        markers = []
+        for marker_id, (xyz, rgb, size) in enumerate((
+                (state.zmp_in_world, (1.0, 0.1, 0.1), 0.04),
+                (state.com_in_world, (0.1, 0.8, 0.1), 0.05))):
+            marker = marker_type(type=marker_type.SPHERE, id=marker_id)
+            if not np.all(np.isfinite(xyz)):
+                marker.action = marker_type.DELETE
+            else:
+                marker.pose.position.x, marker.pose.position.y, marker.pose.position.z = (
+                    float(v) for v in xyz)
+            marker.scale.x = marker.scale.y = marker.scale.z = size
+            markers.append((marker, rgb))
+        outline = marker_type(type=marker_type.LINE_STRIP, id=2)
+        outline.scale.x = 0.01
+        outline.points = list(outline_points)
+        markers.append((outline, (0.2, 0.4, 1.0)))
+        array = self._msg['MarkerArray']()
+        for marker, (red, green, blue) in markers:
+            marker.header.stamp = stamp
+            marker.header.frame_id = WORLD_FRAME
+            marker.ns = 'gait'
+            marker.pose.orientation.w = 1.0
+            marker.color.r, marker.color.g, marker.color.b, marker.color.a = red, green, blue, 1.0
+        array.markers = [marker for marker, _ in markers]
+        return array
+
+    # -- diagnostics ---------------------------------------------------------------------------
+
+    def _stability_values(self, stamp_ns: int, state: ZmpState) -> dict:
+        return {'margin_m': state.margin_m, 'sample_stamp_ns': stamp_ns,
+                'zmp_x_m': float(state.zmp_in_world[0]), 'zmp_y_m': float(state.zmp_in_world[1]),
+                'com_x_m': float(state.com_in_world[0]), 'com_y_m': float(state.com_in_world[1]),
+                'com_z_m': float(state.com_in_world[2]),
+                'contacts': len(state.contact_points_in_world),
+                'warn_margin_m': self.params.warn_margin_m}
+
+    def _check_stability(self, stamp_ns: int, state: ZmpState) -> None:
+        margin = state.margin_m
+        level = ERROR if not margin >= 0.0 else WARN if margin < self.params.warn_margin_m \
+            else OK
+        window = self._window
+        window.samples += 1
+        window.samples_outside += level == ERROR
+        window.samples_warn += level == WARN
+        window.min_margin_m = min(window.min_margin_m, margin)
+        if level != self._stability_level:
+            self._stability_level = level
+            self.diagnostics.report('stability', level, self._stability_message(level, state),
+                                    self._stability_values(stamp_ns, state))
+
+    def _stability_message(self, level: int, state: ZmpState) -> str:
+        margin = state.margin_m
+        if level == ERROR:
+            if math.isfinite(margin):
+                return f'ZMP outside the support polygon by {-margin:.4f} m'
+            if not len(state.contact_points_in_world):
+                return 'no foot in contact'
+            return (f'vertical ground force {state.normal_force_n:.1f} N <= 0: the motion '
+                    f'would lift the feet off the ground (ZMP undefined)')
+        if level == WARN:
+            return (f'ZMP {margin:.4f} m inside the support polygon '
+                    f'(< {self.params.warn_margin_m} m)')
+        return f'ZMP {margin:.4f} m inside the support polygon'
+
+    def _input_age_s(self, now_ns: int) -> tuple[float, bool]:
+        since = self._last_command_ns if self._last_command_ns is not None else self._started_ns
+        return (now_ns - since) * 1e-9, self._last_command_ns is None
+
+    def _check_inputs(self, now_ns: int) -> None:
+        age_s, waiting = self._input_age_s(now_ns)
+        stale = age_s > self.params.stale_after_s + 1e-9
+        if stale != self._stale:
+            self._stale = stale
+            self.diagnostics.publish([self._input_status(now_ns)])
+
+    def _input_status(self, now_ns: int):
+        age_s, waiting = self._input_age_s(now_ns)
+        values = {'joint_commands_age_s': age_s, 'stale_after_s': self.params.stale_after_s,
+                  'footstep_plan': 'yes' if self._plan is not None else 'no (contacts by '
+                  'foot height)',
+                  'dropped': ','.join(f'{t}:{n}' for t, n in self.diagnostics.dropped.items())}
+        if self._stale:
+            what = ('no /joint_commands received' if waiting else
+                    'no /joint_commands')
+            return ('inputs', WARN, f'{what} for {age_s:.3g} s: holding the last good command',
+                    values)
+        return ('inputs', OK, 'waiting for /joint_commands' if waiting else
+                'joint commands fresh', values)
+
+    def _publish_summary(self, now_ns: int) -> None:
+        window, self._window = self._window, _Window()
+        self._last_summary_ns = now_ns
+        statuses = []
+        if window.samples:
+            level = ERROR if window.samples_outside else WARN if window.samples_warn else OK
+            statuses.append((
+                'stability summary', level,
+                f'least margin {window.min_margin_m:.4f} m over {window.samples} samples, '
+                f'{window.samples_outside} outside the support polygon',
+                {'min_margin_m': window.min_margin_m, 'samples': window.samples,
+                 'samples_outside': window.samples_outside,
+                 'samples_below_warn': window.samples_warn,
+                 'warn_margin_m': self.params.warn_margin_m}))
+        joints = sorted(window.saturated_joints, key=lambda j: -window.saturated_joints[j])
+        statuses.append((
+            'velocity saturation', WARN if window.saturated_ticks else OK,
+            (f'{window.saturated_ticks} of {window.ticks} ticks saturated, commands up to '
+             f'{window.max_ratio:.3g}x the limit: {", ".join(joints)}')
+            if window.saturated_ticks else 'joint velocities within limits',
+            {'saturated_ticks': window.saturated_ticks, 'ticks': window.ticks,
+             'max_demanded_over_limit': window.max_ratio, 'joints': ','.join(joints),
+             'clamped_to_position_limits': ','.join(sorted(window.clamped_joints))}))
+        statuses.append((
+            'contacts', OK, f'{window.touch_downs} touch-downs, stance feet slip up to '
+            f'{window.max_slip_m:.2e} m',
+            {'touch_downs': window.touch_downs, 'max_slip_m': window.max_slip_m,
+             'contacts': ','.join(n for n, down in zip(self.robot.foot_names,
+                                                       self.simulation.contacts, strict=True)
+                                  if down)}))
+        statuses.append(self._input_status(now_ns))
+        self.diagnostics.publish(statuses)
+
+
+def main(args: list[str] | None = None) -> int:
+    """Entry point: ``python -m gait_nodes.kinematic_simulator [--ros-args ...]``."""
+    return run_node(lambda options: KinematicSimulator(), args,
+                    prog='python -m gait_nodes.kinematic_simulator',
+                    description=__doc__.split('\n\n')[0])
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,345 @@
+"""Kinematic simulation: position-controlled joints and a floating base held by the stance feet.
+
+Every step, :class:`PositionActuators` moves each joint toward its commanded position by at most
+``velocity_limit * dt`` (what a position-controlled servo with a velocity limit does; each joint
+saturates on its own) and keeps it inside its URDF position limits. :class:`KinematicSimulation`
+then places the floating base so that the feet in contact stay where they touched down: the
+base pose ``B`` minimises, over the stance feet ``k``,
+
+    sum_k |B p_k - w_k|^2  (+ weight^2 |log3(W_k^T R_B R_k)|^2 for flat feet)
+
+where ``p_k, R_k`` is the foot frame in the base frame (forward kinematics of the new joints)
+and ``w_k, W_k`` where it was latched at touch-down. Three or more non-collinear stance feet fix
+the whole pose, roll and pitch included, from their positions (Kabsch's closed form; the
+orientation term is then left out); with fewer, flat feet add their orientation term (one flat
+foot fixes the pose) and what the stance still leaves free (the rotation about the line of two
+point feet) keeps its previous value: Gauss-Newton on SE(3) from the previous pose with a tiny
+Levenberg-Marquardt damping, whose steps do not enter the directions the feet leave free.
+
+Which feet are in contact is the caller's choice (the footstep plan's contact schedule); without
+one, a foot is in contact when its contact point is within a tolerance of the ground (a foot in
+the air lands there once it stops descending). A foot that touches down is latched where it
+lands; a foot that lifts off is released.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import pinocchio as pin
+
+from gait_nodes.errors import ParameterError
+from gait_nodes.robot.model import RobotModel
+
+#: Levenberg-Marquardt damping of the base fit's steps: what the feet leave free does not move
+#: (the fixed points, where the gradient vanishes, are not biased by it).
+STEP_DAMPING = 1e-9
+#: Gauss-Newton stops when the update is below this [m or rad].
+BASE_FIT_TOLERANCE = 1e-11
+#: Without a contact schedule, a foot still descending more than this per step [m] has not
+#: landed yet.
+DESCENT_TOLERANCE_M = 1e-7
+#: Feet whose second principal spread is below this fraction of the first are collinear.
+COLLINEAR_TOLERANCE = 1e-6
+BASE_FIT_ITERATIONS = 10
+
+
+def _skew(vectors: np.ndarray) -> np.ndarray:
+    """(N, 3, 3) cross-product matrices of (N, 3) vectors."""
+    x, y, z = vectors[:, 0], vectors[:, 1], vectors[:, 2]
+    zero = np.zeros_like(x)
+    return np.stack([np.stack([zero, -z, y], -1), np.stack([z, zero, -x], -1),
+                     np.stack([-y, x, zero], -1)], -2)
+
+
+@dataclass(frozen=True)
+class ActuatorStep:
+    """One step of the position-controlled joints.
+
+    Attributes:
+        positions_rad: (J,) joint positions after the step [rad or m].
+        velocities_rad_s: (J,) mean joint velocities over the step [rad/s or m/s].
+        demanded_over_limit: (J,) commanded displacement over the displacement the velocity
+            limit allows in the step; above 1 the joint saturated.
+        clamped_to_limits: (J,) booleans: the command was beyond the joint's position limits.
+    """
+
+    positions_rad: np.ndarray
+    velocities_rad_s: np.ndarray
+    demanded_over_limit: np.ndarray
+    clamped_to_limits: np.ndarray
+
+    @property
+    def saturated(self) -> np.ndarray:
+        """(J,) booleans: the joint moved at its velocity limit and still lags its command."""
+        return self.demanded_over_limit > 1.0 + 1e-9
+
+
+class PositionActuators:
+    """Position-controlled joints with velocity limits (one per joint of the robot).
+
+    Args:
+        robot: The robot (joint order, position limits, velocity limits).
+    """
+
+    def __init__(self, robot: RobotModel):
+        self.robot = robot
+        model = robot.model
+        self.continuous = np.array([model.joints[model.getJointId(name)].nq == 2
+                                    for name in robot.joint_names])
+        self.lower = np.array(robot.lower_limits)
+        self.upper = np.array(robot.upper_limits)
+        self.velocity_limits_rad_s = np.array(robot.velocity_limits_rad_s)
+
+    def step(self, positions_rad: np.ndarray, commanded_rad: np.ndarray,
+             dt_s: float) -> ActuatorStep:
+        """Move ``positions_rad`` toward ``commanded_rad`` for ``dt_s`` [s].
+
+        Commands beyond a joint's position limits are clamped to them; continuous joints turn
+        the short way round.
+        """
+        if not dt_s > 0.0:
+            raise ParameterError(f'dt_s must be > 0 s, got {dt_s!r}')
+        target = np.minimum(np.maximum(commanded_rad, self.lower), self.upper)
+        clamped = np.abs(target - commanded_rad) > 1e-12
+        delta = target - positions_rad
+        if self.continuous.any():
+            wrapped = (delta + math.pi) % (2.0 * math.pi) - math.pi
+            delta = np.where(self.continuous, wrapped, delta)
+        allowed = self.velocity_limits_rad_s * dt_s
+        ratio = np.abs(delta) / allowed
+        moved = np.minimum(np.maximum(delta, -allowed), allowed)
+        positions = np.minimum(np.maximum(positions_rad + moved, self.lower), self.upper)
+        velocities = (positions - positions_rad) / dt_s
+        return ActuatorStep(positions, velocities, ratio, clamped)
+
+
+def kabsch(points_in_base: np.ndarray, points_in_world: np.ndarray) -> pin.SE3 | None:
+    """Rigid transform ``B`` minimising ``sum_k |B p_k - w_k|^2`` (Kabsch), or None.
+
+    None when the points do not fix the rotation (fewer than three, or collinear).
+    """
+    count = len(points_in_base)
+    if count < 3:
+        return None
+    centre_base = points_in_base.sum(axis=0) / count
+    centre_world = points_in_world.sum(axis=0) / count
+    u, singular, vt = np.linalg.svd((points_in_base - centre_base).T
+                                    @ (points_in_world - centre_world))
+    if singular[1] <= COLLINEAR_TOLERANCE * max(singular[0], 1e-300):
+        return None
+    # Kabsch: R = V diag(1, 1, d) U^T with d = det(V U^T) = +-1 (no reflection).
+    rotation = vt.T @ u.T
+    if _det3(rotation) < 0.0:
+        rotation = vt.T @ (u * [1.0, 1.0, -1.0]).T
+    return pin.SE3(rotation, centre_world - rotation @ centre_base)
+
+
+def _det3(m: np.ndarray) -> float:
+    (a, b, c), (d, e, f), (g, h, i) = m.tolist()
+    return a * (e * i - f * h) - b * (d * i - f * g) + c * (d * h - e * g)
+
+
+def fit_base_pose(base_guess: pin.SE3, feet_in_base: list[pin.SE3], feet_in_world: list[pin.SE3],
+                  rotation_weight_m: float = 0.0) -> pin.SE3:
+    """Base pose that best puts the foot frames ``feet_in_base`` on ``feet_in_world``.
+
+    Three or more non-collinear feet fix the pose from their positions alone: least squares in
+    closed form (:func:`kabsch`). Fewer feet: least squares over the positions and, for flat
+    feet (``rotation_weight_m`` [m/rad] > 0), the sole orientations; damped Gauss-Newton on
+    SE(3) from ``base_guess``, which keeps what the feet leave free (the rotation about the line
+    of two point feet) at its value in ``base_guess``.
+
+    Args:
+        base_guess: The previous base pose.
+        feet_in_base: Foot frames in the base frame (forward kinematics).
+        feet_in_world: Where each of those feet must be in the world.
+        rotation_weight_m: Length that turns a sole orientation error [rad] into a residual
+            [m]; 0 for point feet.
+
+    Returns:
+        The base pose in the world.
+    """
+    count = len(feet_in_base)
+    p = np.array([f.translation for f in feet_in_base]).reshape(count, 3)
+    w = np.array([f.translation for f in feet_in_world]).reshape(count, 3)
+    closed_form = kabsch(p, w)
+    if closed_form is not None:
+        return closed_form
+    skews = _skew(p)
+    pose = pin.SE3(base_guess)
+    for _ in range(BASE_FIT_ITERATIONS):
+        rotation, translation = pose.rotation, pose.translation
+        residuals = [(p @ rotation.T + translation - w).ravel()]
+        position_jacobian = np.zeros((count, 3, 6))
+        position_jacobian[:, :, :3] = rotation
+        position_jacobian[:, :, 3:] = -np.einsum('ij,njk->nik', rotation, skews)
+        jacobians = [position_jacobian.reshape(-1, 6)]
+        if rotation_weight_m > 0.0:
+            for foot_base, foot_world in zip(feet_in_base, feet_in_world, strict=True):
+                error = foot_world.rotation.T @ rotation @ foot_base.rotation
+                block = np.zeros((3, 6))
+                block[:, 3:] = rotation_weight_m * pin.Jlog3(error) @ foot_base.rotation.T
+                residuals.append(rotation_weight_m * pin.log3(error))
+                jacobians.append(block)
+        r = np.concatenate(residuals)
+        jacobian = np.vstack(jacobians)
+        step = -np.linalg.solve(jacobian.T @ jacobian + STEP_DAMPING * np.eye(6),
+                                jacobian.T @ r)
+        pose = pose * pin.exp6(step)
+        if np.max(np.abs(step)) < BASE_FIT_TOLERANCE:
+            break
+    return pose
+
+
+@dataclass(frozen=True)
+class SimulationSettings:
+    """Settings of :class:`KinematicSimulation`.
+
+    Attributes:
+        ground_height_m: Height of the ground plane in the world [m].
+        contact_height_tolerance_m: Without a contact schedule, a foot whose contact point is
+            at most this far above the ground is in contact [m].
+        rotation_weight_m: Orientation weight of flat feet in the base fit [m/rad] (0: feet
+            are points even on a robot whose IK holds the soles' orientation).
+    """
+
+    ground_height_m: float = 0.0
+    contact_height_tolerance_m: float = 0.005
+    rotation_weight_m: float = 0.1
+
+    def __post_init__(self):
+        checks = (('ground_height_m', -10.0, 10.0), ('contact_height_tolerance_m', 0.0, 0.5),
+                  ('rotation_weight_m', 0.0, 10.0))
+        for name, low, high in checks:
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, float)) \
+                    or not math.isfinite(value) or not low <= value <= high:
+                raise ParameterError(f'{name} must be a number in [{low}, {high}], got '
+                                     f'{value!r}')
+
+
+@dataclass(frozen=True)
+class SimulationStep:
+    """What one step of :class:`KinematicSimulation` produced.
+
+    Attributes:
+        q: Pinocchio configuration after the step (base pose and joints).
+        actuators: The joint step (velocities, saturation, clamping).
+        contacts: (F,) booleans: feet in contact after the step.
+        contact_points_in_world: (F, 3) contact points; NaN for feet in the air [m].
+        slip_m: Largest distance of a stance foot frame from where it was latched, after the
+            base fit (non-zero only when the commands cannot keep every stance foot still).
+        touched_down: Names of the feet latched at this step.
+    """
+
+    q: np.ndarray
+    actuators: ActuatorStep
+    contacts: np.ndarray
+    contact_points_in_world: np.ndarray
+    slip_m: float
+    touched_down: tuple[str, ...]
+
+
+class KinematicSimulation:
+    """Joints integrated as position-controlled actuators; the base held by the stance feet.
+
+    Args:
+        robot: The robot.
+        q_initial: Starting configuration; every foot starts in contact, latched where it is.
+        settings: Ground, contact tolerance and orientation weight.
+    """
+
+    def __init__(self, robot: RobotModel, q_initial: np.ndarray,
+                 settings: SimulationSettings | None = None):
+        self.robot = robot
+        self.settings = settings or SimulationSettings()
+        self.actuators = PositionActuators(robot)
+        self._data = robot.new_data()
+        self._flat_feet = robot.foot_orientation == 'yaw'
+        self.q = np.array(q_initial, dtype=float)
+        self.joints = robot.joint_positions(self.q)
+        self.base = pin.XYZQUATToSE3(self.q[:7])
+        feet = self._feet_in_base(self.joints)
+        self.latched: list[pin.SE3 | None] = [self.base * foot for foot in feet]
+        self._heights: np.ndarray | None = None
+
+    @property
+    def contacts(self) -> np.ndarray:
+        """(F,) booleans: feet latched on the ground."""
+        return np.array([foot is not None for foot in self.latched])
+
+    def _feet_in_base(self, joints: np.ndarray) -> list[pin.SE3]:
+        q = self.q.copy()
+        q[:7] = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0)
+        self.robot.set_joint_positions(q, joints)
+        model, data = self.robot.model, self._data
+        pin.forwardKinematics(model, data, q)
+        return [pin.updateFramePlacement(model, data, f).copy()
+                for f in self.robot.foot_frame_ids]
+
+    def _contacts_by_height(self, feet: list[pin.SE3]) -> np.ndarray:
+        """Contacts without a schedule, from the foot heights.
+
+        A stance foot stays down while within the tolerance of the ground; a foot in the air
+        touches down once within it and no longer descending.
+        """
+        heights = np.array([(self.base * foot).translation[2] for foot in feet]) \
+            - self.robot.foot_frame_height_m - self.settings.ground_height_m
+        near = heights <= self.settings.contact_height_tolerance_m
+        previous = self._heights if self._heights is not None else heights
+        settled = heights >= previous - DESCENT_TOLERANCE_M
+        self._heights = heights
+        return near & (self.contacts | settled)
+
+    def contact_points(self) -> np.ndarray:
+        """(F, 3) contact points of the latched feet; NaN rows for feet in the air [m]."""
+        points = np.full((len(self.latched), 3), np.nan)
+        for k, foot in enumerate(self.latched):
+            if foot is not None:
+                points[k] = foot.translation
+                points[k, 2] -= self.robot.foot_frame_height_m
+        return points
+
+    def step(self, commanded_joints: np.ndarray, dt_s: float,
+             contacts: np.ndarray | None = None) -> SimulationStep:
+        """Advance by ``dt_s`` [s] toward ``commanded_joints`` (joint vector).
+
+        Args:
+            commanded_joints: (J,) commanded joint positions, in :attr:`RobotModel.joint_names`
+                order [rad or m].
+            dt_s: Step [s].
+            contacts: (F,) booleans from a contact schedule, or None to decide by foot height.
+        """
+        actuators = self.actuators.step(self.joints, commanded_joints, dt_s)
+        feet = self._feet_in_base(actuators.positions_rad)
+        if contacts is None:
+            contacts = self._contacts_by_height(feet)
+        contacts = np.asarray(contacts, dtype=bool)
+        kept = [k for k, down in enumerate(contacts) if down and self.latched[k] is not None]
+        base = self.base
+        slip = 0.0
+        if kept:
+            base = fit_base_pose(self.base, [feet[k] for k in kept],
+                                 [self.latched[k] for k in kept],
+                                 self.settings.rotation_weight_m if self._flat_feet else 0.0)
+            placed = np.array([(base * feet[k]).translation - self.latched[k].translation
+                               for k in kept])
+            slip = float(np.sqrt((placed * placed).sum(axis=1).max()))
+        touched = []
+        for k, down in enumerate(contacts):
+            if not down:
+                self.latched[k] = None
+            elif self.latched[k] is None:
+                self.latched[k] = base * feet[k]
+                touched.append(self.robot.foot_names[k])
+        self.base = base
+        self.joints = actuators.positions_rad
+        q = self.q.copy()
+        q[:7] = pin.SE3ToXYZQUAT(base)
+        self.robot.set_joint_positions(q, self.joints)
+        self.q = q
+        return SimulationStep(q.copy(), actuators, contacts.copy(), self.contact_points(), slip,
+                              tuple(touched))

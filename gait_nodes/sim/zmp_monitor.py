@@ -1,0 +1,161 @@
+"""Full-model ZMP monitor: COM, multi-body ZMP, support polygon and signed stability margin.
+
+The ZMP comes from the rate of change of the robot's momentum (Pinocchio's centroidal dynamics,
+every body with its mass and rotational inertia). With ``h_G = (m c_dot, L_G)`` the momentum at
+the COM ``c`` and ``dh_G`` its time derivative, the ground must supply the force and the moment
+about a point ``O`` of the ground plane (height ``z0``)
+
+    f = m (c_ddot - g),        tau_O = dL_G + (c - O) x f,
+
+and the ZMP is the point of the plane about which the horizontal moment vanishes:
+
+    p_x = O_x - tau_O_y / f_z,        p_y = O_y + tau_O_x / f_z.
+
+This is Kurazume, Hasegawa and Yoneda's multi-mass ZMP (eqs. 26-27) with the rotational terms
+of every body: for point masses ``dL_G + c x f`` reduces to their sum of ``m_i r_i x (r_i_ddot -
+g)``. For a static robot it is the COM's ground projection; for a single point mass it is the
+cart-table ZMP ``c - (c_z - z0) / g c_ddot``.
+
+The support polygon is the convex hull of discs of the robot's foot radius around the contact
+points (:func:`gait_nodes.geometry.foot_discs_polygon` for drawing it); the stability margin is
+the exact signed distance of the ZMP to it (as :func:`gait_nodes.geometry.disc_support_margin`:
+the distance to the hull of the contact centres plus the radius; the hulls are kept while the
+contacts do not change), positive inside. Velocities and accelerations come from the integrated
+configurations by central differences on the configuration manifold
+(:func:`central_differences`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pinocchio as pin
+
+from gait_nodes.geometry import convex_hull, foot_discs_polygon, signed_distance
+
+STANDARD_GRAVITY_M_S2 = 9.80665
+#: Vertices per foot disc in the published support polygon: the drawn polygon circumscribes
+#: the discs, so a margin read off it (as ``inspect`` does) exceeds the exact one by at most
+#: ``r (1 / cos(pi / 64) - 1)`` = 0.07 mm for a 0.055 m foot.
+POLYGON_SEGMENTS_PER_FOOT = 64
+#: Below this vertical ground force [N] the ZMP is undefined (the robot is falling freely).
+MIN_NORMAL_FORCE_N = 1e-6
+
+
+def central_differences(model: pin.Model, q_before: np.ndarray, q: np.ndarray,
+                        q_after: np.ndarray, dt_before_s: float,
+                        dt_after_s: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Velocity and acceleration at ``q`` from the configurations before and after it.
+
+    ``q_before`` is ``dt_before_s`` [s] earlier, ``q_after`` ``dt_after_s`` [s] (default the
+    same) later.
+    With ``d1 = q (-) q_before`` and ``d2 = q_after (-) q`` (``pin.difference``: the free-flyer
+    part in the base frame, as Pinocchio's ``v`` is) and steps ``h1``, ``h2``:
+    ``v = (d1 h2 / h1 + d2 h1 / h2) / (h1 + h2)``, ``a = 2 (d2 / h2 - d1 / h1) / (h1 + h2)``,
+    second-order accurate, exact for joint motions of constant acceleration.
+    """
+    h1 = float(dt_before_s)
+    h2 = h1 if dt_after_s is None else float(dt_after_s)
+    d1 = pin.difference(model, q_before, q)
+    d2 = pin.difference(model, q, q_after)
+    v = (d1 * (h2 / h1) + d2 * (h1 / h2)) / (h1 + h2)
+    a = 2.0 * (d2 / h2 - d1 / h1) / (h1 + h2)
+    return v, a
+
+
+@dataclass(frozen=True)
+class ZmpState:
+    """The monitor's view of one instant.
+
+    Attributes:
+        com_in_world: (3,) centre of mass of the full model [m].
+        zmp_in_world: (3,) ZMP on the ground plane (z = ground height) [m]; NaN without
+            ground force.
+        normal_force_n: Vertical ground force ``m (c_ddot_z + g)`` [N].
+        margin_m: Signed stability margin of the ZMP in the support polygon [m] (positive
+            inside); -inf without contacts or ground force.
+        contact_points_in_world: (C, 3) contact points of the feet in contact [m].
+    """
+
+    com_in_world: np.ndarray
+    zmp_in_world: np.ndarray
+    normal_force_n: float
+    margin_m: float
+    contact_points_in_world: np.ndarray
+
+    @property
+    def inside(self) -> bool:
+        """Whether the ZMP is inside the support polygon (margin >= 0)."""
+        return self.margin_m >= 0.0
+
+
+class ZmpMonitor:
+    """Multi-body ZMP, COM and stability margin of one robot model.
+
+    Args:
+        model: Pinocchio model with a free-flyer root.
+        foot_radius_m: Radius of each foot's contact disc [m].
+        ground_height_m: Height of the ground plane [m].
+        gravity_m_s2: Gravity acceleration magnitude [m/s^2] (along -z).
+    """
+
+    def __init__(self, model: pin.Model, foot_radius_m: float, ground_height_m: float = 0.0,
+                 gravity_m_s2: float = STANDARD_GRAVITY_M_S2):
+        self.model = model
+        self.data = model.createData()
+        self.mass_kg = float(pin.computeTotalMass(model))
+        self.foot_radius_m = float(foot_radius_m)
+        self.ground_height_m = float(ground_height_m)
+        self.gravity = np.array([0.0, 0.0, -gravity_m_s2])
+        self._hull_key = None
+        self._hull_cache = (np.zeros((0, 2)), np.zeros((0, 2)))
+
+    def com_and_zmp(self, q: np.ndarray, v: np.ndarray, a: np.ndarray
+                    ) -> tuple[np.ndarray, np.ndarray, float]:
+        """COM (3,) [m], ZMP (3,) on the ground plane [m] and vertical ground force [N]."""
+        data = self.data
+        pin.computeCentroidalMomentumTimeVariation(self.model, data, q, v, a)
+        com = data.com[0].copy()
+        fx, fy, fz = data.dhg.linear - self.mass_kg * self.gravity
+        lx, ly, _ = data.dhg.angular
+        cx, cy, cz = com[0], com[1], com[2] - self.ground_height_m
+        # tau_O = dL_G + (c - O) x f, x and y components (np.cross costs more than the dynamics).
+        tau_x = lx + cy * fz - cz * fy
+        tau_y = ly + cz * fx - cx * fz
+        if fz <= MIN_NORMAL_FORCE_N:
+            return com, np.full(3, np.nan), float(fz)
+        return com, np.array([-tau_y / fz, tau_x / fz, self.ground_height_m]), float(fz)
+
+    def _hulls(self, contact_points_in_world: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        points = np.asarray(contact_points_in_world, dtype=float).reshape(-1, 3)
+        key = points[:, :2].tobytes()
+        if key != self._hull_key:
+            if len(points) == 0:
+                self._hull_cache = (np.zeros((0, 2)), np.zeros((0, 2)))
+            else:
+                self._hull_cache = (convex_hull(points[:, :2]),
+                                    foot_discs_polygon(points[:, :2], self.foot_radius_m,
+                                                       POLYGON_SEGMENTS_PER_FOOT))
+            self._hull_key = key
+        return self._hull_cache
+
+    def support_polygon(self, contact_points_in_world: np.ndarray) -> np.ndarray:
+        """(M, 2) hull of the contact discs, CCW (empty without contacts) [m]."""
+        return self._hulls(contact_points_in_world)[1]
+
+    def margin(self, zmp_in_world: np.ndarray, contact_points_in_world: np.ndarray) -> float:
+        """Exact signed margin [m] of the ZMP in the hull of the contact discs."""
+        centres_hull = self._hulls(contact_points_in_world)[0]
+        if len(centres_hull) == 0 or not np.all(np.isfinite(zmp_in_world[:2])):
+            return -np.inf
+        # geometry.disc_support_margin, with the centres' hull kept between calls.
+        return float(signed_distance(np.asarray(zmp_in_world)[None, :2], centres_hull)[0]
+                     + self.foot_radius_m)
+
+    def evaluate(self, q: np.ndarray, v: np.ndarray, a: np.ndarray,
+                 contact_points_in_world: np.ndarray) -> ZmpState:
+        """COM, ZMP and margin at ``(q, v, a)`` with the feet at ``contact_points_in_world``."""
+        points = np.asarray(contact_points_in_world, dtype=float).reshape(-1, 3)
+        com, zmp, fz = self.com_and_zmp(q, v, a)
+        return ZmpState(com, zmp, fz, self.margin(zmp, points), points)

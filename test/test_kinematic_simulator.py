@@ -1,0 +1,549 @@
+"""Kinematic simulator: actuators, base on the stance feet, the node alone and in the gait graph.
+
+The graph tests check the published motion from outside, as a user with the bag would: foot
+positions by a fresh forward kinematics of /joint_states and /tf, the ZMP and COM recomputed body
+by body from finite differences of those configurations.
+"""
+
+import math
+
+import numpy as np
+import pinocchio as pin
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from test_zmp_monitor import body_by_body_zmp
+
+from gait_nodes import graph, runtime
+from gait_nodes.contract import FootstepPlan, footsteps_from_msg, footsteps_to_msg
+from gait_nodes.diagnostics import ERROR, OK, WARN, level_value
+from gait_nodes.geometry import disc_support_margin, signed_distance
+from gait_nodes.interfaces import get_message
+from gait_nodes.robot.model import load_robot_model
+from gait_nodes.robot.whole_body_ik import (
+    IkTargets,
+    WholeBodyIkSolver,
+    nominal_configuration,
+)
+from gait_nodes.runtime import Parameter, qos_profile_latched
+from gait_nodes.sim.kinematics import (
+    KinematicSimulation,
+    PositionActuators,
+    fit_base_pose,
+    kabsch,
+)
+from gait_nodes.sim.zmp_monitor import POLYGON_SEGMENTS_PER_FOOT
+
+NS = 1_000_000_000
+#: How far the drawn polygon's edges lie outside the foot circles, per metre of radius.
+CIRCUMSCRIBED = 1 / math.cos(math.pi / POLYGON_SEGMENTS_PER_FOOT) - 1
+
+
+@pytest.fixture(scope='module')
+def robot():
+    return load_robot_model('robosimian')
+
+
+@pytest.fixture(scope='module')
+def q_nominal(robot):
+    return nominal_configuration(robot)
+
+
+# -- core: actuators -------------------------------------------------------------------------
+
+
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 2**31), spread=st.floats(0.0, 4.0), dt=st.floats(1e-4, 0.05))
+def test_actuators_respect_velocity_and_position_limits(robot, q_nominal, seed, spread, dt):
+    rng = np.random.default_rng(seed)
+    actuators = PositionActuators(robot)
+    current = robot.joint_positions(q_nominal)
+    command = current + rng.uniform(-spread, spread, len(current))
+    step = actuators.step(current, command, dt)
+    limits = robot.velocity_limits_rad_s
+    assert np.all(np.abs(step.velocities_rad_s) <= limits * (1 + 1e-12))
+    np.testing.assert_allclose(step.positions_rad - current, step.velocities_rad_s * dt,
+                               atol=1e-15)
+    assert np.all(robot.within_limits(step.positions_rad))
+    target = np.clip(command, robot.lower_limits, robot.upper_limits)
+    reachable = np.abs(target - current) <= limits * dt
+    np.testing.assert_allclose(step.positions_rad[reachable], target[reachable], atol=1e-15)
+    # A joint that could not reach its command moved at exactly its limit, toward it.
+    lagging = ~reachable
+    np.testing.assert_allclose(np.abs(step.velocities_rad_s[lagging]), limits[lagging],
+                               rtol=1e-12)
+    assert np.all(np.sign(step.velocities_rad_s[lagging])
+                  == np.sign(target - current)[lagging])
+    np.testing.assert_array_equal(step.saturated, ~reachable & (
+        np.abs(target - current) > limits * dt * (1 + 1e-9)))
+    np.testing.assert_array_equal(step.clamped_to_limits, target != command)
+
+
+# -- core: the base on the stance feet -------------------------------------------------------
+
+
+def feet_in_base(robot, q):
+    q = q.copy()
+    q[:7] = [0, 0, 0, 0, 0, 0, 1]
+    data = robot.new_data()
+    pin.framesForwardKinematics(robot.model, data, q)
+    return [data.oMf[f].copy() for f in robot.foot_frame_ids]
+
+
+@pytest.mark.parametrize('seed', range(6))
+@pytest.mark.parametrize('stance', [(0, 1, 2, 3), (0, 1, 3), (1, 2), (2,)])
+def test_base_fit_recovers_the_pose_that_holds_the_feet(robot, q_nominal, seed, stance):
+    rng = np.random.default_rng(seed)
+    truth = pin.SE3(pin.rpy.rpyToMatrix(*rng.uniform(-0.3, 0.3, 3)),
+                    rng.uniform(-1, 1, 3) + [0, 0, 0.6])
+    in_base = [feet_in_base(robot, q_nominal)[k] for k in stance]
+    in_world = [truth * f for f in in_base]
+    guess = truth * pin.exp6(rng.normal(0, 0.02, 6))
+    # Flat feet (robosimian holds its soles): one or two feet fix the pose with orientations.
+    fitted = fit_base_pose(guess, in_base, in_world, rotation_weight_m=0.1)
+    np.testing.assert_allclose(fitted.homogeneous, truth.homogeneous, atol=1e-9)
+    if len(stance) >= 3:
+        assert kabsch(np.array([f.translation for f in in_base]),
+                      np.array([f.translation for f in in_world])) is not None
+
+
+def test_two_point_feet_keep_the_free_rotation_of_the_previous_pose(robot, q_nominal):
+    truth = pin.SE3(pin.rpy.rpyToMatrix(0.05, -0.02, 0.3), np.array([0.2, -0.1, 0.65]))
+    in_base = [feet_in_base(robot, q_nominal)[k] for k in (1, 2)]
+    in_world = [truth * f for f in in_base]
+    fitted = fit_base_pose(truth, in_base, in_world, rotation_weight_m=0.0)
+    np.testing.assert_allclose(fitted.homogeneous, truth.homogeneous, atol=1e-9)
+    # From a guess off the truth, the feet are met exactly whatever the rotation they leave.
+    guess = truth * pin.exp6(np.array([0.01, 0.0, 0.0, 0.02, -0.03, 0.01]))
+    fitted = fit_base_pose(guess, in_base, in_world, rotation_weight_m=0.0)
+    for base_foot, world_foot in zip(in_base, in_world, strict=True):
+        np.testing.assert_allclose((fitted * base_foot).translation, world_foot.translation,
+                                   atol=1e-8)
+
+
+def test_a_swing_foot_without_plan_is_released_and_latched_where_it_lands(robot, q_nominal):
+    """Contacts by foot height: lift the front-left foot 5 cm, move it 10 cm forward, lower it."""
+    solver = WholeBodyIkSolver(robot)
+    feet0, yaws0 = robot.foot_poses(q_nominal)
+    com0 = robot.com(q_nominal)
+    simulation = KinematicSimulation(robot, q_nominal)
+    q_ik = q_nominal.copy()
+    dt = 0.005
+    lifted = landed = None
+    for k in range(1, 601):
+        t = k * dt
+        feet = feet0.copy()
+        s = min(max((t - 0.5) / 1.5, 0.0), 1.0)
+        feet[0] += [0.1 * s, 0.0, 0.05 * math.sin(math.pi * s)]
+        targets = IkTargets(feet, yaws0, 0.0, com_in_world=com0 + [0.0, -0.08, 0.0])
+        q_ik = solver.solve(targets, q_ik).q
+        step = simulation.step(robot.joint_positions(q_ik), dt)
+        if lifted is None and not step.contacts[0]:
+            lifted = t
+        if lifted is not None and landed is None and step.contacts[0]:
+            landed = t
+        # Stance feet never move.
+        for f in np.flatnonzero(step.contacts[1:]) + 1:
+            np.testing.assert_allclose(step.contact_points_in_world[f], feet0[f], atol=1e-7)
+    assert lifted is not None and landed is not None and lifted < landed
+    np.testing.assert_allclose(simulation.contact_points()[0], feet0[0] + [0.1, 0.0, 0.0],
+                               atol=1e-6)
+
+
+# -- the node in the gait graph --------------------------------------------------------------
+
+
+class VelocityCommand(runtime.Node):
+    """Publishes a constant /cmd_vel twice a second."""
+
+    def __init__(self, vx_m_s):
+        super().__init__('velocity_command')
+        self.vx = vx_m_s
+        self.publisher = self.create_publisher(get_message('geometry_msgs/msg/Twist'),
+                                               '/cmd_vel', 10)
+        self.create_timer(0.5, self.tick)
+
+    def tick(self):
+        """Publish the twist."""
+        msg = get_message('geometry_msgs/msg/Twist')()
+        msg.linear.x = self.vx
+        self.publisher.publish(msg)
+
+
+class Collector(runtime.Node):
+    """Keeps the simulator's outputs (and the footstep plans) with their reception times."""
+
+    TOPICS = ('/joint_states', '/tf', '/gait/zmp', '/gait/com', '/gait/support_polygon',
+              '/diagnostics', '/clock', '/gait/markers')
+
+    def __init__(self):
+        super().__init__('collector', use_global_arguments=False)
+        self.messages = {topic: [] for topic in self.TOPICS}
+        for topic in self.TOPICS:
+            type_name = graph.TOPICS.get(topic, 'visualization_msgs/msg/MarkerArray')
+            self.create_subscription(get_message(type_name), topic,
+                                     self.messages[topic].append, 1000)
+        self.plans = []
+        self.create_subscription(get_message('trajectory_msgs/msg/MultiDOFJointTrajectory'),
+                                 '/gait/footsteps', self.on_plan, qos_profile_latched)
+
+    def on_plan(self, msg):
+        """Keep the plan with the time it arrived."""
+        self.plans.append((self.get_clock().now().nanoseconds, footsteps_from_msg(msg)))
+
+    def statuses(self, aspect=None):
+        """(stamp [ns], status) of the simulator's diagnostics, for one aspect or all."""
+        return [(stamp_ns(array), status) for array in self.messages['/diagnostics']
+                for status in array.status
+                if status.name.startswith('kinematic_simulator: ')
+                and (aspect is None or status.name == f'kinematic_simulator: {aspect}')]
+
+
+def stamp_ns(msg) -> int:
+    return msg.header.stamp.sec * NS + msg.header.stamp.nanosec
+
+
+def values_of(status) -> dict:
+    return {item.key: item.value for item in status.values}
+
+
+def configurations(robot, collector):
+    """(stamps [ns], q) rebuilt from /joint_states and /tf (matched by stamp)."""
+    bases = {}
+    for msg in collector.messages['/tf']:
+        for transform in msg.transforms:
+            t, r = transform.transform.translation, transform.transform.rotation
+            bases[stamp_ns(transform)] = [t.x, t.y, t.z, r.x, r.y, r.z, r.w]
+    stamps, qs = [], []
+    for msg in collector.messages['/joint_states']:
+        stamp = stamp_ns(msg)
+        q = pin.neutral(robot.model)
+        q[:7] = bases[stamp]
+        joints = np.zeros(len(robot.joint_names))
+        joints[robot.indices(list(msg.name))] = msg.position
+        robot.set_joint_positions(q, joints)
+        stamps.append(stamp)
+        qs.append(q)
+    return np.array(stamps), qs
+
+
+@pytest.fixture(scope='module')
+def crawl():
+    """Five contract nodes (those installed) crawling at 0.03 m/s for 9 s of simulated time."""
+    runtime.init(args=[], runtime='inproc', signal_handlers=False)
+    try:
+        executor = runtime.SingleThreadedExecutor()
+        nodes = {name: graph.load_class(graph.NODES[name])()
+                 for name in graph.available_nodes()}
+        collector = Collector()
+        for node in [*nodes.values(), VelocityCommand(0.03), collector]:
+            executor.add_node(node)
+        executor.spin_for(9.0)
+        yield nodes['kinematic_simulator'], collector
+    finally:
+        runtime.shutdown()
+
+
+def test_crawl_moves_the_robot_forward(crawl):
+    simulator, collector = crawl
+    assert simulator.robot.name == 'robosimian'
+    stamps, qs = configurations(simulator.robot, collector)
+    assert len(stamps) == 9 * 200
+    assert np.all(np.diff(stamps) == NS // 200)
+    assert qs[-1][0] - qs[0][0] > 0.05
+    plans = [plan for _, plan in collector.plans]
+    assert any(plan.swings() for plan in plans)
+
+
+def stance(robot, collector, stamps):
+    """(N, F) booleans: feet in contact per the footstep plan the simulator had at each stamp."""
+    plan_times = np.array([t for t, _ in collector.plans])
+    in_contact = np.zeros((len(stamps), len(robot.foot_names)), dtype=bool)
+    for i, stamp in enumerate(stamps):
+        plan = collector.plans[int(np.searchsorted(plan_times, stamp, side='right')) - 1][1]
+        order = [plan.foot_names.index(n) for n in robot.foot_names]
+        in_contact[i] = plan.contacts_at((stamp - plan.start_ns) * 1e-9)[order]
+    return in_contact
+
+
+def test_stance_feet_do_not_slip(crawl):
+    simulator, collector = crawl
+    robot = simulator.robot
+    stamps, qs = configurations(robot, collector)
+    data = robot.new_data()
+    feet = np.array([robot.foot_poses(q, data)[0] for q in qs])  # (N, F, 3)
+    in_contact = stance(robot, collector, stamps)
+    swings = 0
+    for f in range(len(robot.foot_names)):
+        # Each maximal run of stance samples: the foot stays where it was at the run's start.
+        edges = np.flatnonzero(np.diff(np.r_[0, in_contact[:, f].astype(int), 0]))
+        for start, end in zip(edges[::2], edges[1::2], strict=True):
+            drift = np.linalg.norm(feet[start:end, f] - feet[start, f], axis=1).max()
+            assert drift < 1e-4, (robot.foot_names[f], start, end, drift)
+        swings += int(np.sum(~in_contact[:, f][1:] & in_contact[:, f][:-1]))
+    assert swings >= 3
+
+
+def test_joint_velocities_never_exceed_the_limits(crawl):
+    simulator, collector = crawl
+    robot = simulator.robot
+    limits = robot.velocity_limits_rad_s
+    previous = None
+    for msg in collector.messages['/joint_states']:
+        assert list(msg.name) == list(robot.joint_names)
+        velocities = np.array(msg.velocity)
+        assert np.all(np.abs(velocities) <= limits * (1 + 1e-9))
+        positions = np.array(msg.position)
+        if previous is not None:
+            dt = (stamp_ns(msg) - stamp_ns(previous)) * 1e-9
+            moved = np.abs(positions - np.array(previous.position)) / dt
+            assert np.all(moved <= limits * (1 + 1e-9))
+            np.testing.assert_allclose(moved, np.abs(velocities), atol=1e-9)
+        previous = msg
+
+
+def test_independent_zmp_and_com_from_joint_states_and_tf_agree_within_1mm(crawl):
+    simulator, collector = crawl
+    robot = simulator.robot
+    stamps, qs = configurations(robot, collector)
+    zmp = {stamp_ns(m): (m.point.x, m.point.y) for m in collector.messages['/gait/zmp']}
+    com = {stamp_ns(m): (m.point.x, m.point.y, m.point.z) for m in collector.messages['/gait/com']}
+    checked = 0
+    worst_zmp = worst_com = 0.0
+    for i in range(1, len(qs) - 1):
+        dt = (stamps[i] - stamps[i - 1]) * 1e-9
+        # Central differences on the configuration manifold, written out here.
+        d1 = pin.difference(robot.model, qs[i - 1], qs[i])
+        d2 = pin.difference(robot.model, qs[i], qs[i + 1])
+        v, a = (d1 + d2) / (2 * dt), (d2 - d1) / dt**2
+        expected_zmp, expected_com, force = body_by_body_zmp(robot.model, qs[i], v, a)
+        if stamps[i] not in zmp:  # no ZMP without ground force (reported as an ERROR)
+            assert force <= 1e-6
+            continue
+        worst_zmp = max(worst_zmp, float(np.linalg.norm(np.array(zmp[stamps[i]])
+                                                        - expected_zmp)))
+        worst_com = max(worst_com, float(np.linalg.norm(np.array(com[stamps[i]])
+                                                        - expected_com)))
+        checked += 1
+    assert checked > 1700
+    assert worst_zmp < 1e-3
+    assert worst_com < 1e-9
+
+
+def test_published_polygon_and_margins_agree_with_the_contacts(crawl):
+    simulator, collector = crawl
+    robot = simulator.robot
+    radius = robot.description.foot_radius_m
+    stamps, qs = configurations(robot, collector)
+    in_contact = stance(robot, collector, stamps)
+    data = robot.new_data()
+    polygons = {stamp_ns(m): np.array([(p.x, p.y) for p in m.polygon.points])
+                for m in collector.messages['/gait/support_polygon']}
+    zmp = {stamp_ns(m): np.array([[m.point.x, m.point.y]])
+           for m in collector.messages['/gait/zmp']}
+    exact_margins = []
+    for i, stamp in enumerate(stamps[:-1]):
+        if stamp not in zmp:
+            continue
+        feet = robot.foot_poses(qs[i], data)[0][in_contact[i]]
+        exact = disc_support_margin(zmp[stamp], feet[:, :2], radius)[0]
+        drawn = signed_distance(zmp[stamp], polygons[stamp])[0]
+        # The drawn polygon circumscribes the discs: its margins exceed the exact ones by 0.07 mm
+        # at most.
+        assert exact - 1e-6 <= drawn <= exact + CIRCUMSCRIBED * radius + 1e-6
+        exact_margins.append(exact)
+    assert len(exact_margins) > 1700
+    summaries = [float(values_of(s)['min_margin_m'])
+                 for _, s in collector.statuses('stability summary')]
+    assert min(summaries) <= min(exact_margins) + 1e-9
+    markers = collector.messages['/gait/markers']
+    assert len(markers) == len(collector.messages['/gait/support_polygon'])
+    assert {m.ns for m in markers[-1].markers} == {'gait'}
+
+
+# -- the node alone --------------------------------------------------------------------------
+
+
+@pytest.fixture
+def inproc():
+    runtime.init(args=[], runtime='inproc', signal_handlers=False)
+    yield runtime.default_context().transport
+    runtime.shutdown()
+
+
+class CommandSource(runtime.Node):
+    """Publishes given /joint_commands messages at given times, and a footstep plan."""
+
+    def __init__(self, schedule, plan=None):
+        super().__init__('command_source', use_global_arguments=False)
+        self.schedule = sorted(schedule, key=lambda item: item[0])
+        self.publisher = self.create_publisher(get_message('sensor_msgs/msg/JointState'),
+                                               '/joint_commands', 10)
+        if plan is not None:
+            footsteps = self.create_publisher(
+                get_message('trajectory_msgs/msg/MultiDOFJointTrajectory'), '/gait/footsteps',
+                qos_profile_latched)
+            footsteps.publish(footsteps_to_msg(plan))
+        self.create_timer(0.005, self.tick)
+
+    def tick(self):
+        """Publish what is due."""
+        now = self.get_clock().now().nanoseconds
+        while self.schedule and self.schedule[0][0] <= now:
+            self.publisher.publish(self.schedule.pop(0)[1])
+
+
+def joint_command(names, positions, velocities=()):
+    msg = get_message('sensor_msgs/msg/JointState')()
+    msg.name = list(names)
+    msg.position = [float(p) for p in positions]
+    msg.velocity = [float(v) for v in velocities]
+    return msg
+
+
+def run_simulator(seconds, schedule=(), plan=None, parameters=()):
+    from gait_nodes.kinematic_simulator import KinematicSimulator
+
+    simulator = KinematicSimulator()
+    if parameters:
+        result = simulator.set_parameters([Parameter(n, value=v) for n, v in parameters])
+        assert all(r.successful for r in result)
+    source = CommandSource(list(schedule), plan)
+    collector = Collector()
+    executor = runtime.SingleThreadedExecutor()
+    for node in (simulator, source, collector):
+        executor.add_node(node)
+    executor.spin_for(seconds)
+    return simulator, collector
+
+
+def test_a_gait_that_loses_balance_is_flagged_at_the_first_sample_outside(inproc, robot,
+                                                                          q_nominal):
+    """Both left feet lift at 0.5 s with the COM in the middle: support on the right feet only."""
+    feet, yaws = robot.foot_poses(q_nominal)
+    names = robot.foot_names
+    moved = feet.copy()
+    for foot in ('front_left', 'rear_left'):
+        moved[names.index(foot)] += [0.2, 0.0, 0.0]
+    plan = FootstepPlan(0, names, np.array([0.0, 0.5, 1.5]), np.array([feet, feet, moved]),
+                        np.array([yaws, yaws, yaws]))
+    hold = joint_command(robot.joint_names, robot.joint_positions(q_nominal))
+    simulator, collector = run_simulator(1.0, [(k * NS // 200, hold) for k in range(200)], plan)
+    polygons = {stamp_ns(m): np.array([(p.x, p.y) for p in m.polygon.points])
+                for m in collector.messages['/gait/support_polygon']}
+    first_outside = None
+    for msg in collector.messages['/gait/zmp']:
+        stamp = stamp_ns(msg)
+        point = np.array([[msg.point.x, msg.point.y]])
+        assert signed_distance(point, polygons[stamp])[0] == pytest.approx(
+            disc_support_margin(point, feet[[1, 3], :2] if stamp > NS // 2 else feet[:, :2],
+                                robot.description.foot_radius_m)[0], abs=1e-4)
+        if first_outside is None and signed_distance(point, polygons[stamp])[0] < 0:
+            first_outside = stamp
+    assert first_outside == NS // 2 + NS // 200  # the first tick with the left feet up
+    errors = [(t, s) for t, s in collector.statuses('stability') if level_value(s.level) == ERROR]
+    assert errors, 'no ERROR reported'
+    assert int(values_of(errors[0][1])['sample_stamp_ns']) == first_outside
+    assert errors[0][0] - first_outside <= NS // 200  # reported at the next tick at the latest
+    before = [s for t, s in collector.statuses() if t < first_outside]
+    assert all(level_value(s.level) == OK for s in before)
+
+
+def test_bad_joint_commands_are_rejected_and_the_state_is_held(inproc, robot, q_nominal):
+    names = list(robot.joint_names)
+    start = robot.joint_positions(q_nominal)
+    good = start.copy()
+    good[names.index('fl_joint_1')] += 0.02
+    nan = good.copy()
+    nan[3] = float('nan')
+    schedule = [
+        (NS // 10, joint_command(names, good)),
+        (NS // 2, joint_command([*names[:-1], 'no_such_joint'], start + 0.3)),
+        (NS // 2 + NS // 200, joint_command(names, start + 0.3, velocities=[0.0] * 3)),
+        (NS // 2 + 2 * NS // 200, joint_command(names, nan + 0.3)),
+        (NS // 2 + 3 * NS // 200, joint_command(names[:-1], start + 0.3)),
+        (NS // 2 + 4 * NS // 200, joint_command([names[0], names[0]], [0.1, 0.2])),
+        (NS // 2 + 5 * NS // 200, joint_command([], [])),
+    ]
+    simulator, collector = run_simulator(1.0, schedule)
+    drops = [s for _, s in collector.statuses('input /joint_commands')]
+    assert len(drops) == 6
+    assert all(level_value(s.level) == WARN for s in drops)
+    assert int(values_of(drops[-1])['dropped_count']) == 6
+    states = collector.messages['/joint_states']
+    after = [np.array(m.position) for m in states if stamp_ns(m) >= NS // 2 - NS // 10]
+    for positions in after:  # the good command was reached and is held
+        np.testing.assert_allclose(positions, good, atol=1e-12)
+    for msg in states:
+        assert np.all(np.isfinite(msg.position))
+
+
+def test_a_subset_command_moves_only_its_joints(inproc, robot, q_nominal):
+    start = robot.joint_positions(q_nominal)
+    simulator, collector = run_simulator(0.5, [(NS // 10, joint_command(['rr_joint_7'],
+                                                                        [0.05]))])
+    final = np.array(collector.messages['/joint_states'][-1].position)
+    k = robot.joint_names.index('rr_joint_7')
+    assert final[k] == pytest.approx(0.05)
+    np.testing.assert_allclose(np.delete(final, k), np.delete(start, k), atol=1e-12)
+
+
+def test_stale_commands_are_reported(inproc, robot, q_nominal):
+    hold = joint_command(robot.joint_names, robot.joint_positions(q_nominal))
+    schedule = [(k * NS // 200, hold) for k in range(100)]  # commands stop at 0.5 s
+    simulator, collector = run_simulator(1.0, schedule, parameters=[('stale_after_s', 0.1)])
+    inputs = [(t, s) for t, s in collector.statuses('inputs')]
+    warnings = [(t, s) for t, s in inputs if level_value(s.level) == WARN]
+    assert warnings
+    first = warnings[0][0]
+    last_command = 99 * NS // 200
+    assert last_command + NS // 10 < first <= last_command + NS // 10 + NS // 200
+    assert 'no /joint_commands' in warnings[0][1].message
+
+
+def test_parameters_are_validated_and_a_rejected_change_changes_nothing(inproc):
+    from gait_nodes.kinematic_simulator import KinematicSimulator
+
+    simulator = KinematicSimulator()
+    before = simulator.params
+    for name, value in (('warn_margin_m', -0.1), ('rate_hz', 0.0), ('stale_after_s', math.nan),
+                        ('publish_clock', True), ('robot', 'biped'),
+                        ('contact_height_tolerance_m', 2.0)):
+        result = simulator.set_parameters([Parameter(name, value=value)])[0]
+        assert not result.successful
+        assert name in result.reason
+        assert simulator.params == before
+    assert simulator.set_parameters([Parameter('warn_margin_m', value=0.05)])[0].successful
+    assert simulator.params.warn_margin_m == 0.05
+
+
+def test_clock_is_published_every_tick_with_the_simulated_time(inproc):
+    simulator, collector = run_simulator(0.2, parameters=())
+    assert not collector.messages['/clock']
+    runtime.shutdown()
+    runtime.init(args=['x', '--ros-args', '-p', 'publish_clock:=true'], runtime='inproc',
+                 signal_handlers=False)
+    simulator, collector = run_simulator(0.2)
+    clocks = [m.clock.sec * NS + m.clock.nanosec for m in collector.messages['/clock']]
+    assert clocks == [k * NS // 200 for k in range(1, 41)]
+    assert clocks == [stamp_ns(m) for m in collector.messages['/joint_states']]
+
+
+def test_a_command_beyond_the_velocity_limit_saturates_and_is_reported(inproc, robot,
+                                                                        q_nominal):
+    start = robot.joint_positions(q_nominal)
+    jump = start.copy()
+    k = robot.joint_names.index('fr_joint_1')
+    jump[k] += 0.5  # 0.5 s at 1 rad/s
+    simulator, collector = run_simulator(1.2, [(NS // 10, joint_command(robot.joint_names,
+                                                                        jump))])
+    velocities = np.array([m.velocity[k] for m in collector.messages['/joint_states']])
+    limit = robot.velocity_limits_rad_s[k]
+    assert np.all(np.abs(velocities) <= limit * (1 + 1e-12))
+    assert np.sum(np.isclose(velocities, limit)) >= 99
+    assert collector.messages['/joint_states'][-1].position[k] == pytest.approx(jump[k])
+    summaries = [s for _, s in collector.statuses('velocity saturation')]
+    assert level_value(summaries[0].level) == WARN
+    assert values_of(summaries[0])['joints'] == 'fr_joint_1'
+    assert float(values_of(summaries[0])['max_demanded_over_limit']) == pytest.approx(
+        0.5 / (limit * 0.005))
