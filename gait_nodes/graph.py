@@ -32,6 +32,7 @@ TOPICS: dict[str, str] = {
     '/gait/zmp': 'geometry_msgs/msg/PointStamped',
     '/gait/com': 'geometry_msgs/msg/PointStamped',
     '/gait/support_polygon': 'geometry_msgs/msg/PolygonStamped',
+    '/gait/markers': 'visualization_msgs/msg/MarkerArray',
     '/diagnostics': 'diagnostic_msgs/msg/DiagnosticArray',
     '/clock': 'rosgraph_msgs/msg/Clock',
 }

@@ -73,6 +73,9 @@ def generate_launch_description():
         overrides = {'use_sim_time': use_sim_time, 'robot': robot}
         if node_name == 'footstep_planner':
             overrides['gait'] = gait
+        if node_name == 'kinematic_simulator':
+            # The simulator owns simulated time: it publishes the /clock the others follow.
+            overrides['publish_clock'] = use_sim_time
         nodes.append(
             Node(
                 package=PACKAGE,

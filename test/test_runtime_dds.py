@@ -535,7 +535,9 @@ def test_signal_stops_a_spinning_process_cleanly(tmp_path, program, signum):
             process.kill()
             process.communicate()
     assert process.returncode == 0, stderr
-    assert elapsed < 3.0
+    # The launcher lets nodes that are still starting (imports, robot model, swing table)
+    # come up before it stops them, since a node interrupted mid-import would crash.
+    assert elapsed < (3.0 if program == 'run_node' else 25.0)
     assert 'Traceback' not in stderr
     if program == 'gait_nodes_run':
         assert 'runtime dds' in stdout
