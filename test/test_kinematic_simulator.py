@@ -365,7 +365,8 @@ def test_published_polygon_and_margins_agree_with_the_contacts(crawl):
     assert len(exact_margins) > 1700
     summaries = [float(values_of(s)['min_margin_m'])
                  for _, s in collector.statuses('stability summary')]
-    assert min(summaries) <= min(exact_margins) + 1e-9
+    # Diagnostic values carry 6 significant digits.
+    assert min(summaries) <= min(exact_margins) + 1e-6
     markers = collector.messages['/gait/markers']
     assert len(markers) == len(collector.messages['/gait/support_polygon'])
     assert {m.ns for m in markers[-1].markers} == {'gait'}
