@@ -17,14 +17,12 @@ import json
 import math
 import sys
 
-import yaml
-
 from gait_nodes.cli import run_node
 from gait_nodes.contract import footsteps_to_msg, zmp_reference_to_msg
 from gait_nodes.diagnostics import OK, WARN, DiagnosticsReporter
 from gait_nodes.errors import GaitParameterError, ParameterError
 from gait_nodes.interfaces import get_message
-from gait_nodes.paths import config_file
+from gait_nodes.paths import node_defaults
 from gait_nodes.planning.footsteps import GaitPlanner, Twist2D
 from gait_nodes.planning.gait_params import (
     NUMERIC_RANGES,
@@ -49,8 +47,7 @@ NS_PER_S = 1_000_000_000
 
 def shipped_defaults() -> dict[str, object]:
     """``ros__parameters`` of ``config/footstep_planner.yaml``."""
-    data = yaml.safe_load(config_file(f'{NODE_NAME}.yaml').read_text())
-    return dict(data[NODE_NAME]['ros__parameters'])
+    return node_defaults(NODE_NAME)
 
 
 def check_node_settings(values: dict[str, object]) -> None:

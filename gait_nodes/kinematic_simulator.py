@@ -31,7 +31,6 @@ from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
-import yaml
 
 from gait_nodes.cli import run_node
 from gait_nodes.contract import (
@@ -42,9 +41,9 @@ from gait_nodes.contract import (
     footsteps_from_msg,
 )
 from gait_nodes.diagnostics import ERROR, OK, WARN, DiagnosticsReporter
-from gait_nodes.errors import ConfigError, GaitNodesError, ParameterError
+from gait_nodes.errors import GaitNodesError, ParameterError
 from gait_nodes.interfaces import get_message
-from gait_nodes.paths import config_file
+from gait_nodes.paths import node_defaults as shipped_node_defaults
 from gait_nodes.robot.model import RobotModel, load_robot_model
 from gait_nodes.robot.whole_body_ik import nominal_configuration
 from gait_nodes.runtime import (
@@ -55,6 +54,7 @@ from gait_nodes.runtime import (
     QoSProfile,
     SetParametersResult,
 )
+from gait_nodes.settings import checked_number as _number
 from gait_nodes.sim.kinematics import KinematicSimulation, SimulationSettings
 from gait_nodes.sim.zmp_monitor import ZmpMonitor, ZmpState, central_differences
 
@@ -64,20 +64,7 @@ LEVEL_WORDS = {OK: 'OK', WARN: 'WARN', ERROR: 'ERROR'}
 
 def node_defaults() -> dict:
     """Parameter defaults from ``config/kinematic_simulator.yaml``."""
-    path = config_file(f'{NODE_NAME}.yaml')
-    try:
-        return dict(yaml.safe_load(path.read_text())[NODE_NAME]['ros__parameters'])
-    except (OSError, yaml.YAMLError, KeyError, TypeError) as exc:
-        raise ConfigError(f'{path}: cannot read the node defaults: {exc}') from exc
-
-
-def _number(values: dict, name: str, low: float, high: float, low_open: bool = False) -> float:
-    value = values[name]
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \
-            or not (low < value if low_open else low <= value) or not value <= high:
-        bracket = '(' if low_open else '['
-        raise ParameterError(f'{name} must be a number in {bracket}{low}, {high}], got {value!r}')
-    return float(value)
+    return shipped_node_defaults(NODE_NAME)
 
 
 def _flag(values: dict, name: str) -> bool:

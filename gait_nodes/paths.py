@@ -24,3 +24,14 @@ def config_file(relative: str) -> Path:
     if not path.is_file():
         raise ConfigError(f'config file {path} not found')
     return path
+
+
+def node_defaults(node_name: str) -> dict:
+    """The ``ros__parameters`` of ``config/<node_name>.yaml``; refused with its path if bad."""
+    import yaml
+
+    path = config_file(f'{node_name}.yaml')
+    try:
+        return dict(yaml.safe_load(path.read_text())[node_name]['ros__parameters'])
+    except (OSError, yaml.YAMLError, KeyError, TypeError, ValueError) as exc:
+        raise ConfigError(f'{path}: cannot read the node defaults: {exc}') from exc

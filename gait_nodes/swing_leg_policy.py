@@ -21,14 +21,13 @@ import math
 import sys
 
 import numpy as np
-import yaml
 
 from gait_nodes import contract
 from gait_nodes.cli import run_node
 from gait_nodes.diagnostics import ERROR, OK, WARN, DiagnosticsReporter
 from gait_nodes.errors import GaitNodesError, ParameterError, SwingPolicyError
 from gait_nodes.interfaces import get_message
-from gait_nodes.paths import config_file
+from gait_nodes.paths import node_defaults
 from gait_nodes.robot.model import load_robot_model
 from gait_nodes.runtime import Node, SetParametersResult, qos_profile_latched
 from gait_nodes.swing.cache import load_or_build
@@ -46,8 +45,7 @@ CLAMP_REPORT_M = 0.01
 
 def shipped_defaults() -> dict[str, object]:
     """``ros__parameters`` of ``config/swing_leg_policy.yaml``."""
-    data = yaml.safe_load(config_file(f'{NODE_NAME}.yaml').read_text())
-    return dict(data[NODE_NAME]['ros__parameters'])
+    return node_defaults(NODE_NAME)
 
 
 def check_values(values: dict) -> None:

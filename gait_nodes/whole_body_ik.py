@@ -20,12 +20,10 @@ reference. The step is scaled down to the joint velocity limits and published on
 
 from __future__ import annotations
 
-import math
 import sys
 from dataclasses import dataclass
 
 import numpy as np
-import yaml
 
 from gait_nodes.cli import run_node
 from gait_nodes.contract import (
@@ -35,9 +33,9 @@ from gait_nodes.contract import (
     swing_trajectory_from_msg,
 )
 from gait_nodes.diagnostics import OK, WARN, DiagnosticsReporter
-from gait_nodes.errors import ConfigError, GaitNodesError, ParameterError
+from gait_nodes.errors import GaitNodesError, ParameterError
 from gait_nodes.interfaces import get_message
-from gait_nodes.paths import config_file
+from gait_nodes.paths import node_defaults as shipped_node_defaults
 from gait_nodes.robot.model import load_robot_model
 from gait_nodes.robot.whole_body_ik import (
     IkSettings,
@@ -54,6 +52,7 @@ from gait_nodes.robot.whole_body_ik import (
     swing_pose_at,
 )
 from gait_nodes.runtime import Node, QoSProfile, SetParametersResult, qos_profile_latched
+from gait_nodes.settings import checked_number as _number
 
 NODE_NAME = 'whole_body_ik'
 #: Foot error and COM error above which a tick is reported as off target [m] (issue accuracy).
@@ -63,20 +62,7 @@ COM_ERROR_WARN_M = 1e-3
 
 def node_defaults() -> dict:
     """Parameter defaults from ``config/whole_body_ik.yaml``."""
-    path = config_file(f'{NODE_NAME}.yaml')
-    try:
-        return dict(yaml.safe_load(path.read_text())[NODE_NAME]['ros__parameters'])
-    except (OSError, yaml.YAMLError, KeyError, TypeError) as exc:
-        raise ConfigError(f'{path}: cannot read the node defaults: {exc}') from exc
-
-
-def _number(values: dict, name: str, low: float, high: float, low_open: bool = False) -> float:
-    value = values[name]
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \
-            or not (low < value if low_open else low <= value) or not value <= high:
-        bracket = '(' if low_open else '['
-        raise ParameterError(f'{name} must be a number in {bracket}{low}, {high}], got {value!r}')
-    return float(value)
+    return shipped_node_defaults(NODE_NAME)
 
 
 @dataclass(frozen=True)
