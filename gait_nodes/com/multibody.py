@@ -30,6 +30,9 @@ from gait_nodes.robot.whole_body_ik import (
     fallback_swing_pose,
 )
 
+#: Most IK solves spent on the first sample of a trajectory.
+FIRST_SAMPLE_SOLVES = 20
+
 
 def planned_feet(robot: RobotModel, plan: FootstepPlan, times_s: np.ndarray,
                  step_height_m: float) -> tuple[np.ndarray, np.ndarray]:
@@ -72,7 +75,14 @@ def robot_multibody_zmp(robot: RobotModel, plan: FootstepPlan, times_s: np.ndarr
             targets = IkTargets(feet[k], foot_yaws[k], float(body_yaws_rad[k]),
                                 base_position_in_world=np.array([x, y, body_height_m]))
             if q is None:
+                # Converge the first sample fully: a start still converging over the next
+                # samples would read as a violent motion to the finite differences.
                 q = robot.configuration([x, y, body_height_m], float(body_yaws_rad[k]))
+                for _ in range(FIRST_SAMPLE_SOLVES):
+                    result = solver.solve(targets, q)
+                    q = result.q
+                    if result.converged:
+                        break
             q = solver.solve(targets, q).q
             configurations[k] = q
         zmp, _ = multibody_zmp_trajectory(robot, configurations, dt_s)

@@ -20,41 +20,38 @@ A static robot gives ``p = (c_x, c_y)``; a point mass gives the cart-table formu
 from __future__ import annotations
 
 import numpy as np
-import pinocchio as pin
 
 from gait_nodes.robot.model import RobotModel
+from gait_nodes.sim.zmp_monitor import ZmpMonitor, central_differences
 
 
 def zmp_from_momentum(robot: RobotModel, q: np.ndarray, v: np.ndarray, a: np.ndarray,
-                      data: pin.Data | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """ZMP on z = 0 and COM of the full model at one instant.
+                      monitor: ZmpMonitor | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """ZMP on z = 0 and COM of the full model at one instant (the ZMP monitor's computation).
 
     Args:
         robot: The robot model.
         q: Configuration (Pinocchio's, free-flyer base).
         v: Velocity [m/s, rad/s] (Pinocchio's, base twist in the base frame).
         a: Acceleration, same convention [m/s^2, rad/s^2].
-        data: Pinocchio data to reuse (a fresh one when None).
+        monitor: A monitor of ``robot`` to reuse (a new one when None).
 
     Returns:
-        ``(zmp_in_world (2,), com_in_world (3,))`` [m].
+        ``(zmp_in_world (2,), com_in_world (3,))`` [m]; the ZMP is NaN when the motion would
+        need the ground to pull.
     """
-    model = robot.model
-    data = data if data is not None else robot.new_data()
-    pin.computeCentroidalMomentumTimeVariation(model, data, q, v, a)
-    com = np.array(data.com[0])
-    rate = data.dhg
-    force = np.array(rate.linear) - robot.mass_kg * np.array(model.gravity.linear)
-    torque = np.array(rate.angular) + np.cross(com, force)
-    return np.array([-torque[1] / force[2], torque[0] / force[2]]), com
+    monitor = monitor or ZmpMonitor(robot.model, robot.description.foot_radius_m)
+    com, zmp, _ = monitor.com_and_zmp(q, v, a)
+    return zmp[:2], com
 
 
 def finite_difference_motion(robot: RobotModel, configurations: np.ndarray, dt_s: float
                              ) -> tuple[np.ndarray, np.ndarray]:
     """Velocities and accelerations of a sampled configuration trajectory.
 
-    Central differences on the configuration manifold (``pin.difference``), one-sided at the
-    ends; the trajectory is taken at rest before and after it.
+    Central differences on the configuration manifold (the monitor's
+    :func:`~gait_nodes.sim.zmp_monitor.central_differences`); the trajectory is taken at rest
+    before and after it.
 
     Args:
         robot: The robot model.
@@ -64,13 +61,14 @@ def finite_difference_motion(robot: RobotModel, configurations: np.ndarray, dt_s
     Returns:
         ``(v (N, nv), a (N, nv))``.
     """
-    model = robot.model
     count = len(configurations)
-    steps = np.zeros((count + 1, model.nv))  # steps[k] = (q_k - q_{k-1}) / dt, 0 outside
-    for k in range(1, count):
-        steps[k] = pin.difference(model, configurations[k - 1], configurations[k]) / dt_s
-    velocities = 0.5 * (steps[:-1] + steps[1:])
-    accelerations = (steps[1:] - steps[:-1]) / dt_s
+    velocities = np.zeros((count, robot.model.nv))
+    accelerations = np.zeros((count, robot.model.nv))
+    for k in range(count):
+        before = configurations[max(k - 1, 0)]
+        after = configurations[min(k + 1, count - 1)]
+        velocities[k], accelerations[k] = central_differences(
+            robot.model, before, configurations[k], after, dt_s)
     return velocities, accelerations
 
 
@@ -78,9 +76,9 @@ def multibody_zmp_trajectory(robot: RobotModel, configurations: np.ndarray, dt_s
                              ) -> tuple[np.ndarray, np.ndarray]:
     """(N, 2) ZMP and (N, 3) COM of a sampled configuration trajectory [m]."""
     velocities, accelerations = finite_difference_motion(robot, configurations, dt_s)
-    data = robot.new_data()
+    monitor = ZmpMonitor(robot.model, robot.description.foot_radius_m)
     zmp = np.zeros((len(configurations), 2))
     com = np.zeros((len(configurations), 3))
     for k, q in enumerate(configurations):
-        zmp[k], com[k] = zmp_from_momentum(robot, q, velocities[k], accelerations[k], data)
+        zmp[k], com[k] = zmp_from_momentum(robot, q, velocities[k], accelerations[k], monitor)
     return zmp, com

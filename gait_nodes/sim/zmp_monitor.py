@@ -32,9 +32,12 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
+from gait_nodes.com.trajectory import GRAVITY_M_S2
 from gait_nodes.geometry import convex_hull, foot_discs_polygon, signed_distance
 
-STANDARD_GRAVITY_M_S2 = 9.80665
+#: The project's one gravity (the cart-table planners' and Pinocchio's default model gravity),
+#: so that the monitor judges the planned motion with the planners' physics.
+STANDARD_GRAVITY_M_S2 = GRAVITY_M_S2
 #: Vertices per foot disc in the published support polygon: the drawn polygon circumscribes
 #: the discs, so a margin read off it (as ``inspect`` does) exceeds the exact one by at most
 #: ``r (1 / cos(pi / 64) - 1)`` = 0.07 mm for a 0.055 m foot.
