@@ -61,6 +61,10 @@ def build_parser() -> ArgumentParser:
     run.add_argument('--record', metavar='DIR', nargs='?', const='', default=None,
                      help='record every contract topic to a rosbag2 MCAP directory '
                           '(default name bags/gait_<date-time>)')
+    run.add_argument('--plot', metavar='DIR', default=None,
+                     help='with --record: write the PNG plots into DIR (default: the bag '
+                          "directory's name + '_plots')")
+    run.add_argument('--no-plot', action='store_true', help='with --record: write no plots')
     run.add_argument('--robot', default=None,
                      help="robot name in config/robots/ or a robot YAML (default: the "
                           "scenario's)")
@@ -314,20 +318,34 @@ def print_summary(summary: dict, as_json: bool) -> None:
                 print(f'  DAMAGE: {damage["description"]}')
             for line in format_gait(report.get('gait')):
                 print('  ' + line)
-            print(f'  details and plots: python -m gait_nodes.inspect {summary["bag"]} '
-                  f'--plot {summary["bag"]}_plots')
+            if report.get('plots'):
+                print(f'  plots: {", ".join(report["plots"])}')
+            print(f'  details: python -m gait_nodes.inspect {summary["bag"]}')
 
 
-def _inspect_recording(bag: str) -> dict:
-    """The inspect report of the bag just recorded (an ``error`` entry if it cannot be read)."""
-    from gait_nodes.bag.analysis import inspect_bag
+def _inspect_recording(bag: str, plot_dir: str | None) -> dict:
+    """The inspect report of the bag just recorded (an ``error`` entry if it cannot be read).
+
+    Args:
+        bag: The bag directory.
+        plot_dir: Where to write the PNG plots (none when None).
+    """
+    from gait_nodes.bag.analysis import inspect_bag, robot_limits
 
     try:
-        report = inspect_bag(bag).report
+        inspection = inspect_bag(bag)
     except GaitNodesError as exc:
         return {'error': str(exc)}
+    report = inspection.report
     keep = ('message_count', 'duration_s', 'complete', 'damage', 'metadata_check', 'gait')
-    return {key: report[key] for key in keep if key in report}
+    kept = {key: report[key] for key in keep if key in report}
+    if plot_dir:
+        from gait_nodes.bag.plots import write_plots
+
+        robot = report.get('gait', {}).get('robot')
+        written = write_plots(inspection.series, plot_dir, robot_limits(robot)[1])
+        kept['plots'] = [os.path.abspath(p) for p in written]
+    return kept
 
 
 def main(args: list[str] | None = None) -> int:
@@ -360,7 +378,9 @@ def main(args: list[str] | None = None) -> int:
     summary['scenario'] = options.scenario
     if options.record:
         summary['bag'] = os.path.abspath(options.record)
-        summary['inspect'] = _inspect_recording(options.record)
+        plot_dir = None if options.no_plot else (options.plot or
+                                                  options.record.rstrip('/') + '_plots')
+        summary['inspect'] = _inspect_recording(options.record, plot_dir)
     print_summary(summary, options.json)
     failed = [name for name, code in summary['exit_codes'].items() if code != 0]
     return 1 if failed else 0

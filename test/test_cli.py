@@ -88,6 +88,29 @@ def test_run_inproc_json_summary(tmp_path):
     assert summary['exit_codes'] == {}
 
 
+def test_run_inproc_records_inspects_and_plots(tmp_path):
+    """The main job's shape: the graph recorded, the gait summary printed, the PNGs written."""
+    result = run(['-m', 'gait_nodes', 'run', '--runtime', 'inproc', '--duration', '3',
+                  '--scenario', 'robosimian_crawl_polynomial', '--record', 'bags/r1'],
+                 cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    bag = tmp_path / 'bags' / 'r1'
+    assert (bag / 'metadata.yaml').is_file()
+    assert 'metadata.yaml matches' in result.stdout
+    assert 'ZMP margin' in result.stdout
+    plots = sorted((tmp_path / 'bags' / 'r1_plots').glob('*.png'))
+    assert {p.name for p in plots} >= {'top_view.png', 'com_zmp_time.png',
+                                       'joint_velocities.png'}
+    for plot in plots:
+        assert plot.read_bytes()[:8] == b'\x89PNG\r\n\x1a\n'
+        assert str(plot) in result.stdout
+
+    result = run(['-m', 'gait_nodes', 'run', '--runtime', 'inproc', '--duration', '0.5',
+                  '--record', 'bags/r2', '--no-plot'], cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    assert not (tmp_path / 'bags' / 'r2_plots').exists()
+
+
 @pytest.mark.parametrize(('args', 'env', 'words'), [
     (['--runtime', 'bogus'], {}, ['bogus']),
     ([], {'GAIT_NODES_RUNTIME': 'bogus'}, ['bogus', 'inproc']),
