@@ -1,0 +1,150 @@
+"""The README's results table: every scenario walked and inspected, and the thesis' step sweep.
+
+Runs, with the project's own commands and nothing else:
+
+- ``python -m gait_nodes run --runtime inproc --scenario NAME --record DIR --no-plot --json``
+  for each scenario, and reads the gait summary of the bag it recorded (the numbers
+  ``python -m gait_nodes.inspect DIR`` prints; definitions in gait_nodes/bag/analysis.py);
+- ``python -m gait_nodes.swing_table sweep --quiet`` (thesis IV.B, Fig. 14: crawl speed against
+  step size for value tables built at the robot's joint limit) and keeps its optimum.
+
+It prints a Markdown table (also written to ``--out``). The speed reported is the net speed,
+displacement of base_link in odom over the walk's duration, so a crawl's sideways sway does not
+count as progress; the commanded speed is the scenario's first /cmd_vel.
+
+    python bench/results.py [--scenarios a,b] [--no-sweep] [--out results.md]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import re
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from gait_nodes.scenarios import SCENARIOS
+from gait_nodes.swing.sweep import FT_PER_MIN
+
+
+def run_scenario(name: str, folder: Path) -> dict:
+    """Walk scenario ``name`` in inproc with recording; its run summary (JSON)."""
+    command = [sys.executable, '-m', 'gait_nodes', 'run', '--runtime', 'inproc', '--scenario',
+               name, '--record', str(folder / name), '--no-plot', '--json']
+    started = time.perf_counter()
+    result = subprocess.run(command, capture_output=True, text=True, check=False)
+    if result.returncode != 0:
+        raise SystemExit(f'{" ".join(command)} failed ({result.returncode}):\n{result.stderr}')
+    summary = json.loads(result.stdout)
+    summary['command_wall_s'] = time.perf_counter() - started
+    return summary
+
+
+def scenario_row(name: str, summary: dict) -> dict:
+    """One table row from a run summary."""
+    scenario = SCENARIOS[name]
+    gait = (summary.get('inspect') or {}).get('gait') or {}
+    base = gait.get('base') or {}
+    steps = gait.get('steps') or {}
+    margin = gait.get('zmp_margin') or {}
+    joints = (gait.get('joint_velocity') or {}).get('/joint_states') or {}
+    levels = (gait.get('diagnostics') or {}).get('by_level') or {}
+    commanded = next((c.velocity[0] for c in scenario.commands if c.velocity), None)
+    time_s = base.get('time_s') or 0.0
+    net = base.get('displacement_m', 0.0) / time_s if time_s else None
+    return {
+        'scenario': name, 'robot': scenario.robot,
+        'gait': scenario.settings.get('gait', 'auto'),
+        'swing': scenario.settings.get('swing', '-'),
+        'com': scenario.settings.get('com_method', '-'),
+        'commanded_m_s': commanded, 'net_speed_m_s': net,
+        'steps': steps.get('count', 0), 'mean_step_m': steps.get('mean_length_m'),
+        'margin_min_mm': None if margin.get('min_m') is None else 1000 * margin['min_m'],
+        'margin_mean_mm': None if margin.get('mean_m') is None else 1000 * margin['mean_m'],
+        'outside_s': margin.get('time_outside_s'),
+        'joint_peak_ratio': joints.get('peak_ratio_to_limit'),
+        'errors': levels.get('ERROR', 0), 'warnings': levels.get('WARN', 0),
+        'real_time_factor': summary.get('real_time_factor'),
+    }
+
+
+def run_sweep() -> dict:
+    """The step-size sweep's optimum (``swing_table sweep``), with the command's wall time."""
+    command = [sys.executable, '-m', 'gait_nodes.swing_table', 'sweep', '--quiet']
+    started = time.perf_counter()
+    result = subprocess.run(command, capture_output=True, text=True, check=False)
+    if result.returncode != 0:
+        raise SystemExit(f'{" ".join(command)} failed ({result.returncode}):\n{result.stderr}')
+    found = re.search(r'optimal overall: family (\d+), step height ([\d.]+) m, step ([\d.]+) m, '
+                      r'([\d.]+) ft/min', result.stdout)
+    if not found:
+        raise SystemExit(f'no optimum in the sweep output:\n{result.stdout}')
+    family, height, step, speed = found.groups()
+    return {'family': int(family), 'step_height_m': float(height), 'step_m': float(step),
+            'speed_ft_min': float(speed), 'speed_m_s': float(speed) / FT_PER_MIN,
+            'wall_s': time.perf_counter() - started, 'output': result.stdout}
+
+
+def _number(value, digits: int) -> str:
+    return '-' if value is None else f'{value:.{digits}f}'
+
+
+def markdown(rows: list[dict], sweep: dict | None) -> str:
+    """The results as Markdown tables."""
+    lines = ['| scenario | robot | gait | swing | COM | commanded [m/s] | net speed [m/s] '
+             '| steps (mean [m]) | ZMP margin min / mean [mm] | outside [s] '
+             '| joint vel. peak / limit | ERROR / WARN | real-time factor |',
+             '| --- ' * 13 + '|']
+    for r in rows:
+        lines.append(
+            f'| `{r["scenario"]}` | {r["robot"]} | {r["gait"]} | {r["swing"]} | {r["com"]} '
+            f'| {_number(r["commanded_m_s"], 3)} | {_number(r["net_speed_m_s"], 4)} '
+            f'| {r["steps"]} ({_number(r["mean_step_m"], 3)}) '
+            f'| {_number(r["margin_min_mm"], 1)} / {_number(r["margin_mean_mm"], 1)} '
+            f'| {_number(r["outside_s"], 3)} | {_number(r["joint_peak_ratio"], 2)} '
+            f'| {r["errors"]} / {r["warnings"]} | {_number(r["real_time_factor"], 1)}x |')
+    if sweep:
+        lines += ['', '| step-size sweep (robosimian, value tables at the joint limit) | ours '
+                  '| thesis |', '| --- | --- | --- |',
+                  f'| optimal step [m] | {sweep["step_m"]:.3f} | 0.34 |',
+                  f'| crawl speed at the optimum [ft/min] | {sweep["speed_ft_min"]:.2f} '
+                  f'| 8.54 |',
+                  f'| IK family (0-based), step height [m] | {sweep["family"]}, '
+                  f'{sweep["step_height_m"]:g} | 3rd / 8th, - |']
+    return '\n'.join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run the scenarios and the sweep; print (and write) the tables."""
+    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    parser.add_argument('--scenarios', default=','.join(SCENARIOS),
+                        help='comma-separated scenario names (default: all)')
+    parser.add_argument('--no-sweep', action='store_true', help='skip the step-size sweep')
+    parser.add_argument('--out', default=None, help='also write the Markdown to this file')
+    parser.add_argument('--json', default=None, help='write the raw rows and sweep as JSON')
+    options = parser.parse_args(argv)
+    names = [n.strip() for n in options.scenarios.split(',') if n.strip()]
+    unknown = [n for n in names if n not in SCENARIOS]
+    if unknown:
+        parser.error(f'unknown scenario(s) {unknown}; scenarios: {", ".join(SCENARIOS)}')
+    rows = []
+    with tempfile.TemporaryDirectory(prefix='gait_results_') as tmp:
+        for name in names:
+            summary = run_scenario(name, Path(tmp))
+            rows.append(scenario_row(name, summary))
+            print(f'{name}: ran in {summary["command_wall_s"]:.1f} s', file=sys.stderr)
+    sweep = None if options.no_sweep else run_sweep()
+    text = markdown(rows, sweep)
+    print(text)
+    if options.out:
+        Path(options.out).write_text(text + '\n')
+    if options.json:
+        Path(options.json).write_text(json.dumps({'scenarios': rows, 'sweep': sweep}, indent=1))
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
