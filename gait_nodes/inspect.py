@@ -74,6 +74,39 @@ def format_gait(gait: dict | None) -> list[str]:
         if diagnostics['first_error']:
             error = diagnostics['first_error']
             lines.append(f'    first ERROR: {error["name"]}: {error["message"]}')
+    lines.extend(_consistency_lines(gait.get('consistency')))
+    return lines
+
+
+def _stat(stats: dict | None) -> str:
+    if not stats or stats.get('max_m') is None:
+        return '-'
+    text = f'max {_mm(stats["max_m"])}'
+    return text + (f', rms {_mm(stats["rms_m"])}' if stats.get('rms_m') is not None else '')
+
+
+def _consistency_lines(checks: dict | None) -> list[str]:
+    """The physics consistency section (gait_nodes.bag.consistency)."""
+    if not checks:
+        return []
+    lines = [f'  consistency (full model, {checks["configurations"]} configurations from '
+             f'/joint_states + /tf):']
+    com = checks.get('com') or {}
+    if com.get('vs_reference'):
+        lines.append(f'    COM reached vs /gait/com_reference (horizontal): '
+                     f'{_stat(com["vs_reference"])}')
+    if com.get('vs_monitor'):
+        lines.append(f'    COM vs /gait/com: {_stat(com["vs_monitor"])}')
+    zmp = checks.get('zmp')
+    if zmp:
+        lines.append(f'    ZMP by inverse dynamics vs /gait/zmp: {_stat(zmp)}')
+    feet = checks.get('footholds')
+    if feet:
+        lines.append(f'    feet at touch-down vs /gait/footsteps: {_stat(feet)} '
+                     f'({feet["samples"]} landings)')
+    slip = checks.get('stance_slip')
+    if slip:
+        lines.append(f'    stance feet slip: {_stat(slip)}')
     return lines
 
 

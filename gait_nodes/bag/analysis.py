@@ -19,6 +19,9 @@ independent reader of the bag can check it:
   ``hardware_id`` of the bag's diagnostics).
 - ``commands``: ``/gait/command_status`` answers, accepted and rejected with their reasons.
 - ``diagnostics``: statuses on ``/diagnostics`` counted by level and by name.
+- ``consistency``: the nodes' outputs checked against each other with the robot's full model
+  (COM reached vs asked, ZMP by inverse dynamics vs the monitor's, feet vs footsteps, stance
+  slip): :mod:`gait_nodes.bag.consistency`.
 """
 
 from __future__ import annotations
@@ -62,6 +65,9 @@ class GaitSeries:
     """Decoded time series of a gait bag, for metrics and plots (stamps in [ns])."""
 
     base: list[tuple[int, float, float, float, float]] = field(default_factory=list)
+    base_poses: list[tuple[int, float, float, float, float, float, float, float]] = field(
+        default_factory=list)
+    zmp_plane_height_m: float | None = None
     zmp: list[tuple[int, float, float]] = field(default_factory=list)
     com: list[tuple[int, float, float, float]] = field(default_factory=list)
     polygons: list[tuple[int, np.ndarray]] = field(default_factory=list)
@@ -105,11 +111,14 @@ class _Collector:
             if transform.header.frame_id.lstrip('/') == contract.WORLD_FRAME and \
                     transform.child_frame_id.lstrip('/') == contract.BASE_FRAME:
                 t, r = transform.transform.translation, transform.transform.rotation
-                self.series.base.append((_stamp(transform.header), t.x, t.y, t.z,
+                stamp = _stamp(transform.header)
+                self.series.base.append((stamp, t.x, t.y, t.z,
                                          contract.quaternion_to_yaw(r.x, r.y, r.z, r.w)))
+                self.series.base_poses.append((stamp, t.x, t.y, t.z, r.x, r.y, r.z, r.w))
 
     def _gait_zmp(self, msg) -> None:
         self.series.zmp.append((_stamp(msg.header), msg.point.x, msg.point.y))
+        self.series.zmp_plane_height_m = msg.point.z
 
     def _gait_com(self, msg) -> None:
         self.series.com.append((_stamp(msg.header), msg.point.x, msg.point.y, msg.point.z))
@@ -418,7 +427,25 @@ def gait_report(series: GaitSeries, robot: str | None = None) -> dict:
     gait = {key: value for key, value in sections.items() if value is not None}
     if gait and robot_name:
         gait['robot'] = robot_name
+        checks = physics_consistency(series, robot or hardware_id(series))
+        if checks:
+            gait['consistency'] = checks
     return gait
+
+
+def physics_consistency(series: GaitSeries, robot: str) -> dict | None:
+    """:func:`gait_nodes.bag.consistency.consistency_report` with the robot's full model.
+
+    None when the robot's model cannot be loaded (a robot YAML without kinematics).
+    """
+    from gait_nodes.bag.consistency import consistency_report
+    from gait_nodes.robot.model import load_robot_model
+
+    try:
+        model = load_robot_model(robot)
+    except GaitNodesError:
+        return None
+    return consistency_report(model, series)
 
 
 def metadata_check(metadata: dict | None, counts: Counter, types: dict) -> dict | None:
