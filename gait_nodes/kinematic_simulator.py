@@ -20,7 +20,11 @@ tracking its last good command.
 
 With ``publish_clock`` the simulator owns time: it advances by one period per tick (paced by the
 wall clock) and publishes /clock, which every node started with ``use_sim_time:=true`` follows.
-Under the inproc runtime time is the executor's and /clock repeats it.
+Under the inproc runtime time is the executor's and /clock repeats it. On the wall clock the
+simulation still steps on a fixed grid of one period (as a fixed-step simulator synchronized to
+real time): a timer that fires late delays the publication, not the stamps, so the monitor's
+finite differences see the motion and not the scheduler's jitter; if the timer falls more than
+``MAX_LAG_PERIODS`` behind, the grid is re-anchored to the clock.
 """
 
 from __future__ import annotations
@@ -59,6 +63,8 @@ from gait_nodes.sim.kinematics import KinematicSimulation, SimulationSettings
 from gait_nodes.sim.zmp_monitor import ZmpMonitor, ZmpState, central_differences
 
 NODE_NAME = 'kinematic_simulator'
+#: On the wall clock, how many periods the step grid may trail the clock before re-anchoring.
+MAX_LAG_PERIODS = 10
 LEVEL_WORDS = {OK: 'OK', WARN: 'WARN', ERROR: 'ERROR'}
 
 
@@ -308,9 +314,13 @@ class KinematicSimulator(Node):
         period_ns = int(round(1e9 / self.params.rate_hz))
         if self._owns_time:
             self._sim_ns += period_ns
-            now_ns = self._sim_ns
+            self._step(self._sim_ns, period_ns)
         else:
-            now_ns = self.get_clock().now().nanoseconds
+            for now_ns in self._grid_times_ns(period_ns):
+                self._step(now_ns, period_ns)
+
+    def _step(self, now_ns: int, period_ns: int) -> None:
+        """One integration step at ``now_ns`` and everything published for it."""
         if self._clock_publisher is not None:
             clock = self._msg['Clock']()
             clock.clock = self._stamp(now_ns)
@@ -345,6 +355,22 @@ class KinematicSimulator(Node):
             self._last_summary_ns = now_ns
         elif (now_ns - self._last_summary_ns) * 1e-9 >= self.params.diagnostics_period_s - 1e-9:
             self._publish_summary(now_ns)
+
+    def _grid_times_ns(self, period_ns: int) -> list[int]:
+        """The grid instants this tick steps through: the next one, and any the timer missed.
+
+        The grid is re-anchored to the clock when the clock went back or the timer starved for
+        more than ``MAX_LAG_PERIODS``.
+        """
+        clock_ns = self.get_clock().now().nanoseconds
+        if not self._history:
+            return [clock_ns]
+        last_ns = self._history[-1][0]
+        next_ns = last_ns + period_ns
+        if clock_ns < last_ns or clock_ns - next_ns > MAX_LAG_PERIODS * period_ns:
+            return [clock_ns]
+        missed = max(clock_ns - next_ns, 0) // period_ns
+        return [next_ns + k * period_ns for k in range(missed + 1)]
 
     def _account(self, step) -> None:
         window = self._window

@@ -6,6 +6,7 @@ by body from finite differences of those configurations.
 """
 
 import math
+from types import SimpleNamespace
 
 import numpy as np
 import pinocchio as pin
@@ -558,3 +559,46 @@ def test_a_command_beyond_the_velocity_limit_saturates_and_is_reported(inproc, r
     assert values_of(summaries[0])['joints'] == 'fr_joint_1'
     assert float(values_of(summaries[0])['max_demanded_over_limit']) == pytest.approx(
         0.5 / (limit * 0.005))
+
+
+class FixedClock:
+    """A clock that reads whatever the test sets."""
+
+    def __init__(self):
+        self.ns = 0
+
+    def now(self):
+        """The time the test set."""
+        return SimpleNamespace(nanoseconds=self.ns)
+
+
+def test_on_the_wall_clock_steps_stay_on_the_period_grid_whatever_the_timer_jitter(inproc):
+    """A late timer delays publication, not stamps; missed steps are caught up.
+
+    A clock that jumps (back, or too far ahead) re-anchors the grid.
+    """
+    from gait_nodes.kinematic_simulator import MAX_LAG_PERIODS, KinematicSimulator
+
+    simulator = KinematicSimulator()
+    clock = FixedClock()
+    simulator.get_clock = lambda: clock
+    period = NS // 200
+    stamps = []
+    simulator._step = lambda now_ns, _period: (stamps.append(now_ns),
+                                               simulator._history.append((now_ns, None, None)))
+    clock.ns = 10 * NS
+    simulator._owns_time = False
+    simulator.tick()
+    for jitter in (700_000, -300_000, 1_900_000, 0):
+        clock.ns = stamps[-1] + period + jitter
+        simulator.tick()
+    assert np.all(np.diff(stamps) == period)
+    clock.ns = stamps[-1] + 3 * period + 1000  # the timer missed two ticks
+    simulator.tick()
+    assert np.all(np.diff(stamps) == period) and len(stamps) == 8
+    clock.ns = stamps[-1] + (MAX_LAG_PERIODS + 3) * period  # starved: re-anchored on the clock
+    simulator.tick()
+    assert stamps[-1] == clock.ns
+    clock.ns = stamps[-1] - 7 * period  # clock went back
+    simulator.tick()
+    assert stamps[-1] == clock.ns
