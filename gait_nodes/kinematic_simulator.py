@@ -43,6 +43,7 @@ from gait_nodes.contract import (
     ContractError,
     FootstepPlan,
     footsteps_from_msg,
+    time_msg_to_ns,
 )
 from gait_nodes.diagnostics import ERROR, OK, WARN, DiagnosticsReporter
 from gait_nodes.errors import GaitNodesError, ParameterError
@@ -65,6 +66,8 @@ from gait_nodes.sim.zmp_monitor import ZmpMonitor, ZmpState, central_differences
 NODE_NAME = 'kinematic_simulator'
 #: On the wall clock, how many periods the step grid may trail the clock before re-anchoring.
 MAX_LAG_PERIODS = 10
+#: How far [periods] a joint setpoint is carried forward with its velocity when the next is late.
+MAX_EXTRAPOLATION_PERIODS = 2
 LEVEL_WORDS = {OK: 'OK', WARN: 'WARN', ERROR: 'ERROR'}
 
 
@@ -119,10 +122,14 @@ class KinematicSimulatorParams:
                                   contact_height_tolerance_m=self.contact_height_tolerance_m)
 
 
-def joint_command_from_msg(msg, robot: RobotModel, previous: np.ndarray) -> np.ndarray:
-    """The commanded joint vector of a /joint_commands JointState over ``previous``.
+def joint_command_from_msg(msg, robot: RobotModel, previous: np.ndarray,
+                           previous_velocity: np.ndarray | None = None
+                           ) -> tuple[np.ndarray, np.ndarray]:
+    """The commanded joint positions and velocities of a /joint_commands JointState.
 
-    A command may name a subset of the joints; the others keep their previous command.
+    A command may name a subset of the joints; the others keep their previous command
+    (``previous``, ``previous_velocity``: zero when None). A command without velocities
+    commands zero velocity for the joints it names.
 
     Raises:
         ContractError: No joints, an unknown or repeated joint name, ``position`` (or a
@@ -147,8 +154,12 @@ def joint_command_from_msg(msg, robot: RobotModel, previous: np.ndarray) -> np.n
                                                                               dtype=float))):
         raise ContractError('a joint command holds a NaN or infinite value')
     command = np.array(previous, dtype=float)
-    command[robot.indices(names)] = positions
-    return command
+    velocity = (np.zeros(len(command)) if previous_velocity is None
+                else np.array(previous_velocity, dtype=float))
+    indices = robot.indices(names)
+    command[indices] = positions
+    velocity[indices] = np.array(msg.velocity, dtype=float) if len(msg.velocity) else 0.0
+    return command, velocity
 
 
 class _Window:
@@ -185,6 +196,8 @@ class KinematicSimulator(Node):
         self.monitor = ZmpMonitor(self.robot.model, self.robot.description.foot_radius_m,
                                   self.params.ground_height_m)
         self._command = self.robot.joint_positions(q_initial)
+        self._command_velocity = np.zeros(len(self._command))
+        self._command_stamp_ns: int | None = None
         self._plan: FootstepPlan | None = None
         self._plan_order: np.ndarray | None = None
         self._last_command_ns: int | None = None
@@ -288,12 +301,31 @@ class KinematicSimulator(Node):
     # -- inputs --------------------------------------------------------------------------------
 
     def _on_joint_commands(self, msg) -> None:
+        stamp_ns = time_msg_to_ns(msg.header.stamp) or self._now_ns()
         try:
-            self._command = joint_command_from_msg(msg, self.robot, self._command)
+            held = self._command_at(stamp_ns)  # the joints it does not name go on as they were
+            self._command, self._command_velocity = joint_command_from_msg(
+                msg, self.robot, held, self._command_velocity)
         except ContractError as exc:
             self.diagnostics.drop('/joint_commands', str(exc))
             return
+        self._command_stamp_ns = stamp_ns
         self._last_command_ns = self._now_ns()
+
+    def _command_at(self, now_ns: int) -> np.ndarray:
+        """The command stream at ``now_ns``: the last setpoint advanced by its velocity.
+
+        A position servo fed by a jittery stream interpolates between setpoints; carrying the
+        last one forward with its commanded velocity (for at most ``MAX_EXTRAPOLATION_PERIODS``)
+        does the same without delay, so the joints follow the commanded motion and not the
+        arrival times of its messages.
+        """
+        if self._command_stamp_ns is None:
+            return self._command
+        period_ns = 1e9 / self.params.rate_hz
+        ahead_ns = min(max(now_ns - self._command_stamp_ns, 0), MAX_EXTRAPOLATION_PERIODS
+                       * period_ns)
+        return self._command + self._command_velocity * (ahead_ns * 1e-9)
 
     def _on_footsteps(self, msg) -> None:
         try:
@@ -338,7 +370,7 @@ class KinematicSimulator(Node):
         if self._plan is not None:
             t_plan = (now_ns - self._plan.start_ns) * 1e-9
             contacts = self._plan.contacts_at(t_plan)[self._plan_order]
-        step = self.simulation.step(self._command, dt_s, contacts)
+        step = self.simulation.step(self._command_at(now_ns), dt_s, contacts)
         self._history.append((now_ns, step.q, step.contact_points_in_world))
         self._publish_state(now_ns, step.q, step.actuators.velocities_rad_s)
         self._account(step)

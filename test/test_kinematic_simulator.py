@@ -602,3 +602,35 @@ def test_on_the_wall_clock_steps_stay_on_the_period_grid_whatever_the_timer_jitt
     clock.ns = stamps[-1] - 7 * period  # clock went back
     simulator.tick()
     assert stamps[-1] == clock.ns
+
+
+def test_a_jittery_command_stream_gives_the_commanded_motion_not_its_arrival_times(
+        inproc, robot, q_nominal):
+    """A ramp of stamped setpoints with velocities, every third one lost.
+
+    The joint still moves at the commanded velocity at every tick (setpoints are carried
+    forward with their velocity), so the monitor's accelerations, hence its ZMP, stay those of
+    the motion.
+    """
+    names = list(robot.joint_names)
+    start = robot.joint_positions(q_nominal)
+    k = names.index('fl_joint_1')
+    rate = 0.4  # [rad/s], within the limit
+    schedule = []
+    for tick in range(1, 200):
+        if tick % 3 == 0:
+            continue
+        stamp = tick * NS // 200
+        positions = start.copy()
+        positions[k] += rate * max(stamp - NS // 4, 0) * 1e-9
+        velocities = np.zeros(len(names))
+        velocities[k] = rate if stamp >= NS // 4 else 0.0
+        msg = joint_command(names, positions, velocities)
+        msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(stamp, NS)
+        schedule.append((stamp, msg))
+    simulator, collector = run_simulator(1.0, schedule)
+    moving = [m for m in collector.messages['/joint_states']
+              if NS // 4 + NS // 50 <= stamp_ns(m) <= NS - NS // 50]
+    assert len(moving) > 100
+    for msg in moving:
+        assert msg.velocity[k] == pytest.approx(rate, abs=1e-9)
