@@ -53,6 +53,9 @@ def build_parser() -> ArgumentParser:
     run.add_argument('--runtime', choices=['dds', 'inproc', 'rclpy'], default=None,
                      help='dds: one process per node; inproc: one process, simulated time '
                           '(default: GAIT_NODES_RUNTIME, else rclpy when importable, else dds)')
+    run.add_argument('--fast', action='store_true',
+                     help='the same as --runtime inproc: one process, simulated time, as fast '
+                          'as the machine goes')
     run.add_argument('--scenario', default=DEFAULT_SCENARIO, metavar='NAME',
                      help=f'walk to run: {", ".join(SCENARIOS)} (default {DEFAULT_SCENARIO})')
     run.add_argument('--duration', type=str, default=None,
@@ -358,6 +361,11 @@ def main(args: list[str] | None = None) -> int:
         scenario = get_scenario(options.scenario)
         options.duration = _positive_float(options.duration or str(scenario.duration_s))
         parse_ros_args(ros[1:])  # refuse a bad --params-file or -p before starting anything
+        if options.fast:
+            if options.runtime not in (None, 'inproc'):
+                raise ArgumentError(f'--fast runs the inproc runtime; it cannot be combined '
+                                    f'with --runtime {options.runtime}')
+            options.runtime = 'inproc'
         runtime_name = select_runtime(options.runtime)
         names = _selected_nodes(options)
         if options.record == '':

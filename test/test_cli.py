@@ -68,8 +68,7 @@ def gain_node(tmp_path) -> Path:
 
 
 def test_run_inproc_prints_a_summary(tmp_path):
-    result = run(['-m', 'gait_nodes', 'run', '--runtime', 'inproc', '--duration', '2'],
-                 cwd=tmp_path)
+    result = run(['-m', 'gait_nodes', 'run', '--fast', '--duration', '2'], cwd=tmp_path)
     assert result.returncode == 0, result.stderr
     assert 'Traceback' not in result.stderr
     assert 'runtime inproc' in result.stdout
@@ -118,6 +117,7 @@ def test_run_inproc_records_inspects_and_plots(tmp_path):
     (['--runtime', 'inproc', '--duration', 'soon'], {}, ['soon']),
     (['--runtime', 'inproc', '--duration', 'nan'], {}, ['nan']),
     (['--runtime', 'inproc', '--nodes', 'teleporter'], {}, ['teleporter']),
+    (['--fast', '--runtime', 'dds'], {}, ['--fast', 'dds']),
     (['--runtime', 'inproc', '--ros-args', '--bogus'], {}, ['--bogus']),
     (['--runtime', 'inproc', '--ros-args', '-p', 'gain'], {}, ['gain']),
     (['--runtime', 'inproc', '--ros-args', '--params-file', 'missing.yaml'], {},
@@ -130,7 +130,8 @@ def test_run_inproc_records_inspects_and_plots(tmp_path):
     (['--runtime', 'rclpy'], {}, ['rclpy']),
     (['--no-such-option'], {}, ['--no-such-option']),
 ], ids=['runtime-flag', 'runtime-env', 'negative-duration', 'word-duration', 'nan-duration',
-        'unknown-node', 'unknown-ros-flag', 'param-without-value', 'missing-params-file',
+        'unknown-node', 'fast-with-dds', 'unknown-ros-flag', 'param-without-value',
+        'missing-params-file',
         'bad-yaml-params-file', 'list-params-file', 'binary-params-file', 'bad-yaml-value',
         'rclpy-without-ros', 'unknown-option'])
 def test_run_refuses_bad_input_on_one_line(tmp_path, args, env, words):
