@@ -46,7 +46,6 @@ class InputWatchdog:
         self._start_ns = int(start_ns)
         self._last_ns: dict[str, int | None] = {topic: None for topic in self.topics}
         self._stale: tuple[str, ...] = ()
-        self._updated = False
 
     @property
     def timeout_s(self) -> float:
@@ -86,10 +85,10 @@ class InputWatchdog:
         return self._stale
 
     def update(self, now_ns: int) -> bool:
-        """Re-evaluate at ``now_ns``; True when the stale set changed (or on the first call)."""
+        """Re-evaluate at ``now_ns``; True when the set of stale inputs changed."""
         stale = tuple(topic for topic in self.topics if self.is_stale(topic, now_ns))
-        changed = stale != self._stale or not self._updated
-        self._stale, self._updated = stale, True
+        changed = stale != self._stale
+        self._stale = stale
         return changed
 
     def status(self, now_ns: int) -> tuple[str, int, str, dict]:
