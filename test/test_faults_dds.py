@@ -239,14 +239,16 @@ def test_killed_nodes_are_reported_stale_and_rejoin_the_walk(graph):
 
 
 def _walk(graph: Graph, order: tuple[str, ...], delay_s: float) -> tuple[dict, np.ndarray]:
-    for name in order:
+    graph.start(order[0])
+    graph.wait_ready(order[0])
+    graph.spin(delay_s)  # the first node alone on the network for a while, then the others
+    for name in order[1:]:
         graph.start(name)
-        graph.wait_ready(name)
-        graph.spin(delay_s)
+    graph.wait_ready(*order)
     graph.velocity = VELOCITY_M_S
-    graph.spin_until(lambda: any(p.moved.any() for p in graph.plans), 20.0, 'a walking plan')
-    first = next(p for p in graph.plans if p.moved.any())
-    lift_ns = first.start_ns + int(first.times_s[np.flatnonzero(first.moved.any(axis=1))[0] - 1]
+    graph.spin_until(lambda: any(p.moved().any() for p in graph.plans), 20.0, 'a walking plan')
+    first = next(p for p in graph.plans if p.moved().any())
+    lift_ns = first.start_ns + int(first.times_s[np.flatnonzero(first.moved().any(axis=1))[0]]
                                    * 1e9)
     graph.spin_until(lambda: graph.base[-1][1] > lift_ns * 1e-9 + 6.5, 30.0, '6.5 s of walking')
     footholds = {}
