@@ -9,6 +9,13 @@ re-initializes the generator from the current COM state, so the COM does not jum
 comes from /gait/footsteps (mean of the planned foot yaws, linear between contact changes);
 without a plan it is 0.
 
+/gait/zmp_reference is a stream: silent for more than ``stale_after_s`` it is reported stale
+(WARN, ``com_preview_controller: inputs``) and the controller keeps running on the last good
+reference, held at its end (the walk the other nodes still follow, then a standstill over the
+last ZMP). The generator starts from the robot's measured COM (/gait/com, the simulator's
+full-model COM, with its velocity from the recent samples) when one is fresh, so that a
+controller restarted mid-walk picks up the robot where it is; without one, from the reference.
+
 A ZMP reference with a NaN, out-of-order stamps, too short a horizon (< ``preview_s``) or in a
 frame other than odom is dropped and reported on /diagnostics; the controller keeps its last good
 reference and its state. A parameter change that the controller cannot use (Riccati equation
@@ -20,6 +27,7 @@ from __future__ import annotations
 
 import math
 import sys
+from collections import deque
 
 import numpy as np
 
@@ -32,11 +40,15 @@ from gait_nodes.errors import ComPlanningError, GaitNodesError
 from gait_nodes.interfaces import get_message
 from gait_nodes.robot.description import load_robot_description
 from gait_nodes.runtime import DurabilityPolicy, Node, QoSProfile, SetParametersResult
+from gait_nodes.watchdog import InputWatchdog
 
 NODE_NAME = 'com_preview_controller'
 ZMP_TOPIC = '/gait/zmp_reference'
 FOOTSTEPS_TOPIC = '/gait/footsteps'
 COM_TOPIC = '/gait/com_reference'
+MEASURED_COM_TOPIC = '/gait/com'
+#: Least span of /gait/com samples a measured COM velocity is taken over [s].
+VELOCITY_SPAN_S = 0.02
 #: Declared parameters and their defaults (also in config/com_preview_controller.yaml).
 DEFAULTS = {
     'robot': 'robosimian',
@@ -47,6 +59,7 @@ DEFAULTS = {
     'Q': 1.0,
     'R': 1e-6,
     'status_period_s': 1.0,
+    'stale_after_s': 0.5,
 }
 #: Most ticks the controller catches up in one timer call when it fell behind the clock.
 MAX_CATCH_UP_TICKS = 50
@@ -80,6 +93,10 @@ class ComPreviewController(Node):
         self._settings = self._make_settings(values, self._robot)  # raises when invalid
         preview_gains(self._settings.preview)
         self.diagnostics = DiagnosticsReporter(self, self._robot.name)
+        self.inputs = InputWatchdog([ZMP_TOPIC], values['stale_after_s'],
+                                    self.get_clock().now().nanoseconds,
+                                    holding='running on the last reference, held at its end')
+        self._measured_com: deque = deque(maxlen=50)  # (received [ns], stamp [ns], (x, y))
         self._publisher = self.create_publisher(
             get_message('trajectory_msgs/msg/MultiDOFJointTrajectory'), COM_TOPIC, 10)
         self.create_subscription(get_message('nav_msgs/msg/Path'), ZMP_TOPIC,
@@ -88,6 +105,8 @@ class ComPreviewController(Node):
             get_message('trajectory_msgs/msg/MultiDOFJointTrajectory'), FOOTSTEPS_TOPIC,
             self._on_footsteps, QoSProfile(depth=1,
                                            durability=DurabilityPolicy.TRANSIENT_LOCAL))
+        self.create_subscription(get_message('geometry_msgs/msg/PointStamped'),
+                                 MEASURED_COM_TOPIC, self._on_measured_com, 10)
         self._reference = None
         self._plan = None
         self._generator = None
@@ -110,6 +129,10 @@ class ComPreviewController(Node):
         if not 0 < values['status_period_s'] <= 60:
             raise ComPlanningError(f'status_period_s must be in (0, 60], got '
                                    f'{values["status_period_s"]}')
+        stale = values['stale_after_s']
+        if isinstance(stale, bool) or not isinstance(stale, (int, float)) \
+                or not 0 < stale <= 60:
+            raise ComPlanningError(f'stale_after_s must be in (0, 60] s, got {stale!r}')
         preview = PreviewSettings(com_height_m=height, dt_s=values['dt_s'],
                                   preview_s=values['preview_s'], q_weight=values['Q'],
                                   r_weight=values['R'])
@@ -127,6 +150,7 @@ class ComPreviewController(Node):
             return SetParametersResult(successful=False, reason=str(exc))
         old, old_values = self._settings, self._values
         self._robot, self._values, self._settings = robot, values, settings
+        self.inputs.timeout_s = values['stale_after_s']
         if settings.preview.dt_s != old.preview.dt_s:
             self.destroy_timer(self._timer)
             self._timer = self.create_timer(settings.preview.dt_s, self._tick)
@@ -170,6 +194,7 @@ class ComPreviewController(Node):
                                              '(out of order)')
             return
         self._reference = reference
+        self.inputs.heard(ZMP_TOPIC, self.get_clock().now().nanoseconds)
         if self._generator is not None:
             self._generator.set_reference(reference)
 
@@ -179,17 +204,43 @@ class ComPreviewController(Node):
         except contract.ContractError as exc:
             self.diagnostics.drop(FOOTSTEPS_TOPIC, str(exc))
 
+    def _on_measured_com(self, msg) -> None:
+        xy = (msg.point.x, msg.point.y)
+        if msg.header.frame_id.lstrip('/') != contract.WORLD_FRAME \
+                or not all(math.isfinite(v) for v in xy):
+            return  # only a start hint: a bad sample is simply not used
+        self._measured_com.append((self.get_clock().now().nanoseconds,
+                                   contract.time_msg_to_ns(msg.header.stamp), xy))
+
+    def _start_state(self, now_ns: int) -> np.ndarray:
+        """(3, 2) position, velocity, acceleration the generator starts from."""
+        samples = [s for s in self._measured_com
+                   if (now_ns - s[0]) * 1e-9 <= self._values['stale_after_s']]
+        if not samples:
+            start = self._reference.sample(np.array([now_ns], dtype=np.int64))[0]
+            return np.array([start, (0.0, 0.0), (0.0, 0.0)])
+        _, last_ns, last = samples[-1]
+        velocity = np.zeros(2)
+        for _, stamp_ns, xy in samples:
+            span_s = (last_ns - stamp_ns) * 1e-9
+            if span_s >= VELOCITY_SPAN_S:
+                velocity = (np.array(last) - np.array(xy)) / span_s
+            else:
+                break
+        return np.array([last, velocity, (0.0, 0.0)])
+
     # --- output -------------------------------------------------------------------------------
 
     def _tick(self) -> None:
+        now_ns = self.get_clock().now().nanoseconds
+        if self.inputs.update(now_ns):
+            self.diagnostics.publish([self.inputs.status(now_ns)])
         if self._reference is None:
             return
-        now_ns = self.get_clock().now().nanoseconds
         preview = self._settings.preview
         if self._generator is None:
-            start = self._reference.sample(np.array([now_ns], dtype=np.int64))[0]
-            state = np.array([start, (0.0, 0.0), (0.0, 0.0)])
-            self._generator = make_generator(self._settings, state, now_ns, self._reference)
+            self._generator = make_generator(self._settings, self._start_state(now_ns), now_ns,
+                                             self._reference)
         behind = (now_ns - self._generator.stamp_ns) // preview.dt_ns
         if behind > MAX_CATCH_UP_TICKS or behind < -1:
             # Far off the clock (a jump in time): carry the state over to now.
@@ -224,6 +275,7 @@ class ComPreviewController(Node):
         self._last_published = sample
 
     def _report_status(self) -> None:
+        self.diagnostics.publish([self.inputs.status(self.get_clock().now().nanoseconds)])
         if self._last_published is None:
             self.diagnostics.report('controller', WARN, f'waiting for {ZMP_TOPIC}')
             return

@@ -9,6 +9,16 @@ The gait settings are ROS parameters (defaults in ``config/footstep_planner.yaml
 ``ros2 param set`` and a /gait/command go through the same checks, and an accepted change takes
 effect at the next step boundary. The planning itself is :class:`gait_nodes.planning.footsteps.
 GaitPlanner`.
+
+/cmd_vel watchdog (``cmd_vel_timeout_s`` > 0, as twist_mux's timeout): when no /cmd_vel has come
+for that long the planner walks a zero twist from the next step boundary (closing steps, then
+standing), reports the stale input (WARN, ``footstep_planner: inputs``) and walks again with the
+next /cmd_vel. 0 (the default) keeps the last /cmd_vel until the next one, as
+``python -m gait_nodes.command --vel`` expects; a launcher that streams /cmd_vel sets it.
+
+Rejoin: started into a running graph (dds, rclpy), the planner waits up to ``JOIN_WAIT_S`` for
+the robot's base pose (/tf odom -> base_link) and plans from there (feet at their nominal places
+under that pose) instead of from the origin.
 """
 
 from __future__ import annotations
@@ -32,17 +42,21 @@ from gait_nodes.planning.gait_params import (
 )
 from gait_nodes.robot.description import load_robot_description
 from gait_nodes.runtime import Node, Parameter, SetParametersResult, qos_profile_latched
+from gait_nodes.watchdog import InputWatchdog
 
 NODE_NAME = 'footstep_planner'
 GAIT_FIELDS = tuple(GaitParameters.__dataclass_fields__)
 #: Node settings: name -> (lowest, lowest included?, highest included, unit).
 NODE_SETTINGS = {'rate_hz': (0.0, False, 1000.0, 'Hz'), 'zmp_horizon_s': (1.6, True, 60.0, 's'),
-                 'zmp_sample_period_s': (0.0, False, 0.1, 's')}
+                 'zmp_sample_period_s': (0.0, False, 0.1, 's'),
+                 'cmd_vel_timeout_s': (0.0, True, 60.0, 's')}
 #: Most samples in one /gait/zmp_reference.
 MAX_ZMP_SAMPLES = 20000
 #: A clock jump larger than this [s] restarts the plan from standstill.
 CLOCK_JUMP_S = 10.0
 NS_PER_S = 1_000_000_000
+#: Longest wait of a planner started into a running graph for the robot's pose on /tf [s].
+JOIN_WAIT_S = 1.0
 
 
 def shipped_defaults() -> dict[str, object]:
@@ -89,6 +103,12 @@ class FootstepPlanner(Node):
 
         self.origin_ns = self.get_clock().now().nanoseconds
         self.planner = GaitPlanner(self.robot, params)
+        self.inputs = InputWatchdog(['/cmd_vel'], self.settings['cmd_vel_timeout_s'] or 1.0,
+                                    self.origin_ns, holding='stopping (zero velocity from the '
+                                    'next step boundary)')
+        # Under inproc every node starts together; elsewhere the robot may be somewhere already.
+        self._joined = self.context.runtime == 'inproc'
+        self._base_pose: tuple[float, float, float] | None = None
         self._last_now_s = 0.0
         self._pending: tuple[GaitParameters, dict] | None = None
         self._last_plan = None
@@ -105,6 +125,9 @@ class FootstepPlanner(Node):
                                  self.on_cmd_vel, 10)
         self.create_subscription(get_message('std_msgs/msg/String'), '/gait/command',
                                  self.on_command, 10)
+        if not self._joined:
+            self._tf_subscription = self.create_subscription(
+                get_message('tf2_msgs/msg/TFMessage'), '/tf', self.on_tf, 100)
         self.add_on_set_parameters_callback(self.on_set_parameters)
         self.add_post_set_parameters_callback(self.on_parameters_set)
         self.timer = self.create_timer(1.0 / self.settings['rate_hz'], self.tick)
@@ -146,7 +169,8 @@ class FootstepPlanner(Node):
             return
         twist = Twist2D(float(msg.linear.x), float(msg.linear.y), float(msg.angular.z))
         changed = twist != self.planner.requested_twist
-        _, now_s = self.now_s()
+        now_ns, now_s = self.now_s()
+        self.inputs.heard('/cmd_vel', now_ns)
         applied, notes = self.planner.set_velocity(twist, now_s)
         # /cmd_vel is usually streamed: report a clamp when it starts or changes, not per message.
         if changed or notes != self._last_velocity_notes:
@@ -156,6 +180,40 @@ class FootstepPlanner(Node):
                 '; '.join(notes) if notes else 'velocity command accepted',
                 {'requested_twist': twist.as_tuple(), 'applied_twist': applied.as_tuple(),
                  'takes_effect_s': self.planner.next_boundary_s(now_s)})
+
+    def on_tf(self, msg) -> None:
+        """Keep the robot's base pose (x, y, yaw) in odom until the planner has joined."""
+        for transform in msg.transforms:
+            if transform.header.frame_id.lstrip('/') == 'odom' and \
+                    transform.child_frame_id.lstrip('/') == 'base_link':
+                t, r = transform.transform.translation, transform.transform.rotation
+                yaw = math.atan2(2.0 * (r.w * r.z + r.x * r.y), 1.0 - 2.0 * (r.y ** 2 + r.z ** 2))
+                if all(math.isfinite(v) for v in (t.x, t.y, yaw)):
+                    self._base_pose = (float(t.x), float(t.y), yaw)
+
+    def _join(self, now_ns: int) -> bool:
+        """Whether the planner may plan: it knows where the robot is, or waited long enough."""
+        if self._base_pose is None and (now_ns - self.origin_ns) * 1e-9 < JOIN_WAIT_S:
+            return False
+        if self._base_pose is not None:
+            twist = self.planner.requested_twist
+            self.planner = GaitPlanner(self.robot, self.planner.params, base_pose=self._base_pose)
+            self.origin_ns, self._last_now_s = now_ns, 0.0
+            self.planner.set_velocity(twist, 0.0)
+            self.get_logger().info(f'planning from the robot\'s pose {self._base_pose}')
+        self._joined = True
+        self.destroy_subscription(self._tf_subscription)
+        return True
+
+    def _check_cmd_vel(self, now_ns: int, now_s: float) -> None:
+        timeout = self.settings['cmd_vel_timeout_s']
+        if not timeout:
+            return
+        self.inputs.timeout_s = timeout
+        if self.inputs.update(now_ns):
+            self.diagnostics.publish([self.inputs.status(now_ns)])
+        if self.inputs.stale and not self.planner.twist.is_zero():
+            self.planner.set_velocity(Twist2D(), now_s)
 
     def on_command(self, msg) -> None:
         """Apply a JSON gait command as parameters; answer on /gait/command_status."""
@@ -231,8 +289,12 @@ class FootstepPlanner(Node):
     def tick(self) -> None:
         """Extend the plan, publish the footsteps if they changed and the ZMP reference."""
         now_ns, now_s = self.now_s()
+        if not self._joined and not self._join(now_ns):
+            return
+        now_ns, now_s = self.now_s()
         now_s = self._restart_if_clock_jumped(now_ns, now_s)
         self._last_now_s = now_s
+        self._check_cmd_vel(now_ns, now_s)
         horizon = self.settings['zmp_horizon_s']
         self.planner.advance(now_s + horizon + self.planner.params.step_period_s)
         self.planner.prune(now_s)

@@ -62,6 +62,7 @@ from gait_nodes.runtime import (
 from gait_nodes.settings import checked_number as _number
 from gait_nodes.sim.kinematics import KinematicSimulation, SimulationSettings
 from gait_nodes.sim.zmp_monitor import ZmpMonitor, ZmpState, central_differences
+from gait_nodes.watchdog import InputWatchdog
 
 NODE_NAME = 'kinematic_simulator'
 #: On the wall clock, how many periods the step grid may trail the clock before re-anchoring.
@@ -202,7 +203,7 @@ class KinematicSimulator(Node):
         self._plan_order: np.ndarray | None = None
         self._last_command_ns: int | None = None
         self._started_ns: int | None = None
-        self._stale = False
+        self.inputs: InputWatchdog | None = None  # from the first tick, when time starts
         self._stability_level: int | None = None
         # (stamp [ns], q, contact points) of the last three ticks, oldest first.
         self._history: deque = deque(maxlen=3)
@@ -311,6 +312,8 @@ class KinematicSimulator(Node):
             return
         self._command_stamp_ns = stamp_ns
         self._last_command_ns = self._now_ns()
+        if self.inputs is not None:
+            self.inputs.heard('/joint_commands', self._last_command_ns)
 
     def _command_at(self, now_ns: int) -> np.ndarray:
         """The command stream at ``now_ns``: the last setpoint advanced by its velocity.
@@ -359,6 +362,10 @@ class KinematicSimulator(Node):
             self._clock_publisher.publish(clock)
         if self._started_ns is None:
             self._started_ns = now_ns
+            self.inputs = InputWatchdog(['/joint_commands'], self.params.stale_after_s, now_ns,
+                                        holding='holding the last good command')
+            if self._last_command_ns is not None:
+                self.inputs.heard('/joint_commands', self._last_command_ns)
             q0 = self.simulation.q.copy()
             points = self.simulation.contact_points()
             self._history.extend([(now_ns - 2 * period_ns, q0, points),
@@ -542,30 +549,21 @@ class KinematicSimulator(Node):
                     f'(< {self.params.warn_margin_m} m)')
         return f'ZMP {margin:.4f} m inside the support polygon'
 
-    def _input_age_s(self, now_ns: int) -> tuple[float, bool]:
-        since = self._last_command_ns if self._last_command_ns is not None else self._started_ns
-        return (now_ns - since) * 1e-9, self._last_command_ns is None
-
     def _check_inputs(self, now_ns: int) -> None:
-        age_s, waiting = self._input_age_s(now_ns)
-        stale = age_s > self.params.stale_after_s + 1e-9
-        if stale != self._stale:
-            self._stale = stale
+        self.inputs.timeout_s = self.params.stale_after_s
+        if self.inputs.update(now_ns):
             self.diagnostics.publish([self._input_status(now_ns)])
 
     def _input_status(self, now_ns: int):
-        age_s, waiting = self._input_age_s(now_ns)
-        values = {'joint_commands_age_s': age_s, 'stale_after_s': self.params.stale_after_s,
-                  'footstep_plan': 'yes' if self._plan is not None else 'no (contacts by '
-                  'foot height)',
-                  'dropped': ','.join(f'{t}:{n}' for t, n in self.diagnostics.dropped.items())}
-        if self._stale:
-            what = ('no /joint_commands received' if waiting else
-                    'no /joint_commands')
-            return ('inputs', WARN, f'{what} for {age_s:.3g} s: holding the last good command',
-                    values)
-        return ('inputs', OK, 'waiting for /joint_commands' if waiting else
-                'joint commands fresh', values)
+        aspect, level, message, values = self.inputs.status(now_ns)
+        values.update({'joint_commands_age_s': self.inputs.age_s('/joint_commands', now_ns),
+                       'footstep_plan': 'yes' if self._plan is not None else 'no (contacts by '
+                       'foot height)',
+                       'dropped': ','.join(f'{t}:{n}'
+                                           for t, n in self.diagnostics.dropped.items())})
+        if level == OK and not self.inputs.ever_heard('/joint_commands'):
+            message = 'waiting for /joint_commands'
+        return aspect, level, message, values
 
     def _publish_summary(self, now_ns: int) -> None:
         window, self._window = self._window, _Window()

@@ -8,7 +8,15 @@ swing trajectory (/gait/swing_trajectory) and solves the whole-body IK
 reference. The step is scaled down to the joint velocity limits and published on
 /joint_commands (positions and velocities of every joint of the URDF).
 
-* Before the first COM reference and footstep plan have arrived, the nominal stance is held.
+* Before the first COM reference and footstep plan have arrived, the current posture is held:
+  the robot's /joint_states (and /tf base pose) once heard, the nominal stance until then. A
+  node started into a running graph (dds, rclpy) waits up to ``stale_timeout_s`` for
+  /joint_states before it commands anything, so that a restarted IK picks up the robot where it
+  stands instead of pulling it back to the nominal stance, and seeds its solver there.
+* /gait/com_reference is a stream: silent for more than ``stale_timeout_s``, the node holds its
+  last joint command (zero velocity: the robot stops where it is, it does not keep stepping
+  under a frozen COM) and reports the stale input (WARN, ``whole_body_ik: inputs``); when the
+  reference returns it resumes from the held posture and reports OK.
 * A foot in swing per the plan with no swing trajectory covering the instant follows the
   fallback swing (quintic smoothstep from lift-off to landing place, lifted by
   ``fallback_step_height_m``; :func:`gait_nodes.robot.whole_body_ik.fallback_swing_pose`).
@@ -53,6 +61,7 @@ from gait_nodes.robot.whole_body_ik import (
 )
 from gait_nodes.runtime import Node, QoSProfile, SetParametersResult, qos_profile_latched
 from gait_nodes.settings import checked_number as _number
+from gait_nodes.watchdog import InputWatchdog
 
 NODE_NAME = 'whole_body_ik'
 #: Foot error and COM error above which a tick is reported as off target [m] (issue accuracy).
@@ -156,6 +165,13 @@ class WholeBodyIk(Node):
         self._last_tick_ns = None
         self._window = _Window()
         self._last_summary_ns = None
+        self._moving = False
+        self._start_ns = self.get_clock().now().nanoseconds
+        self.inputs = InputWatchdog(['/gait/com_reference'], self.params.stale_timeout_s,
+                                    self._start_ns, holding='holding the last joint command')
+        # Under inproc every node starts together; elsewhere the IK may join a running graph.
+        self._joined = self.context.runtime == 'inproc'
+        self._base_pose = None
         self.add_on_set_parameters_callback(self._on_set_parameters)
 
         self.diagnostics = DiagnosticsReporter(self, self.robot.name)
@@ -166,6 +182,9 @@ class WholeBodyIk(Node):
         self.create_subscription(trajectory, '/gait/footsteps', self._on_footsteps,
                                  QoSProfile(depth=1, durability=qos_profile_latched.durability))
         self.create_subscription(trajectory, '/gait/swing_trajectory', self._on_swing, 10)
+        self.create_subscription(get_message('sensor_msgs/msg/JointState'), '/joint_states',
+                                 self._on_joint_states, 10)
+        self.create_subscription(get_message('tf2_msgs/msg/TFMessage'), '/tf', self._on_tf, 100)
         self.timer = self.create_timer(1.0 / self.params.rate_hz, self.tick)
         self.get_logger().info(f'{self.robot.name}: {len(self.robot.joint_names)} joints, '
                                f'{len(self.robot.ik_joint_names)} moved by the IK, '
@@ -203,6 +222,7 @@ class WholeBodyIk(Node):
             self._family = family
             self._reseed = True
         self.solver.settings = settings
+        self.inputs.timeout_s = params.stale_timeout_s
         self.params = params
         return SetParametersResult(successful=True)
 
@@ -216,6 +236,7 @@ class WholeBodyIk(Node):
             return
         self._com_states = states
         self._com_received_ns = self.get_clock().now().nanoseconds
+        self.inputs.heard('/gait/com_reference', self._com_received_ns)
 
     def _on_footsteps(self, msg) -> None:
         try:
@@ -238,6 +259,37 @@ class WholeBodyIk(Node):
             self.diagnostics.drop('/gait/swing_trajectory', str(exc))
             return
         self._swings[swing.foot] = swing
+
+    def _on_tf(self, msg) -> None:
+        for transform in msg.transforms:
+            if transform.header.frame_id.lstrip('/') == 'odom' and \
+                    transform.child_frame_id.lstrip('/') == 'base_link':
+                t, r = transform.transform.translation, transform.transform.rotation
+                pose = np.array([t.x, t.y, t.z, r.x, r.y, r.z, r.w], dtype=float)
+                if np.all(np.isfinite(pose)) and np.linalg.norm(pose[3:]) > 0.5:
+                    pose[3:] /= np.linalg.norm(pose[3:])
+                    self._base_pose = pose
+
+    def _on_joint_states(self, msg) -> None:
+        """Until motion is commanded, hold the measured posture (rejoin a running graph)."""
+        if self._moving:
+            return
+        try:
+            names = list(msg.name)
+            positions = np.array(msg.position, dtype=float)
+            if len(positions) != len(names) or not np.all(np.isfinite(positions)):
+                raise ContractError('positions are not one finite value per joint')
+            indices = self.robot.indices(names)
+        except (ContractError, GaitNodesError) as exc:
+            self.diagnostics.drop('/joint_states', str(exc))
+            return
+        joints = self.robot.joint_positions(self._q_command)
+        joints[indices] = positions
+        self.robot.set_joint_positions(self._q_command, joints)
+        self.robot.set_joint_positions(self._q_solution, joints)
+        if self._base_pose is not None:
+            self._q_solution[:7] = self._q_command[:7] = self._base_pose
+        self._joined = True
 
     # -- tick ----------------------------------------------------------------------------------
 
@@ -272,9 +324,19 @@ class WholeBodyIk(Node):
         dt_s = period_s if self._last_tick_ns is None or now_ns <= self._last_tick_ns \
             else (now_ns - self._last_tick_ns) * 1e-9
         self._last_tick_ns = now_ns
+        if self.inputs.update(now_ns):
+            self.diagnostics.publish([self._input_status(now_ns, self._window)])
+        if not self._joined:
+            if (now_ns - self._start_ns) * 1e-9 <= self.params.stale_timeout_s:
+                return  # wait a moment for the robot's /joint_states before commanding
+            self._joined = True
         window = self._window
         window.ticks += 1
-        if self._com_states is not None and self._plan is not None:
+        held = self._moving and self.inputs.stale
+        if held:
+            target = self._q_command
+        elif self._com_states is not None and self._plan is not None:
+            self._moving = True
             targets, fallbacks = self._targets_at(now_ns)
             window.fallback_ticks += fallbacks > 0
             if self._reseed:
@@ -292,7 +354,7 @@ class WholeBodyIk(Node):
             window.joints_at_limit.update(result.joints_at_limit)
             target = result.q
         else:
-            target = self.q_nominal
+            target = self._q_command  # the current posture (the nominal stance before any)
         q, velocities, saturation = limit_joint_velocity(self.robot, self._q_command, target,
                                                          dt_s)
         self._q_command = q
@@ -353,19 +415,16 @@ class WholeBodyIk(Node):
     def _input_status(self, now_ns: int, window: _Window):
         waiting = [topic for topic, value in (('/gait/com_reference', self._com_states),
                                               ('/gait/footsteps', self._plan)) if value is None]
-        age_s = None if self._com_received_ns is None else (now_ns - self._com_received_ns) * 1e-9
-        stale = age_s is not None and age_s > self.params.stale_timeout_s
+        aspect, level, message, values = self.inputs.status(now_ns)
         if waiting:
-            message, level = f'holding the nominal stance, waiting for {", ".join(waiting)}', OK
-        elif stale:
-            message, level = f'/gait/com_reference is {age_s:.3g} s old', WARN
-        else:
-            message, level = 'inputs fresh', OK
-        return ('inputs', level, message,
-                {'waiting_for': ','.join(waiting), 'com_reference_age_s': age_s
-                 if age_s is not None else 'none',
-                 'fallback_swing_ticks': window.fallback_ticks,
-                 'dropped': ','.join(f'{t}:{n}' for t, n in self.diagnostics.dropped.items())})
+            holding = 'the current posture' if self._joined else 'nothing yet'
+            message = f'holding {holding}, waiting for {", ".join(waiting)}' + (
+                f'; {message}' if level == WARN else '')
+        values.update({'waiting_for': ','.join(waiting),
+                       'fallback_swing_ticks': window.fallback_ticks,
+                       'dropped': ','.join(f'{t}:{n}'
+                                           for t, n in self.diagnostics.dropped.items())})
+        return aspect, level, message, values
 
     def _family_status(self):
         limb_ik = robosimian_limb_ik(self.robot)

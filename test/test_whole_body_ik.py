@@ -391,8 +391,12 @@ def test_node_holds_the_nominal_stance_before_the_references(inproc):
     for msg in collector.commands:
         np.testing.assert_allclose(msg.position, nominal)
         np.testing.assert_allclose(msg.velocity, 0.0)
-    [status] = collector.status('inputs')
-    assert 'waiting for /gait/com_reference, /gait/footsteps' in status.message
+    statuses = collector.status('inputs')
+    assert all('waiting for /gait/com_reference, /gait/footsteps' in status.message
+               for status in statuses)
+    # Nothing has come for longer than stale_timeout_s: reported at once and in the summary.
+    assert [level_value(s.level) for s in statuses] == [WARN, WARN]
+    assert 'nothing received on /gait/com_reference' in statuses[0].message
 
 
 def test_node_saturates_a_fast_reference_and_reports_the_joints(inproc):

@@ -1,0 +1,112 @@
+"""Stale-input watchdog shared by every node that consumes a stream.
+
+A node names the streams it needs (``/gait/zmp_reference``, ``/gait/com_reference``,
+``/joint_commands``, ``/cmd_vel``...), calls :meth:`InputWatchdog.heard` from each of their
+callbacks and :meth:`InputWatchdog.update` from its timer. An input is *stale* when nothing
+has arrived on it for longer than ``timeout_s`` (counted from the node's start while nothing has
+arrived yet). :meth:`InputWatchdog.update` says when the set of stale inputs changed, so the node
+reports at once; :meth:`InputWatchdog.status` is the ``(aspect, level, message, values)`` entry
+of :meth:`gait_nodes.diagnostics.DiagnosticsReporter.publish`: one ``"<node>: inputs"`` status,
+WARN naming each stale topic and its age, OK once every input is fresh again. No ROS import:
+time comes in as integer nanoseconds.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+from gait_nodes.diagnostics import OK, WARN
+from gait_nodes.errors import ParameterError
+
+ASPECT = 'inputs'
+
+
+class InputWatchdog:
+    """Ages of a node's required input streams.
+
+    Args:
+        topics: The watched topics.
+        timeout_s: Age above which an input is stale [s], > 0.
+        start_ns: The node's start [ns]: an input never heard is as old as the node.
+        holding: What the node does while an input is stale, for the WARN message
+            (e.g. 'holding the last command').
+
+    Raises:
+        ParameterError: No topic, or ``timeout_s`` not a finite number > 0.
+    """
+
+    def __init__(self, topics: Sequence[str], timeout_s: float, start_ns: int,
+                 holding: str = ''):
+        if not topics:
+            raise ParameterError('a watchdog needs at least one topic')
+        self.topics = tuple(topics)
+        self.timeout_s = timeout_s
+        self.holding = holding
+        self._start_ns = int(start_ns)
+        self._last_ns: dict[str, int | None] = {topic: None for topic in self.topics}
+        self._stale: tuple[str, ...] = ()
+
+    @property
+    def timeout_s(self) -> float:
+        """Age above which an input is stale [s]."""
+        return self._timeout_s
+
+    @timeout_s.setter
+    def timeout_s(self, value: float) -> None:
+        if isinstance(value, bool) or not isinstance(value, (int, float)) \
+                or not math.isfinite(value) or value <= 0:
+            raise ParameterError(f'a stale-input timeout must be a number of seconds > 0, got '
+                                 f'{value!r}')
+        self._timeout_s = float(value)
+
+    def heard(self, topic: str, now_ns: int) -> None:
+        """A good message arrived on ``topic`` at ``now_ns``."""
+        if topic not in self._last_ns:
+            raise KeyError(f'{topic} is not watched; watched: {list(self.topics)}')
+        self._last_ns[topic] = int(now_ns)
+
+    def ever_heard(self, topic: str) -> bool:
+        """Whether anything has arrived on ``topic``."""
+        return self._last_ns[topic] is not None
+
+    def age_s(self, topic: str, now_ns: int) -> float:
+        """Time since the last message on ``topic`` (since the start if none) [s]."""
+        last = self._last_ns[topic]
+        return (int(now_ns) - (self._start_ns if last is None else last)) * 1e-9
+
+    def is_stale(self, topic: str, now_ns: int) -> bool:
+        """Whether ``topic`` is older than the timeout at ``now_ns``."""
+        return self.age_s(topic, now_ns) > self._timeout_s + 1e-9
+
+    @property
+    def stale(self) -> tuple[str, ...]:
+        """The topics stale at the last :meth:`update`."""
+        return self._stale
+
+    def update(self, now_ns: int) -> bool:
+        """Re-evaluate at ``now_ns``; True when the set of stale inputs changed."""
+        stale = tuple(topic for topic in self.topics if self.is_stale(topic, now_ns))
+        changed = stale != self._stale
+        self._stale = stale
+        return changed
+
+    def status(self, now_ns: int) -> tuple[str, int, str, dict]:
+        """``('inputs', level, message, values)`` as of the last :meth:`update`."""
+        values: dict[str, object] = {'stale_after_s': self._timeout_s}
+        for topic in self.topics:
+            age = self.age_s(topic, now_ns)
+            values[f'{topic} age_s'] = age
+            values[f'{topic} received'] = 'yes' if self.ever_heard(topic) else 'no'
+        values['stale'] = ','.join(self._stale)
+        if self._stale:
+            parts = []
+            for topic in self._stale:
+                age = self.age_s(topic, now_ns)
+                what = 'nothing received on' if not self.ever_heard(topic) else 'no'
+                parts.append(f'{what} {topic} for {age:.3g} s')
+            message = '; '.join(parts) + f' (> {self._timeout_s:g} s)'
+            if self.holding:
+                message += f': {self.holding}'
+            return ASPECT, WARN, message, values
+        return ASPECT, OK, f'inputs fresh: {", ".join(self.topics)}', values
