@@ -80,7 +80,10 @@ def build_parser() -> ArgumentParser:
 
 def _graph_params(options) -> dict:
     scenario = get_scenario(options.scenario)
-    values = {'robot': options.robot or scenario.robot, **scenario.settings}
+    # The launcher re-sends /cmd_vel every 0.5 s (CommandDriver), so the planner may treat a
+    # silence of 2 s as a lost teleop and stop the walk, as a robot's velocity watchdog does.
+    values = {'robot': options.robot or scenario.robot, 'cmd_vel_timeout_s': 2.0,
+              **scenario.settings}
     if options.gait:
         values['gait'] = options.gait
     return {'/**': {'ros__parameters': values}}
