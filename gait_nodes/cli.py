@@ -25,6 +25,31 @@ ROS_ARGS_EPILOG = (
 
 #: A launcher (``run``) names a file here; the node writes it once it is up and spinning.
 READY_FILE_ENV = 'GAIT_NODES_READY_FILE'
+#: A launcher puts its pid here; the node stops (SIGTERM, a clean stop) when that process dies.
+LAUNCHER_PID_ENV = 'GAIT_NODES_LAUNCHER_PID'
+#: prctl option: signal delivered to this process when its parent dies (Linux).
+_PR_SET_PDEATHSIG = 1
+
+
+def stop_with_launcher() -> bool:
+    """Arrange a SIGTERM for this node when the launcher named in the environment dies.
+
+    Nodes run in their own sessions (a Ctrl-C reaches the launcher only, which stops them in
+    order); without this, a launcher killed outright would leave its graph running. Linux only
+    (prctl); elsewhere a no-op.
+
+    Returns:
+        False when the launcher is already gone (the node should not start), else True.
+    """
+    launcher = os.environ.get(LAUNCHER_PID_ENV)
+    if not launcher or not sys.platform.startswith('linux'):
+        return True
+    import ctypes
+    import signal
+
+    libc = ctypes.CDLL(None, use_errno=True)
+    libc.prctl(_PR_SET_PDEATHSIG, int(signal.SIGTERM), 0, 0, 0)
+    return str(os.getppid()) == launcher.strip()
 
 
 class ArgumentParser(argparse.ArgumentParser):
@@ -81,6 +106,10 @@ def run_node(node_factory, args: list[str] | None = None, *, prog: str,
     if add_arguments is not None:
         add_arguments(parser)
     options = parser.parse_args(user)
+    if not stop_with_launcher():
+        print(f'{prog}: the launcher that started this node is gone; not starting',
+              file=sys.stderr)
+        return 0
     try:
         runtime.init(args=[prog, *ros], runtime=options.runtime)
     except GaitNodesError as exc:

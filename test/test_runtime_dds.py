@@ -528,7 +528,7 @@ def test_signal_stops_a_spinning_process_cleanly(tmp_path, program, signum):
         time.sleep(0.2)
         sent = time.monotonic()
         process.send_signal(signum)
-        stdout, stderr = finish(process, 10)
+        stdout, stderr = finish(process, 10 if program == 'run_node' else 30)
         elapsed = time.monotonic() - sent
     finally:
         if process.poll() is None:
@@ -541,3 +541,46 @@ def test_signal_stops_a_spinning_process_cleanly(tmp_path, program, signum):
     assert 'Traceback' not in stderr
     if program == 'gait_nodes_run':
         assert 'runtime dds' in stdout
+
+
+def _children(pid: int) -> list[int]:
+    """Pids of the processes whose parent is ``pid`` (Linux /proc)."""
+    children = []
+    for entry in Path('/proc').iterdir():
+        if entry.name.isdigit():
+            try:
+                fields = (entry / 'stat').read_text().rsplit(')', 1)[1].split()
+            except (FileNotFoundError, ProcessLookupError):
+                continue
+            if int(fields[1]) == pid:
+                children.append(int(entry.name))
+    return children
+
+
+def _alive(pid: int) -> bool:
+    try:
+        state = Path(f'/proc/{pid}/stat').read_text().rsplit(')', 1)[1].split()[0]
+    except FileNotFoundError:
+        return False
+    return state != 'Z'
+
+
+def test_nodes_stop_when_their_launcher_is_killed(tmp_path):
+    """The nodes run in their own sessions; a SIGKILLed launcher must not leave them running."""
+    command = [sys.executable, '-m', 'gait_nodes', 'run', '--runtime', 'dds', '--duration', '60',
+               '--nodes', 'footstep_planner,com_preview_controller']
+    process = subprocess.Popen(command, env=dds_env(), cwd=tmp_path, stdout=subprocess.DEVNULL,
+                               stderr=subprocess.DEVNULL)
+    try:
+        _wait_until(lambda: len(_children(process.pid)) == 2, 20, 'the two node processes')
+        nodes = _children(process.pid)
+        _wait_until(lambda: all(_handles_sigterm(pid) for pid in nodes), 60,
+                    'the nodes to be up')
+        process.kill()
+        process.wait()
+        _wait_until(lambda: not any(_alive(pid) for pid in nodes), 20,
+                    'the orphaned nodes to stop')
+    finally:
+        if process.poll() is None:
+            process.kill()
+            process.wait()
