@@ -25,6 +25,7 @@ from gait_nodes.planning.gait_params import (
     parameters_from_mapping,
     parse_command,
 )
+from gait_nodes.robot.description import load_robot_description
 
 QUADRUPED = robot('quadruped')
 BIPED = robot('biped')
@@ -39,6 +40,18 @@ def test_defaults_take_the_robot_stance_and_heights():
     assert biped.com_height_m == 0.814
     assert quad.cycle_s == 2 * quad.step_period_s
     assert quad.swing_s == pytest.approx((1 - quad.duty_factor) * quad.cycle_s)
+
+
+def test_default_stride_fits_the_robot_reach():
+    # The class default (0.3 m), or the robot's reach when that is shorter (a Go2: 0.2 m).
+    default = GaitParameters.__dataclass_fields__['step_length_m'].default
+    go2 = load_robot_description('go2')
+    for description in (QUADRUPED, BIPED, go2):
+        params = GaitParameters.for_robot(description)
+        assert params.step_length_m == min(default, description.reach.max_step_length_m)
+        params.check_robot(description)
+    assert GaitParameters.for_robot(go2).step_length_m == 0.2
+    assert GaitParameters.for_robot(go2, step_length_m=0.1).step_length_m == 0.1
 
 
 def test_auto_resolves_to_the_robot_first_gait():

@@ -202,9 +202,34 @@ def test_polynomial_swing_rests_at_both_ends_and_reaches_the_via_height():
     via = evaluate(coefficients, [0.5 * duration])[0]
     assert via[2] == pytest.approx(0.02 + 0.1)
     assert np.allclose(via[:2], 0.5 * (swing.start_in_world[:2] + swing.end_in_world[:2]))
-    assert trajectory.positions_in_world[20, 2] == pytest.approx(0.12)
+    middle = len(trajectory.times_s) // 2
+    assert trajectory.times_s[middle] == pytest.approx(0.5 * duration)
+    assert trajectory.positions_in_world[middle, 2] == pytest.approx(0.12)
     assert trajectory.duration_s == pytest.approx(duration)
     assert trajectory.yaws_rad[-1] == pytest.approx(0.3)
+
+
+@pytest.mark.parametrize('duration', [0.4, 0.6, 2.3])
+def test_polynomial_swing_waypoints_are_dense_enough_to_follow_linearly(duration):
+    # The IK follows the waypoints linearly at 200 Hz: sampled at its period the followed path
+    # is the polynomial to 0.1 mm, and its second differences (what the ZMP monitor sees) are
+    # the polynomial's acceleration, not impulses at sparse corners.
+    from gait_nodes.robot.whole_body_ik import swing_pose_at
+    from gait_nodes.swing.polynomial import MAX_WAYPOINT_SPACING_S
+
+    swing = make_swing([0.0, 0.1, 0.0], [0.3, 0.1, 0.0], 0.0, 0.0, duration=duration)
+    trajectory, coefficients = polynomial_swing(swing, 0, 0.1, samples=21)
+    assert len(trajectory.times_s) >= 21
+    assert np.diff(trajectory.times_s).max() <= MAX_WAYPOINT_SPACING_S + 1e-12
+    dt = 0.005
+    times = np.arange(0.0013, duration, dt)  # ticks not aligned with the waypoints
+    followed = np.array([swing_pose_at(trajectory, int(round(t * 1e9)))[0] for t in times])
+    exact = evaluate(coefficients, times)[:, :3]
+    assert np.abs(followed - exact).max() < 1e-4
+    if len(times) > 2:
+        acceleration = np.diff(followed, 2, axis=0) / dt**2
+        peak = np.abs(evaluate(coefficients, times, 2)[:, :3]).max()
+        assert np.abs(acceleration).max() <= 1.1 * peak + 1e-9
 
 
 # -- the node in the inproc runtime ----------------------------------------------------------

@@ -138,8 +138,16 @@ class GaitParameters:
 
     @classmethod
     def for_robot(cls, robot: RobotDescription, **values) -> GaitParameters:
-        """Parameters with the robot's stance width and heights as defaults, checked for it."""
-        defaults = {'step_width_m': nominal_stance_width_m(robot),
+        """Parameters with the robot's defaults, checked for it.
+
+        The robot gives the stance width, the heights and the longest stride: the class default
+        ``step_length_m``, or the robot's ``reach.max_step_length_m`` when that is shorter (a
+        Go2 reaches 0.2 m), so that the defaults always suit the robot.
+        """
+        step_length_m = min(cls.__dataclass_fields__['step_length_m'].default,
+                            robot.reach.max_step_length_m)
+        defaults = {'step_length_m': step_length_m,
+                    'step_width_m': nominal_stance_width_m(robot),
                     'com_height_m': robot.com_height_m,
                     'body_height_m': robot.body_height_m}
         params = cls(**{**defaults, **values})

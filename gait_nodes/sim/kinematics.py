@@ -44,6 +44,12 @@ DESCENT_TOLERANCE_M = 1e-7
 #: Feet whose second principal spread is below this fraction of the first are collinear.
 COLLINEAR_TOLERANCE = 1e-6
 BASE_FIT_ITERATIONS = 10
+#: Weight [m/rad] of the base orientation of the previous tick in the fit on fewer than three
+#: point feet: among the poses that put the feet in place, the fit takes the one closest in
+#: orientation to the previous pose. Without it the step of least norm in (v, w) mixes a
+#: rotation about the line of the feet into every body translation (that line does not pass
+#: through the base origin), and a trot's base pitched 0.09 rad in 20 s.
+ORIENTATION_PRIOR_M = 1e-3
 
 
 def _skew(vectors: np.ndarray) -> np.ndarray:
@@ -148,9 +154,10 @@ def fit_base_pose(base_guess: pin.SE3, feet_in_base: list[pin.SE3], feet_in_worl
 
     Three or more non-collinear feet fix the pose from their positions alone: least squares in
     closed form (:func:`kabsch`). Fewer feet: least squares over the positions and, for flat
-    feet (``rotation_weight_m`` [m/rad] > 0), the sole orientations; damped Gauss-Newton on
-    SE(3) from ``base_guess``, which keeps what the feet leave free (the rotation about the line
-    of two point feet) at its value in ``base_guess``.
+    feet (``rotation_weight_m`` [m/rad] > 0), the sole orientations, for point feet a weak pull
+    (:data:`ORIENTATION_PRIOR_M`) towards the orientation of ``base_guess``; damped
+    Gauss-Newton on SE(3) from ``base_guess``. What point feet leave free (the rotation about
+    the line of two of them) thus keeps its value in ``base_guess``.
 
     Args:
         base_guess: The previous base pose.
@@ -177,7 +184,13 @@ def fit_base_pose(base_guess: pin.SE3, feet_in_base: list[pin.SE3], feet_in_worl
         position_jacobian[:, :, :3] = rotation
         position_jacobian[:, :, 3:] = -np.einsum('ij,njk->nik', rotation, skews)
         jacobians = [position_jacobian.reshape(-1, 6)]
-        if rotation_weight_m > 0.0:
+        if rotation_weight_m == 0.0:
+            prior = base_guess.rotation.T @ rotation
+            prior_block = np.zeros((3, 6))
+            prior_block[:, 3:] = ORIENTATION_PRIOR_M * pin.Jlog3(prior)
+            residuals.append(ORIENTATION_PRIOR_M * pin.log3(prior))
+            jacobians.append(prior_block)
+        else:
             for foot_base, foot_world in zip(feet_in_base, feet_in_world, strict=True):
                 error = foot_world.rotation.T @ rotation @ foot_base.rotation
                 block = np.zeros((3, 6))

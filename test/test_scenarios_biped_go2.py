@@ -1,0 +1,207 @@
+"""End to end in inproc: the biped_walk and go2_trot scenarios walk, judged from their bags.
+
+Each scenario runs as a user runs it (``python -m gait_nodes run --runtime inproc --scenario NAME
+--record DIR``); both run at once, one process each. From the bag:
+
+* through ``inspect``'s analysis (:func:`gait_nodes.bag.analysis.inspect_bag`): no ERROR on
+  /diagnostics, the ZMP inside the recorded support polygon at every sample with a positive
+  least margin, the whole-body IK never saturated (the plan is feasible, not clipped), the
+  commanded speed reached (within 10 %), and the biped standing still after its stop;
+* independently, from the raw messages: forward kinematics (Pinocchio) of /tf (full base pose)
+  and /joint_states puts every stance foot where /gait/footsteps has it, and the COM the monitor
+  reports (/gait/com) is on /gait/com_reference.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from gait_nodes import contract
+from gait_nodes.bag.analysis import inspect_bag
+from gait_nodes.bag.reader import BagReader
+from gait_nodes.diagnostics import ERROR, OK
+from gait_nodes.errors import ConfigError
+from gait_nodes.interfaces import deserialize_message, get_message
+from gait_nodes.robot.description import example_robot_data_dir
+from gait_nodes.robot.model import load_robot_model
+from gait_nodes.scenarios import get_scenario
+
+ROOT = Path(__file__).resolve().parents[1]
+#: Scenario -> (run duration [s], commanded forward speed [m/s], window of steady walking [s]).
+RUNS = {'biped_walk': (16.0, 0.1, (4.5, 9.0)), 'go2_trot': (10.0, 0.1, (3.0, 10.0))}
+#: A stance foot's forward kinematics within this of its footstep [m].
+FOOT_TOLERANCE_M = 0.002
+#: The monitor's COM within this of the COM reference [m].
+COM_TOLERANCE_M = 0.001
+
+
+@pytest.fixture(scope='module')
+def bags(tmp_path_factory) -> dict[str, Path]:
+    """Both scenarios recorded, run side by side."""
+    try:
+        example_robot_data_dir()
+    except ConfigError:
+        pytest.skip('example-robot-data is not installed (the Go2 model)')
+    out = tmp_path_factory.mktemp('scenarios')
+    env = {**os.environ, 'PYTHONPATH': str(ROOT), 'XDG_CACHE_HOME': str(out / 'cache')}
+    processes = {}
+    for name, (duration, _, _) in RUNS.items():
+        command = [sys.executable, '-m', 'gait_nodes', 'run', '--runtime', 'inproc',
+                   '--scenario', name, '--duration', str(duration), '--record',
+                   str(out / name)]
+        processes[name] = subprocess.Popen(command, cwd=out, env=env, stdout=subprocess.PIPE,
+                                           stderr=subprocess.STDOUT, text=True)
+    for name, process in processes.items():
+        output, _ = process.communicate(timeout=300)
+        assert process.returncode == 0, f'{name}:\n{output[-3000:]}'
+    return {name: out / name for name in RUNS}
+
+
+@pytest.fixture(scope='module')
+def inspected(bags):
+    return {name: inspect_bag(path) for name, path in bags.items()}
+
+
+def _raw(bag: Path) -> dict:
+    """Full base poses, joint states, footstep plans and COM samples, decoded independently."""
+    types = {'/tf': 'tf2_msgs/msg/TFMessage', '/joint_states': 'sensor_msgs/msg/JointState',
+             '/gait/footsteps': 'trajectory_msgs/msg/MultiDOFJointTrajectory',
+             '/gait/com': 'geometry_msgs/msg/PointStamped',
+             '/gait/com_reference': 'trajectory_msgs/msg/MultiDOFJointTrajectory'}
+    raw = {'tf': {}, 'joints': {}, 'plans': [], 'com': [], 'com_reference': []}
+    for channel, _, _, data in BagReader(bag).messages():
+        if channel.topic not in types:
+            continue
+        msg = deserialize_message(data, get_message(types[channel.topic]))
+        if channel.topic == '/tf':
+            for transform in msg.transforms:
+                t, r = transform.transform.translation, transform.transform.rotation
+                raw['tf'][contract.time_msg_to_ns(transform.header.stamp)] = np.array(
+                    [t.x, t.y, t.z, r.x, r.y, r.z, r.w])
+        elif channel.topic == '/joint_states':
+            raw['joints'][contract.time_msg_to_ns(msg.header.stamp)] = dict(
+                zip(msg.name, msg.position, strict=True))
+        elif channel.topic == '/gait/footsteps':
+            raw['plans'].append(contract.footsteps_from_msg(msg))
+        elif channel.topic == '/gait/com':
+            p = msg.point
+            raw['com'].append((contract.time_msg_to_ns(msg.header.stamp), p.x, p.y, p.z))
+        else:
+            raw['com_reference'].extend(
+                (s.stamp_ns, *s.position_in_world) for s in contract.com_reference_from_msg(msg))
+    return raw
+
+
+@pytest.fixture(scope='module')
+def raw(bags):
+    return {name: _raw(path) for name, path in bags.items()}
+
+
+@pytest.mark.parametrize('name', RUNS)
+def test_no_error_and_the_zmp_stays_inside_the_support_polygon(inspected, name):
+    report = inspected[name].report['gait']
+    levels = report['diagnostics']['by_level']
+    assert levels.get('ERROR', 0) == 0, report['diagnostics']['first_error']
+    margin = report['zmp_margin']
+    assert margin['samples_outside'] == 0 and margin['min_m'] > 0.0, margin
+    assert margin['samples'] >= 0.99 * RUNS[name][0] * 200
+
+
+@pytest.mark.parametrize('name', RUNS)
+def test_the_plan_is_feasible_the_ik_never_saturates(inspected, name):
+    series = inspected[name].series
+    ik = [(status, level, message) for _, status, level, message, _ in series.diagnostics
+          if status.startswith('whole_body_ik:')]
+    saturation = [(level, message) for status, level, message in ik
+                  if status == 'whole_body_ik: velocity saturation']
+    assert saturation and all(level == OK for level, _ in saturation), saturation
+    assert all(level != ERROR for _, level, _ in ik)
+    tracking = {message for status, _, message in ik if status == 'whole_body_ik: tracking'}
+    assert tracking == {'feet and COM on target'}, tracking
+    for topic, peak in inspected[name].report['gait']['joint_velocity'].items():
+        # Below the limit with room: the walk does not ride the joint limits.
+        assert peak['samples_over_limit'] == 0 and peak['peak_ratio_to_limit'] < 0.9, topic
+
+
+@pytest.mark.parametrize('name', RUNS)
+def test_the_robot_walks_at_the_commanded_speed(inspected, name):
+    _, speed, (start_s, end_s) = RUNS[name]
+    base = np.array(sorted(inspected[name].series.base))
+    t = base[:, 0] * 1e-9
+    chosen = (t >= start_s) & (t <= end_s)
+    # Over whole gait cycles the body's mean forward speed is the commanded one.
+    fitted = np.polyfit(t[chosen], base[chosen, 1], 1)[0]
+    assert fitted == pytest.approx(speed, rel=0.1)
+    assert np.abs(base[chosen, 2]).max() < 0.1  # no drift sideways
+
+
+def test_the_biped_stops_and_stands(inspected, raw):
+    series = inspected['biped_walk'].series
+    base = np.array(sorted(series.base))
+    t = base[:, 0] * 1e-9
+    last = t >= 15.0  # the stop was commanded at 10 s: closing step, then the COM settles
+    assert np.ptp(base[last, 1]) < 1e-3 and np.ptp(base[last, 2]) < 1e-3
+    plan = raw['biped_walk']['plans'][-1]
+    end_s = (base[-1, 0] - plan.start_ns) * 1e-9
+    assert plan.contacts_at(end_s).all()
+    feet = plan.positions_in_world[plan.index_at(end_s)]
+    # Both feet side by side, the body over their middle.
+    assert abs(feet[0, 0] - feet[1, 0]) < 1e-6
+    com = np.array(sorted(series.com))
+    assert np.linalg.norm(com[-1, 1:3] - feet[:, :2].mean(axis=0)) < 0.005
+    velocities = np.array(series.joints['/joint_states'].velocities)
+    assert np.abs(velocities[-200:]).max() < 0.05
+
+
+@pytest.mark.parametrize('name', RUNS)
+def test_stance_feet_are_where_the_footsteps_put_them(raw, name):
+    data = raw[name]
+    robot = load_robot_model(get_scenario(name).robot)
+    model_data = robot.new_data()
+    plans = sorted(data['plans'], key=lambda p: p.start_ns)
+    starts = np.array([p.start_ns for p in plans])
+    errors = []
+    for stamp in sorted(data['tf'])[::5]:
+        if stamp not in data['joints']:
+            continue
+        q = np.zeros(robot.model.nq)
+        q[:7] = data['tf'][stamp]
+        joints = data['joints'][stamp]
+        robot.set_joint_positions(q, np.array([joints[n] for n in robot.joint_names]))
+        pin.framesForwardKinematics(robot.model, model_data, q)
+        which = np.searchsorted(starts, stamp, side='right') - 1
+        if which < 0:
+            continue
+        plan = plans[which]
+        t_s = (stamp - plan.start_ns) * 1e-9
+        down, index = plan.contacts_at(t_s), plan.index_at(t_s)
+        for k, foot in enumerate(robot.foot_names):
+            f = plan.foot_names.index(foot)
+            if down[f]:
+                sole = model_data.oMf[robot.foot_frame_ids[k]].translation \
+                    - [0.0, 0.0, robot.foot_frame_height_m]
+                errors.append(np.linalg.norm(sole - plan.positions_in_world[index][f]))
+    assert len(errors) > 500
+    assert max(errors) < FOOT_TOLERANCE_M
+
+
+@pytest.mark.parametrize('name', RUNS)
+def test_the_monitor_com_tracks_the_com_reference(raw, name):
+    com = np.array(sorted(raw[name]['com']), dtype=float)
+    reference = np.array(sorted(set(raw[name]['com_reference'])), dtype=float)
+    stamps, index = np.unique(reference[:, 0], return_index=True)
+    reference = reference[index]
+    # The reference starts with the first ZMP reference; judge from then on.
+    com = com[(com[:, 0] >= stamps[0]) & (com[:, 0] <= stamps[-1])]
+    expected = np.column_stack([np.interp(com[:, 0], stamps, reference[:, i])
+                                for i in (1, 2, 3)])
+    assert len(com) > 0.9 * RUNS[name][0] * 200
+    assert np.abs(com[:, 1:] - expected).max() < COM_TOLERANCE_M
+
