@@ -29,13 +29,17 @@ import numpy as np
 
 from gait_nodes.contract import FootstepPlan, ZmpReference
 from gait_nodes.errors import GaitParameterError
+from gait_nodes.planning import rhythm as rhythm_module
 from gait_nodes.planning import support, zmp_reference
 from gait_nodes.planning.gait_params import GaitParameters
 from gait_nodes.planning.layout import FootLayout
+from gait_nodes.planning.rhythm import Rhythm
 from gait_nodes.robot.description import RobotDescription
 
 #: A foot closer than this to its target [m, rad] does not step (no zero-length steps).
 ALREADY_THERE = 1e-6
+#: Longest weight shift before the first step from standstill [s] (at most one step period).
+START_SHIFT_S = 1.0
 NS_PER_S = 1_000_000_000
 
 
@@ -94,13 +98,22 @@ def wrap_angle(angle: np.ndarray) -> np.ndarray:
 
 
 def clamp_velocity(twist: Twist2D, params: GaitParameters, robot: RobotDescription,
-                   layout: FootLayout) -> tuple[Twist2D, list[str]]:
+                   layout: FootLayout, cycle_of=None) -> tuple[Twist2D, list[str]]:
     """The twist the planner walks for a commanded ``twist``, and why it was reduced.
 
     Each component is clamped to its configured maximum; then the whole twist is scaled down so
     that no foot moves more than one stride (``step_length_m`` along x,
     ``reach.max_step_width_m`` along y) and the body turns at most ``reach.max_turn_rad`` in a
     cycle.
+
+    Args:
+        twist: The commanded twist.
+        params: Gait parameters.
+        robot: Robot description (reach).
+        layout: Foot layout.
+        cycle_of: Gait cycle [s] of a twist when the rhythm depends on it (``timing:
+            joint_limit``); raises GaitParameterError for a twist the joints cannot walk.
+            None: ``params.cycle_s``.
     """
     notes = []
     values = list(twist.as_tuple())
@@ -115,10 +128,13 @@ def clamp_velocity(twist: Twist2D, params: GaitParameters, robot: RobotDescripti
                          f'({settings[i]})')
             values[i] = clamped
     result = Twist2D(*values)
-    cycle = params.cycle_s
     offsets = layout.offsets(params.step_width_m)
 
     def fits(candidate: Twist2D) -> bool:
+        try:
+            cycle = params.cycle_s if cycle_of is None else cycle_of(candidate)
+        except GaitParameterError:
+            return False
         if abs(candidate.wz_rad_s) * cycle > robot.reach.max_turn_rad + 1e-12:
             return False
         moved = place(integrate_pose(np.zeros(3), candidate, cycle), offsets) - offsets
@@ -131,12 +147,15 @@ def clamp_velocity(twist: Twist2D, params: GaitParameters, robot: RobotDescripti
             middle = 0.5 * (low + high)
             low, high = (middle, high) if fits(result.scaled(middle)) else (low, middle)
         reduced = result.scaled(low)
+        cycle = params.cycle_s if cycle_of is None else cycle_of(reduced)
+        rhythm = ('' if cycle_of is None else
+                  ' at the fastest rhythm the joint velocity limit allows')
         notes.append(f'twist ({result.vx_m_s:g}, {result.vy_m_s:g}, {result.wz_rad_s:g}) '
                      f'scaled by {low:.3f} to ({reduced.vx_m_s:.4g}, {reduced.vy_m_s:.4g}, '
-                     f'{reduced.wz_rad_s:.4g}) to keep each swing within one stride '
+                     f'{reduced.wz_rad_s:.4g}) to keep each swing within one stride{rhythm} '
                      f'(step_length_m {params.step_length_m:g} m, reach.max_step_width_m '
                      f'{robot.reach.max_step_width_m:g} m, reach.max_turn_rad '
-                     f'{robot.reach.max_turn_rad:g} rad per {cycle:g} s cycle)')
+                     f'{robot.reach.max_turn_rad:g} rad per {cycle:.4g} s cycle)')
         result = reduced
     return result, notes
 
@@ -232,18 +251,25 @@ class GaitPlanner:
         base_pose: Initial body pose (x [m], y [m], yaw [rad]) in odom; the feet start at their
             nominal places under it.
         start_s: Time of the initial standstill [s].
+        swing_timing: Least swing times at the joint velocity limit
+            (:class:`gait_nodes.swing.timing.SwingTiming`), used with ``timing: joint_limit``;
+            None: every gait keeps the fixed timing of its parameters.
 
     Raises:
         GaitParameterError: ``params`` do not suit the robot.
     """
 
     def __init__(self, robot: RobotDescription, params: GaitParameters | None = None, *,
-                 base_pose: Sequence[float] = (0.0, 0.0, 0.0), start_s: float = 0.0):
+                 base_pose: Sequence[float] = (0.0, 0.0, 0.0), start_s: float = 0.0,
+                 swing_timing=None):
         self.robot = robot
         self.layout = FootLayout.of(robot)
         params = params or GaitParameters.for_robot(robot)
         params.check_robot(robot)
         self._params = params
+        self._timing = swing_timing
+        self._rhythms: dict = {}
+        self._clamped: dict = {}
         self._requested = Twist2D()
         self._twist = Twist2D()
         pose = np.array(base_pose, dtype=float)
@@ -273,6 +299,65 @@ class GaitPlanner:
         """Twist last commanded, before clamping."""
         return self._requested
 
+    @property
+    def swing_timing(self):
+        """The swing timing model (None: fixed timing)."""
+        return self._timing
+
+    def set_swing_timing(self, swing_timing, now_s: float) -> None:
+        """Time the steps from the next step boundary after ``now_s`` with ``swing_timing``."""
+        self._timing = swing_timing
+        self._rhythms.clear()
+        self._clamped.clear()
+        self._twist, _ = self._clamp(self._requested, self._params)
+        self._replan(now_s)
+
+    def rhythm(self, params: GaitParameters | None = None,
+               twist: Twist2D | None = None) -> Rhythm | None:
+        """The joint-limit rhythm of steady walking at ``twist`` (default: the walked twist).
+
+        None with ``timing: fixed`` or without a swing timing model.
+
+        Raises:
+            GaitParameterError: The joints cannot walk ``twist`` at any stride.
+        """
+        params = params or self._params
+        twist = self._twist if twist is None else twist
+        if params.timing != 'joint_limit' or self._timing is None:
+            return None
+        key = (params, twist)
+        if key not in self._rhythms:
+            if len(self._rhythms) > 256:
+                self._rhythms.clear()
+            gait = params.resolved_gait(self.robot)
+            try:
+                self._rhythms[key] = rhythm_module.walking_rhythm(gait, self.layout, params,
+                                                                  twist, self._timing)
+            except GaitParameterError as exc:
+                self._rhythms[key] = exc
+        result = self._rhythms[key]
+        if isinstance(result, GaitParameterError):
+            raise result
+        return result
+
+    def timed(self, params: GaitParameters, twist: Twist2D) -> GaitParameters:
+        """``params`` with the step period and duty factor the steps at ``twist`` walk with."""
+        rhythm = self.rhythm(params, twist)
+        return params if rhythm is None else rhythm.apply(params)
+
+    def _clamp(self, twist: Twist2D, params: GaitParameters) -> tuple[Twist2D, list[str]]:
+        key = (twist, params)
+        if key not in self._clamped:
+            if len(self._clamped) > 256:
+                self._clamped.clear()
+            cycle_of = None
+            if params.timing == 'joint_limit' and self._timing is not None:
+                def cycle_of(candidate):
+                    return self.rhythm(params, candidate).cycle_s
+            self._clamped[key] = clamp_velocity(twist, params, self.robot, self.layout,
+                                                cycle_of)
+        return self._clamped[key]
+
     def set_parameters(self, params: GaitParameters, now_s: float) -> None:
         """Use ``params`` from the next step boundary after ``now_s``.
 
@@ -280,7 +365,7 @@ class GaitPlanner:
             GaitParameterError: ``params`` do not suit the robot (nothing changes).
         """
         params.check_robot(self.robot)
-        twist, _ = clamp_velocity(self._requested, params, self.robot, self.layout)
+        twist, _ = self._clamp(self._requested, params)
         self._params, self._twist = params, twist
         self._replan(now_s)
 
@@ -295,7 +380,7 @@ class GaitPlanner:
         """
         if not all(math.isfinite(v) for v in twist.as_tuple()):
             raise GaitParameterError(f'velocity command {twist.as_tuple()} is not finite')
-        applied, notes = clamp_velocity(twist, self._params, self.robot, self.layout)
+        applied, notes = self._clamp(twist, self._params)
         self._requested = twist
         if applied != self._twist:
             self._twist = applied
@@ -313,8 +398,25 @@ class GaitPlanner:
         return self._steps[-1].state_after if self._steps else self._initial
 
     def _replan(self, now_s: float) -> None:
-        """Drop the steps that have not started by ``now_s``."""
+        """Drop the steps that have not started by ``now_s``; end a standstill at ``now_s``.
+
+        A step that holds the robot standing has nothing to finish: it is cut at ``now_s`` (its
+        ZMP where it is then), so that a command from standstill starts the walk at once.
+        """
         self._steps = [step for step in self._steps if step.start_s <= now_s]
+        if self._steps and self._steps[-1].kind == 'stand' and self._steps[-1].end_s > now_s:
+            step = self._steps[-1]
+            cut = max(now_s, step.start_s)
+            zmp = zmp_reference.sample(step.zmp_times_s, step.zmp_points, np.array([cut]))[0]
+            times = np.array([step.start_s, cut]) if cut > step.start_s else np.array([cut])
+            points = np.array([step.zmp_points[0], zmp]) if cut > step.start_s else zmp[None]
+            after = dataclasses.replace(step.state_after, time_s=cut, zmp=zmp)
+            self._steps[-1] = dataclasses.replace(step, end_s=cut, zmp_times_s=times,
+                                                  zmp_points=points, state_after=after)
+            if cut == step.start_s:
+                self._steps.pop()
+                if not self._steps:
+                    self._initial = dataclasses.replace(self._initial, time_s=cut, zmp=zmp)
 
     def next_boundary_s(self, now_s: float) -> float:
         """Time of the first step boundary after ``now_s`` (where a change takes effect)."""
@@ -346,7 +448,6 @@ class GaitPlanner:
         gait = params.resolved_gait(self.robot)
         groups = self.layout.swing_groups(gait)
         offsets = self.layout.offsets(params.step_width_m)
-        half, cycle, swing = params.step_period_s, params.cycle_s, params.swing_s
         t0 = state.time_s
         if twist.is_zero():
             rest = state.last_anchor if state.mode == 'walking' else state.rest_pose
@@ -358,6 +459,8 @@ class GaitPlanner:
             group_index = next(g % len(groups) for g in range(state.next_group,
                                                               state.next_group + len(groups))
                                if pending & set(sum(groups[g % len(groups)], ())))
+            params = self._closing_params(params, gait, state, targets, yaws,
+                                          sum(groups[group_index], ()))
             path = dict(path_start_s=state.path_start_s, path_pose=state.path_pose,
                         path_twist=state.path_twist)
 
@@ -366,11 +469,13 @@ class GaitPlanner:
 
             mode = 'stopping'
         else:
+            params = self.timed(params, twist)
+            half, cycle, swing = params.step_period_s, params.cycle_s, params.swing_s
             starting = state.mode != 'walking'
             rest = state.rest_pose
             group_index = ((0 if _leads_left(twist) else 1) if starting
                            else state.next_group % len(groups))
-            extra = half if state.mode == 'standing' else 0.0
+            extra = self._start_shift_s(params) if state.mode == 'standing' else 0.0
             first_touch_down = t0 + params.transfer_s(gait) + extra + swing
             if starting:
                 # The body starts so that no foot of the first cycle moves more than a stride.
@@ -394,7 +499,8 @@ class GaitPlanner:
                 return place(anchor, offsets[foot:foot + 1])[0], anchor[2], anchor
 
             mode = 'walking'
-        extra = half if state.mode == 'standing' else 0.0
+        swing = params.swing_s
+        extra = self._start_shift_s(params) if state.mode == 'standing' else 0.0
         t1 = t0 + params.transfer_s(gait) + extra
         positions, foot_yaws = state.positions.copy(), state.yaws.copy()
         slots, last_anchor = [], state.last_anchor
@@ -428,6 +534,24 @@ class GaitPlanner:
             next_group=group_index + 1, rest_pose=rest, last_anchor=last_anchor, **path)
         return Step(gait, kind, t0, t_end, state.positions, state.yaws, tuple(slots), times,
                     points, kept, params, twist, after_state)
+
+    @staticmethod
+    def _start_shift_s(params: GaitParameters) -> float:
+        """Weight shift added before the first step from standstill [s]."""
+        return min(params.step_period_s, START_SHIFT_S)
+
+    def _closing_params(self, params: GaitParameters, gait: str, state: _State,
+                        targets: np.ndarray, yaws: np.ndarray, feet) -> GaitParameters:
+        """``params`` timed for the closing swings of ``feet`` to ``targets`` (joint limit)."""
+        if params.timing != 'joint_limit' or self._timing is None:
+            return params
+        c, s = math.cos(state.yaws.mean()), math.sin(state.yaws.mean())
+        moves = (targets - state.positions) @ np.array([[c, -s], [s, c]])
+        turns = wrap_angle(yaws - state.yaws)
+        swing_s = max(self._timing.swing_s(f, moves[f], float(turns[f])) for f in feet)
+        rhythm = rhythm_module.rhythm_for_swing(gait, swing_s, self._timing.lift_and_lower_s(),
+                                                self._timing.name)
+        return rhythm.apply(params)
 
     def _stand_step(self, state: _State, gait: str, rest: np.ndarray) -> Step:
         t0, t_end = state.time_s, state.time_s + self._params.step_period_s

@@ -54,6 +54,7 @@ from gait_nodes.robot.description import RobotDescription
 GAITS = ('biped', 'crawl', 'trot', 'auto')
 SWING_METHODS = ('polynomial', 'value_table')
 COM_METHODS = ('preview', 'sway', 'polynomial')
+TIMINGS = ('fixed', 'joint_limit')
 
 #: Steps per gait cycle (every gait).
 STEPS_PER_CYCLE = 2
@@ -75,7 +76,7 @@ NUMERIC_RANGES: dict[str, tuple[float, float, str]] = {
     'max_wz_rad_s': (0.0, 10.0, 'rad/s'),
 }
 CHOICE_FIELDS: dict[str, tuple[str, ...]] = {
-    'gait': GAITS, 'swing': SWING_METHODS, 'com_method': COM_METHODS,
+    'gait': GAITS, 'swing': SWING_METHODS, 'com_method': COM_METHODS, 'timing': TIMINGS,
 }
 
 
@@ -95,6 +96,9 @@ class GaitParameters:
         zmp_margin_m: Least distance of the ZMP reference inside the support polygon [m].
         swing: Swing-leg method: polynomial | value_table.
         com_method: COM method: preview | sway | polynomial.
+        timing: fixed (``step_period_s`` and ``duty_factor`` as given) | joint_limit (the
+            rhythm follows from the joint velocity limit, see :mod:`gait_nodes.planning.
+            rhythm`; for a robot without a swing timing model the same as fixed).
         max_vx_m_s: Largest forward speed accepted from /cmd_vel [m/s].
         max_vy_m_s: Largest sideways speed accepted from /cmd_vel [m/s].
         max_wz_rad_s: Largest turn rate accepted from /cmd_vel [rad/s].
@@ -111,6 +115,7 @@ class GaitParameters:
     zmp_margin_m: float = 0.01
     swing: str = 'polynomial'
     com_method: str = 'preview'
+    timing: str = 'fixed'
     max_vx_m_s: float = 0.1
     max_vy_m_s: float = 0.05
     max_wz_rad_s: float = 0.1
