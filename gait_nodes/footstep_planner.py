@@ -27,6 +27,7 @@ from gait_nodes.planning.footsteps import GaitPlanner, Twist2D
 from gait_nodes.planning.gait_params import (
     NUMERIC_RANGES,
     GaitParameters,
+    nominal_stance_width_m,
     parameters_from_mapping,
     parse_command,
 )
@@ -73,7 +74,11 @@ class FootstepPlanner(Node):
         defaults = shipped_defaults()
         robot_name = self.declare_parameter('robot', str(defaults.pop('robot'))).value
         self.robot = load_robot_description(robot_name)
-        robot_defaults = GaitParameters.for_robot(self.robot).to_dict()
+        # The robot's defaults, unchecked: checking resolves gait 'auto', which for a robot
+        # with limb IK runs the thesis' crossover (seconds), and the settings are checked below.
+        robot_defaults = GaitParameters(step_width_m=nominal_stance_width_m(self.robot),
+                                        com_height_m=self.robot.com_height_m,
+                                        body_height_m=self.robot.body_height_m).to_dict()
         values = {}
         for name in NODE_SETTINGS:
             values[name] = self.declare_parameter(name, float(defaults[name])).value

@@ -40,6 +40,10 @@ from gait_nodes.robot.description import RobotDescription
 ALREADY_THERE = 1e-6
 #: Longest weight shift before the first step from standstill [s] (at most one step period).
 START_SHIFT_S = 1.0
+#: A step re-timed for swings longer than its rhythm's gets this much more than they need, so
+#: that the later touch-downs (and footholds) it causes still fit; at most MAX_RETIMING times.
+RETIMING_ALLOWANCE = 0.02
+MAX_RETIMING = 4
 NS_PER_S = 1_000_000_000
 
 
@@ -443,12 +447,24 @@ class GaitPlanner:
                 last = step.slots[-1]
                 self._before = (last.touch_down_s, last.positions_after, last.yaws_after)
 
-    def _next_step(self, state: _State) -> Step:
+    def _next_step(self, state: _State, swing_s: float | None = None, retimed: int = 0
+                   ) -> Step:
+        """The step after ``state``; with ``swing_s``, its swings last that long [s].
+
+        With ``timing: joint_limit`` a step whose swings need more time than its rhythm gives
+        (the first steps, a change of gait or velocity, the closing steps: footholds that do
+        not follow the steady pattern) is planned again with the time they need.
+        """
         params, twist = self._params, self._twist
         gait = params.resolved_gait(self.robot)
         groups = self.layout.swing_groups(gait)
         offsets = self.layout.offsets(params.step_width_m)
         t0 = state.time_s
+        params = self.timed(params, twist)
+        if swing_s is not None:
+            params = rhythm_module.rhythm_for_swing(gait, swing_s,
+                                                    self._timing.lift_and_lower_s(),
+                                                    self._timing.name).apply(params)
         if twist.is_zero():
             rest = state.last_anchor if state.mode == 'walking' else state.rest_pose
             targets = place(rest, offsets)
@@ -459,8 +475,6 @@ class GaitPlanner:
             group_index = next(g % len(groups) for g in range(state.next_group,
                                                               state.next_group + len(groups))
                                if pending & set(sum(groups[g % len(groups)], ())))
-            params = self._closing_params(params, gait, state, targets, yaws,
-                                          sum(groups[group_index], ()))
             path = dict(path_start_s=state.path_start_s, path_pose=state.path_pose,
                         path_twist=state.path_twist)
 
@@ -469,7 +483,6 @@ class GaitPlanner:
 
             mode = 'stopping'
         else:
-            params = self.timed(params, twist)
             half, cycle, swing = params.step_period_s, params.cycle_s, params.swing_s
             starting = state.mode != 'walking'
             rest = state.rest_pose
@@ -532,26 +545,43 @@ class GaitPlanner:
         after_state = _State(
             time_s=t_end, positions=positions, yaws=foot_yaws, zmp=points[-1], mode=mode,
             next_group=group_index + 1, rest_pose=rest, last_anchor=last_anchor, **path)
+        needed = self._needed_swing_s(gait, state, slots, points, params.com_height_m)
+        if needed > swing * (1.0 + 1e-9) and retimed < MAX_RETIMING:
+            return self._next_step(state, needed * (1.0 + RETIMING_ALLOWANCE), retimed + 1)
         return Step(gait, kind, t0, t_end, state.positions, state.yaws, tuple(slots), times,
                     points, kept, params, twist, after_state)
+
+    def _needed_swing_s(self, gait: str, state: _State, slots: Sequence[SwingSlot],
+                        zmp_points: np.ndarray, com_height_m: float) -> float:
+        """Longest time [s] the swings of ``slots`` need at the joint limit (0: no model).
+
+        Each swing is probed where it happens (:meth:`gait_nodes.swing.timing.SwingTiming.
+        step_s`): the other feet where they stand, the COM over the ZMP reference of the swing
+        (held at the step's knot in a crawl or biped step, moving along the diagonal in a trot).
+        """
+        if self._params.timing != 'joint_limit' or self._timing is None or not slots:
+            return 0.0
+        from gait_nodes.contract import Swing
+
+        centre = zmp_points[1] if gait != 'trot' else 0.5 * (zmp_points[1] + zmp_points[2])
+        com = np.array([centre[0], centre[1], com_height_m])
+        needed = 0.0
+        positions, yaws = state.positions, state.yaws
+        for slot in slots:
+            body_yaw = float(np.angle(np.exp(1j * yaws).sum()))
+            feet = np.column_stack([positions, np.zeros(len(positions))])
+            swings = {foot: Swing(self.layout.names[foot], slot.lift_off_s, slot.touch_down_s,
+                                  feet[foot], np.array([*slot.positions_after[foot], 0.0]),
+                                  float(yaws[foot]), float(slot.yaws_after[foot]))
+                      for foot in slot.feet}
+            needed = max(needed, self._timing.step_s(swings, feet, yaws, body_yaw, com))
+            positions, yaws = slot.positions_after, slot.yaws_after
+        return needed
 
     @staticmethod
     def _start_shift_s(params: GaitParameters) -> float:
         """Weight shift added before the first step from standstill [s]."""
         return min(params.step_period_s, START_SHIFT_S)
-
-    def _closing_params(self, params: GaitParameters, gait: str, state: _State,
-                        targets: np.ndarray, yaws: np.ndarray, feet) -> GaitParameters:
-        """``params`` timed for the closing swings of ``feet`` to ``targets`` (joint limit)."""
-        if params.timing != 'joint_limit' or self._timing is None:
-            return params
-        c, s = math.cos(state.yaws.mean()), math.sin(state.yaws.mean())
-        moves = (targets - state.positions) @ np.array([[c, -s], [s, c]])
-        turns = wrap_angle(yaws - state.yaws)
-        swing_s = max(self._timing.swing_s(f, moves[f], float(turns[f])) for f in feet)
-        rhythm = rhythm_module.rhythm_for_swing(gait, swing_s, self._timing.lift_and_lower_s(),
-                                                self._timing.name)
-        return rhythm.apply(params)
 
     def _stand_step(self, state: _State, gait: str, rest: np.ndarray) -> Step:
         t0, t_end = state.time_s, state.time_s + self._params.step_period_s

@@ -38,9 +38,14 @@ from collections.abc import Callable
 
 import numpy as np
 
-from gait_nodes.contract import SwingTrajectory
+from gait_nodes.contract import Swing, SwingTrajectory
 from gait_nodes.errors import SwingPolicyError
 
+#: Relative extra time of a swing probed where it happens (:meth:`SwingTiming.step_s`): the COM
+#: drifts a little while the ZMP reference holds still.
+STEP_MARGIN = 0.05
+#: Samples of a probed planned swing.
+STEP_PROBE_SAMPLES = 61
 #: Width of the triangular smoothing kernel of value-table swings [s].
 SMOOTHING_S = 0.2
 #: Fine time step of the smoothing convolution [s].
@@ -49,7 +54,9 @@ FINE_STEP_S = 0.001
 #: the RoboSimian crawl: the whole-body probe's times were 16 % short of what the joints needed).
 BODY_MOTION_MARGIN = 0.25
 #: Lattice of the cached table timings: step x, step y [m], turn [rad].
-LATTICE = (0.01, 0.01, 0.05)
+LATTICE = (0.02, 0.02, 0.05)
+#: The 8 corners of a lattice cell, as offsets.
+_CORNERS = np.array([[(corner >> axis) & 1 for axis in range(3)] for corner in range(8)])
 #: Samples of a polynomial swing when its joint speeds are measured.
 POLYNOMIAL_PROBE_SAMPLES = 61
 #: Factor on the polynomial swing's times when they stand in for a value table not built yet
@@ -136,12 +143,15 @@ class SwingTiming:
         self.robot = robot
         self.timing = LimbTiming(robot, family, joint_velocity_limit_rad_s)
         self.name = name
+        #: Factor on every time (> 1 for a model standing in for slower swings).
+        self.factor = 1.0
         ik = self.timing.ik
         feet = robot.description.feet
         self._mirrors = [np.asarray(ik.mirrors[ik.foot_index[foot.name]], dtype=float)
                          for foot in feet]
         self._reference = next(k for k, m in enumerate(self._mirrors) if (m == 1).all())
         self._solver = WholeBodyIkSolver(robot, IkSettings(max_iterations=50))
+        self._seed_solver = WholeBodyIkSolver(robot, IkSettings(max_iterations=200))
         self._q_nominal = nominal_configuration(robot, family)
         import pinocchio as pin
 
@@ -161,44 +171,97 @@ class SwingTiming:
 
     def raw_s(self, step_in_base: np.ndarray, turn_rad: float) -> float:
         """Swing time [s] of the front-right limb's step with the body compensating its mass."""
+        u, states = self.shape(np.asarray(step_in_base, dtype=float), float(turn_rad))
+        feet = np.repeat(self._feet[None], len(states), axis=0)
+        yaws = np.zeros(feet.shape[:2])
+        feet[:, self._reference] = self._q_nominal[:3] + states[:, :3]
+        yaws[:, self._reference] = states[:, 3]
+        return self._time_through_ik(u, feet, yaws, 0.0, self._com, self._q_nominal)
+
+    def _time_through_ik(self, u, feet, yaws, body_yaw_rad, com, q_start) -> float:
+        """``max |dq/du| / W`` over every joint, the feet following ``feet`` (N, F, 3).
+
+        The full-model COM is held at ``com`` and the body level at ``body_yaw_rad``.
+        """
         from gait_nodes.robot.whole_body_ik import IkTargets
 
-        u, states = self.shape(np.asarray(step_in_base, dtype=float), float(turn_rad))
-        base = self._q_nominal[:3]
-        feet = self._feet.copy()
-        yaws = np.zeros(len(feet))
-        q = self._q_nominal.copy()
+        q = np.array(q_start, dtype=float)
         joints = []
-        for state in states:
-            feet[self._reference] = base + state[:3]
-            yaws[self._reference] = state[3]
-            result = self._solver.solve(IkTargets(feet, yaws, 0.0, com_in_world=self._com), q)
-            if result.foot_position_errors_m.max() > 1e-4:
-                raise SwingPolicyError(f'the swing by {np.round(step_in_base, 3).tolist()} '
-                                       f'leaves the reach of the limbs')
+        for k in range(len(u)):
+            result = self._solver.solve(IkTargets(feet[k], yaws[k], body_yaw_rad,
+                                                  com_in_world=com), q)
+            if result.foot_position_errors_m.max() > 1e-4 or result.com_error_m > 1e-4:
+                raise SwingPolicyError(f'a swing to {np.round(feet[-1], 3).tolist()} leaves '
+                                       f'the reach of the limbs')
             q = result.q
             joints.append(self.robot.joint_positions(q))
-        joints = np.array(joints)
-        rates = np.abs(np.diff(joints, axis=0)) / np.diff(u)[:, None]
+        rates = np.abs(np.diff(np.array(joints), axis=0)) / np.diff(u)[:, None]
         limits = np.asarray(self.robot.velocity_limits_rad_s, dtype=float)
         return float((rates / limits).max())
 
+    def world_shape(self, swing: Swing, body_yaw_rad: float) -> tuple[np.ndarray, np.ndarray]:
+        """The swing published for a planned ``swing``, as ``(u, states)``.
+
+        ``u`` runs from 0 to 1 in the swing's time law; ``states`` (N, 4) are world positions
+        and yaws.
+        """
+        raise NotImplementedError
+
+    def step_s(self, swings: dict[int, Swing], feet_in_world: np.ndarray,
+               foot_yaws_rad: np.ndarray, body_yaw_rad: float, com_in_world: np.ndarray
+               ) -> float:
+        """Least time [s] of planned swings made together, probed where they happen.
+
+        The whole-body IK follows the swings (as :meth:`world_shape` makes them, each stretched
+        to the common duration) with the other feet at ``feet_in_world`` and the full-model COM
+        held at ``com_in_world`` (where the ZMP reference holds it during the swing), so the
+        body's sway and its compensation of the limbs' mass are those of the walk;
+        ``STEP_MARGIN`` covers the COM's drift.
+
+        Args:
+            swings: Foot index -> its planned swing (world places and yaws; times unused).
+            feet_in_world: (F, 3) contact points of all feet before the swings.
+            foot_yaws_rad: (F,) their yaws [rad].
+            body_yaw_rad: Body yaw [rad].
+            com_in_world: (3,) COM position held during the swings [m].
+        """
+        from gait_nodes.robot.whole_body_ik import IkTargets, seed_configuration
+
+        u = np.linspace(0.0, 1.0, STEP_PROBE_SAMPLES)
+        feet = np.repeat(np.asarray(feet_in_world, dtype=float)[None], len(u), axis=0)
+        yaws = np.repeat(np.asarray(foot_yaws_rad, dtype=float)[None], len(u), axis=0)
+        for foot, swing in swings.items():
+            own_u, states = self.world_shape(swing, body_yaw_rad)
+            own_u = own_u / own_u[-1]
+            feet[:, foot] = np.column_stack([np.interp(u, own_u, states[:, i])
+                                             for i in range(3)])
+            yaws[:, foot] = np.interp(u, own_u, states[:, 3])
+        first = IkTargets(feet[0], yaws[0], body_yaw_rad, com_in_world=np.asarray(com_in_world))
+        q = seed_configuration(self.robot, first, self.timing.family)
+        q = self._seed_solver.solve(first, q).q
+        return (1.0 + STEP_MARGIN) * self.factor * self._time_through_ik(
+            u, feet, yaws, body_yaw_rad, com_in_world, q)
+
     def _lattice_s(self, step_in_base: np.ndarray, turn_rad: float) -> float:
         """:meth:`raw_s` interpolated on :data:`LATTICE` (cached; the planner asks often)."""
-        point = np.array([step_in_base[0], step_in_base[1], turn_rad]) / LATTICE
+        # A swing backwards is the forward one reversed: the same joint speeds, the same time.
+        point = np.array([step_in_base[0], step_in_base[1], turn_rad], dtype=float)
+        if point[0] < 0 or (point[0] == 0 and (point[1] < 0 or (point[1] == 0
+                                                                  and point[2] < 0))):
+            point = -point
+        point = point / LATTICE
         low = np.floor(point).astype(int)
         weight = point - low
+        weights = np.prod(np.where(_CORNERS, weight, 1.0 - weight), axis=1)
         total = 0.0
-        for corner in range(8):
-            bits = np.array([(corner >> axis) & 1 for axis in range(3)])
-            w = float(np.prod(np.where(bits, weight, 1.0 - weight)))
+        for corner, w in zip(low + _CORNERS, weights, strict=True):
             if w == 0.0:
                 continue
-            key = tuple(int(v) for v in low + bits)
+            key = (int(corner[0]), int(corner[1]), int(corner[2]))
             if key not in self._cache:
                 node = np.array(key, dtype=float) * LATTICE
                 self._cache[key] = self.raw_s(node[:2], float(node[2]))
-            total += w * self._cache[key]
+            total += float(w) * self._cache[key]
         return total
 
     def swing_s(self, foot: int, step_in_base: np.ndarray, turn_rad: float = 0.0) -> float:
@@ -243,6 +306,21 @@ class TableSwingTiming(SwingTiming):
         return smoothed.times_s / needed, states
 
 
+    def world_shape(self, swing, body_yaw_rad):
+        """The smoothed table swing placed on ``swing`` (see :meth:`SwingTiming.world_shape`)."""
+        from gait_nodes.swing.policy import limb_step, place_swing
+
+        ik = self.timing.ik
+        mirror = ik.mirrors[ik.foot_index[swing.foot]]
+        step, turn = limb_step(swing, mirror, body_yaw_rad)
+        path, _ = self.policy.path_for_step(step, turn)
+        polyline, _ = place_swing(path, swing, 0, mirror, body_yaw_rad,
+                                  self.policy.table.ground_z_m)
+        smoothed, needed = smooth_trajectory(polyline, None, needed_probe_period(path))
+        states = np.column_stack([smoothed.positions_in_world, np.unwrap(smoothed.yaws_rad)])
+        return smoothed.times_s / needed, states
+
+
 def needed_probe_period(path) -> float:
     """Sample spacing [s] for timing a swing (about 60 samples)."""
     return max(path.duration_s / 60.0, 0.005)
@@ -282,6 +360,15 @@ class PolynomialSwingTiming(SwingTiming):
         coefficients = sixth_order_coefficients(start, end, via, 1.0, 0.5)
         u = np.linspace(0.0, 1.0, POLYNOMIAL_PROBE_SAMPLES)
         return u / self.factor, evaluate(coefficients, u)
+
+    def world_shape(self, swing, body_yaw_rad):
+        """The sixth-order swing of ``swing`` (see :meth:`SwingTiming.world_shape`)."""
+        from gait_nodes.swing.polynomial import polynomial_swing
+
+        trajectory, _ = polynomial_swing(swing, 0, self.step_height_m, POLYNOMIAL_PROBE_SAMPLES)
+        states = np.column_stack([trajectory.positions_in_world,
+                                  np.unwrap(trajectory.yaws_rad)])
+        return trajectory.times_s / trajectory.duration_s, states
 
 
 def swing_timing(robot, method: str, step_height_m: float,
