@@ -226,3 +226,17 @@ def test_a_command_from_standstill_starts_the_walk_at_once():
     times = np.linspace(7.0, 8.0, 201)
     zmp = planner.zmp(times)
     assert np.abs(np.diff(zmp, axis=0)).max() < 0.01
+
+
+def test_without_a_built_table_the_slower_polynomial_times_stand_in(tmp_path, monkeypatch):
+    from gait_nodes.swing.timing import STAND_IN_FACTOR, swing_timing
+
+    monkeypatch.setenv('XDG_CACHE_HOME', str(tmp_path))
+    model, reason = swing_timing(robot(), 'value_table', STEP_HEIGHT_M)
+    assert isinstance(model, PolynomialSwingTiming) and 'not built yet' in reason
+    assert model.swing_s(1, np.array([0.1, 0.0])) == pytest.approx(
+        STAND_IN_FACTOR * polynomial_timing().swing_s(1, np.array([0.1, 0.0])))
+    # A robot without closed-form limb IK has no model: its gait keeps fixed timing.
+    from gait_nodes.robot.model import load_robot_model
+
+    assert swing_timing(load_robot_model('biped'), 'polynomial', STEP_HEIGHT_M)[0] is None
