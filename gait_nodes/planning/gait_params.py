@@ -16,7 +16,13 @@ crawl    one lateral pair, hind then fore            thesis III.B.1: from the di
                                                      pairs, moves twice a cycle
 =======  ==========================================  ===============================
 
-Each foot swings ``(1 - duty_factor) * T``. ``step_length_m`` is the longest stride: how far a
+Each foot swings ``(1 - duty_factor) * T`` (``timing: fixed``). With ``timing: joint_limit``
+and a robot whose swings can be timed at its joint velocity limit (closed-form limb IK), the
+rhythm comes from the limit instead (:mod:`gait_nodes.planning.rhythm`, thesis eq. (2)): each
+swing lasts what the swing method needs for the stride the velocity asks for, each transfer
+half the body's move, and ``step_period_s`` and ``duty_factor`` are not used; a velocity
+faster than the joints allow at the longest stride is reduced to the fastest feasible one.
+``step_length_m`` is the longest stride: how far a
 foot moves in one swing in steady straight walking (the thesis' step size, Kurazume's L); the
 walk itself follows /cmd_vel, so a foot moves ``v T`` per swing, at most ``step_length_m``. For
 the biped, Lucy's step length (the distance between the ankles in double support) is half the
