@@ -19,6 +19,15 @@ next /cmd_vel. 0 (the default) keeps the last /cmd_vel until the next one, as
 Rejoin: started into a running graph (dds, rclpy), the planner waits up to ``JOIN_WAIT_S`` for
 the robot's base pose (/tf odom -> base_link) and plans from there (feet at their nominal places
 under that pose) instead of from the origin.
+
+With ``timing: joint_limit`` (the shipped default) on a robot with closed-form limb IK, the
+rhythm follows from the joint velocity limit and the swing method
+(:mod:`gait_nodes.swing.timing`): the value table's swings (the cached table of
+:mod:`gait_nodes.swing.cache`; until swing_leg_policy has built it, the polynomial swing's longer
+times stand in and the table is looked for again every second) or the polynomial swing's. The
+'timing' diagnostic says which; the 'gait' diagnostic reports the walked step period, swing,
+transfer, duty factor and stride; a velocity beyond the fastest feasible one is reduced with a
+WARN on the 'velocity' diagnostic.
 """
 
 from __future__ import annotations
@@ -87,7 +96,9 @@ class FootstepPlanner(Node):
         defaults = shipped_defaults()
         robot_name = self.declare_parameter('robot', str(defaults.pop('robot'))).value
         self.robot = load_robot_description(robot_name)
-        robot_defaults = GaitParameters.for_robot(self.robot).to_dict()
+        # The robot's defaults, unchecked: checking resolves gait 'auto', which for a robot
+        # with limb IK runs the thesis' crossover (seconds), and the settings are checked below.
+        robot_defaults = GaitParameters(**GaitParameters.robot_defaults(self.robot)).to_dict()
         values = {}
         for name in NODE_SETTINGS:
             values[name] = self.declare_parameter(name, float(defaults[name])).value
@@ -102,7 +113,11 @@ class FootstepPlanner(Node):
         params.check_robot(self.robot)
 
         self.origin_ns = self.get_clock().now().nanoseconds
-        self.planner = GaitPlanner(self.robot, params)
+        self.diagnostics = DiagnosticsReporter(self, self.robot.name)
+        self._robot_model = None
+        self._timing_key, self._timing_model, self._timing_final = None, None, True
+        self._timing_reason = 'fixed timing'
+        self.planner = GaitPlanner(self.robot, params, swing_timing=self._swing_timing(params))
         self.inputs = InputWatchdog(['/cmd_vel'], self.settings['cmd_vel_timeout_s'] or 1.0,
                                     self.origin_ns, holding='stopping (zero velocity from the '
                                     'next step boundary)')
@@ -112,7 +127,6 @@ class FootstepPlanner(Node):
         self._last_now_s = 0.0
         self._pending: tuple[GaitParameters, dict] | None = None
         self._last_plan = None
-        self.diagnostics = DiagnosticsReporter(self, self.robot.name)
         self._last_velocity_notes: list[str] = []
         self.footsteps_publisher = self.create_publisher(
             get_message('trajectory_msgs/msg/MultiDOFJointTrajectory'), '/gait/footsteps',
@@ -132,9 +146,57 @@ class FootstepPlanner(Node):
         self.add_post_set_parameters_callback(self.on_parameters_set)
         self.timer = self.create_timer(1.0 / self.settings['rate_hz'], self.tick)
         self.create_timer(1.0, self.report_state)
-        self.get_logger().info(
-            f'{self.robot.name}: gait {params.gait} ({params.resolved_gait(self.robot)}), '
-            f'step period {params.step_period_s:g} s, duty factor {params.duty_factor:g}')
+        if self.planner.swing_timing is not None:
+            # Time the fastest forward walk now, so that a first /cmd_vel is answered at once.
+            fastest, _ = self.planner.set_velocity(Twist2D(params.max_vx_m_s), 0.0)
+            self.planner.set_velocity(Twist2D(), 0.0)
+            rhythm = self.planner.rhythm(params, fastest)
+            timing = (f'timing from the joint limit ({self._timing_reason}): fastest '
+                      f'{fastest.vx_m_s:.4g} m/s, swing {rhythm.swing_s:.3f} s, step period '
+                      f'{rhythm.step_period_s:.3f} s')
+        else:
+            timing = (f'{self._timing_reason}: step period {params.step_period_s:g} s, duty '
+                      f'factor {params.duty_factor:g}')
+        self.get_logger().info(f'{self.robot.name}: gait {params.gait} '
+                               f'({params.resolved_gait(self.robot)}), {timing}')
+
+    # --- swing timing --------------------------------------------------------------------------
+
+    def _swing_timing(self, params: GaitParameters):
+        """The swing timing model for ``params`` (None: fixed timing); kept while it fits.
+
+        With ``swing: value_table`` and the table not built yet (swing_leg_policy builds it on
+        first use), the polynomial swing's longer times stand in and the table is looked for
+        again once a second (:meth:`report_state`).
+        """
+        if params.timing != 'joint_limit' or self.robot.extra.get('limb_ik') is None:
+            key, model, final = None, None, True
+            reason = ('fixed timing' if params.timing == 'fixed' else
+                      f'{self.robot.name} has no closed-form limb IK: fixed timing')
+        else:
+            key = (params.swing, params.step_height_m)
+            if key == self._timing_key and self._timing_final:
+                return self._timing_model
+            from gait_nodes.robot.model import load_robot_model
+            from gait_nodes.swing.timing import TableSwingTiming, swing_timing
+
+            if self._robot_model is None:
+                self._robot_model = load_robot_model(str(self.robot.path))
+            model, reason = swing_timing(self._robot_model, params.swing, params.step_height_m)
+            final = params.swing != 'value_table' or isinstance(model, TableSwingTiming)
+            if not final and key == self._timing_key:
+                return self._timing_model  # still the stand-in: keep the same one
+        if reason != self._timing_reason:
+            self.diagnostics.report('timing', OK if final else WARN, reason)
+        self._timing_key, self._timing_model = key, model
+        self._timing_reason, self._timing_final = reason, final
+        return model
+
+    def _refresh_timing(self, now_s: float) -> None:
+        """Re-make the timing model when the settings changed or the table appeared."""
+        model = self._swing_timing(self.planner.params)
+        if model is not self.planner.swing_timing:
+            self.planner.set_swing_timing(model, now_s)
 
     # --- time ----------------------------------------------------------------------------------
 
@@ -153,7 +215,8 @@ class FootstepPlanner(Node):
         pose = state.rest_pose if state is not None else (0.0, 0.0, 0.0)
         twist = self.planner.requested_twist
         self.origin_ns = now_ns
-        self.planner = GaitPlanner(self.robot, self.planner.params, base_pose=pose)
+        self.planner = GaitPlanner(self.robot, self.planner.params, base_pose=pose,
+                                   swing_timing=self.planner.swing_timing)
         self.planner.set_velocity(twist, 0.0)
         self._last_now_s = 0.0
         return 0.0
@@ -197,7 +260,8 @@ class FootstepPlanner(Node):
             return False
         if self._base_pose is not None:
             twist = self.planner.requested_twist
-            self.planner = GaitPlanner(self.robot, self.planner.params, base_pose=self._base_pose)
+            self.planner = GaitPlanner(self.robot, self.planner.params, base_pose=self._base_pose,
+                                       swing_timing=self.planner.swing_timing)
             self.origin_ns, self._last_now_s = now_ns, 0.0
             self.planner.set_velocity(twist, 0.0)
             self.get_logger().info(f'planning from the robot\'s pose {self._base_pose}')
@@ -279,6 +343,7 @@ class FootstepPlanner(Node):
         _, now_s = self.now_s()
         if params != self.planner.params:
             self.planner.set_parameters(params, now_s)
+            self._refresh_timing(now_s)
         if settings['rate_hz'] != self.settings['rate_hz']:
             self.destroy_timer(self.timer)
             self.timer = self.create_timer(1.0 / settings['rate_hz'], self.tick)
@@ -307,7 +372,9 @@ class FootstepPlanner(Node):
         self.zmp_publisher.publish(zmp_reference_to_msg(reference))
 
     def report_state(self) -> None:
-        """Once a second: the gait, the twist and the margin of the planned ZMP."""
+        """Once a second: the gait, the twist, the rhythm and the margin of the planned ZMP."""
+        _, now_s = self.now_s()
+        self._refresh_timing(now_s)
         params = self.planner.params
         steps = self.planner.steps
         kept = min((step.zmp_margin_kept_m for step in steps), default=math.inf)
@@ -318,7 +385,23 @@ class FootstepPlanner(Node):
             'mode': mode, 'requested_twist': self.planner.requested_twist.as_tuple(),
             'applied_twist': self.planner.twist.as_tuple(),
             'zmp_margin_kept_m': kept, 'zmp_margin_m': params.zmp_margin_m,
-            'planned_steps': len(steps)})
+            'planned_steps': len(steps), 'timing': params.timing,
+            'timing_source': self._timing_reason, **self._rhythm_values()})
+
+    def _rhythm_values(self) -> dict:
+        """The walked rhythm (step period, swing, transfer, duty factor, speed) for reports."""
+        try:
+            rhythm = self.planner.rhythm()
+        except GaitParameterError:
+            return {}
+        params = self.planner.params
+        if rhythm is None:
+            return {'step_period_s': params.step_period_s, 'swing_s': params.swing_s,
+                    'duty_factor': params.duty_factor}
+        twist = self.planner.twist
+        return {'step_period_s': rhythm.step_period_s, 'swing_s': rhythm.swing_s,
+                'transfer_s': rhythm.transfer_s, 'duty_factor': rhythm.duty_factor,
+                'stride_m': math.hypot(twist.vx_m_s, twist.vy_m_s) * rhythm.cycle_s}
 
 
 def _same_plan(a, b) -> bool:

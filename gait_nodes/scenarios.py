@@ -61,12 +61,12 @@ SCENARIOS: dict[str, Scenario] = {s.name: s for s in (
     Scenario('robosimian_crawl',
              'RoboSimian-like quadruped, crawl, preview-control COM, value-table swing',
              'robosimian', {'gait': 'crawl', 'swing': 'value_table', 'com_method': 'preview',
-              'step_period_s': 4.0},
+                            'timing': 'joint_limit'},
              (_vel(0.0, 0.04),)),
     Scenario('robosimian_crawl_polynomial',
              'the same crawl with a polynomial swing, to compare speeds',
              'robosimian', {'gait': 'crawl', 'swing': 'polynomial', 'com_method': 'preview',
-              'step_period_s': 4.0},
+                            'timing': 'joint_limit'},
              (_vel(0.0, 0.04),)),
     Scenario('biped_walk',
              'small humanoid: start, walk with a stair-like swing height (Lucy), stop',
@@ -84,7 +84,7 @@ SCENARIOS: dict[str, Scenario] = {s.name: s for s in (
              'RoboSimian crawl changed while it walks: step length, velocity, gait, and '
              'invalid commands that must be rejected',
              'robosimian', {'gait': 'crawl', 'swing': 'polynomial', 'com_method': 'preview',
-              'step_period_s': 4.0},
+                            'timing': 'joint_limit'},
              (_vel(0.0, 0.05),
               _cmd(4.0, {'step_length_m': 0.2}),
               _cmd(5.0, '{"step_length_m": 0.3'),            # invalid JSON

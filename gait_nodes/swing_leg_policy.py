@@ -9,10 +9,15 @@ or step height, naming the file and what differs. For each swing of the latched 
 publishes, ``lead_time_s`` before lift-off, the greedy minimum-time path from the table: the
 table's goal mapped onto the planned landing place, the path rotated with the body and mirrored
 for the limb, lift-off and landing exactly where planned, each segment timed with the fastest
-joint at ``joint_velocity_limit_rad_s`` and the whole stretched to the swing's planned duration.
-When the plan gives less time than the table needs the timing is compressed to fit and the
-shortfall is reported on /diagnostics. With ``swing: polynomial`` it publishes a sixth-order
-swing with a via point at ``step_height_m`` (Lucy, seed 004) instead.
+joint at ``joint_velocity_limit_rad_s``, filtered into a smooth swing
+(:func:`gait_nodes.swing.timing.smooth_trajectory`: the polyline's corners would make the foot
+change velocity in one tick) and the whole stretched to the swing's planned duration.
+When the plan gives less time than the swing needs the timing is compressed to fit and the
+shortfall is reported on /diagnostics (the footstep planner with ``timing: joint_limit`` plans
+the time the swing needs, :mod:`gait_nodes.swing.timing`). With ``swing: polynomial`` it
+publishes a sixth-order swing with a via point at ``step_height_m`` (Lucy, seed 004) instead.
+Either way the waypoints are ``sample_period_s`` apart (the whole-body IK interpolates them
+linearly, so at its own tick period the foot's velocity changes smoothly).
 """
 
 from __future__ import annotations
@@ -33,6 +38,7 @@ from gait_nodes.runtime import Node, SetParametersResult, qos_profile_latched
 from gait_nodes.swing.cache import load_or_build
 from gait_nodes.swing.policy import SwingPolicy, limb_step, place_swing
 from gait_nodes.swing.polynomial import polynomial_swing
+from gait_nodes.swing.timing import smooth_trajectory
 
 NODE_NAME = 'swing_leg_policy'
 FOOTSTEPS_TOPIC = '/gait/footsteps'
@@ -72,6 +78,7 @@ def check_values(values: dict) -> None:
     number('joint_velocity_limit_rad_s', 0.0, 100.0)
     number('lead_time_s', 0.0, 10.0)
     number('rate_hz', 0.0, 1000.0, low_open=True)
+    number('sample_period_s', 0.0, 0.1, low_open=True)
     if isinstance(values['polynomial_samples'], bool) \
             or not isinstance(values['polynomial_samples'], int) \
             or not 3 <= values['polynomial_samples'] <= 1000:
@@ -221,8 +228,9 @@ class SwingLegPolicy(Node):
                 self.diagnostics.report('swing', ERROR, f'{swing.foot} at {swing.lift_off_s:.3f}'
                                         f' s: {exc}; sending the polynomial swing instead')
         if trajectory is None:
-            trajectory, _ = polynomial_swing(swing, lift_ns, values['step_height_m'],
-                                             values['polynomial_samples'])
+            samples = max(values['polynomial_samples'],
+                          int(math.ceil(swing.duration_s / values['sample_period_s'])) + 1)
+            trajectory, _ = polynomial_swing(swing, lift_ns, values['step_height_m'], samples)
         self._publisher.publish(contract.swing_trajectory_to_msg(trajectory))
         self.published_count += 1
 
@@ -237,8 +245,9 @@ class SwingLegPolicy(Node):
         if key not in self._lookups:
             self._lookups[key] = policy.path_for_step(step_fr, turn)
         path, clamped = self._lookups[key]
-        trajectory, needed = place_swing(path, swing, lift_ns, mirror, yaw, table.ground_z_m,
-                                         swing.duration_s)
+        polyline, _ = place_swing(path, swing, lift_ns, mirror, yaw, table.ground_z_m)
+        trajectory, needed = smooth_trajectory(polyline, swing.duration_s,
+                                               self._values['sample_period_s'])
         report = {'foot': swing.foot, 'lift_off_s': swing.lift_off_s,
                   'planned_s': swing.duration_s, 'needed_s': needed,
                   'joint_velocity_limit_rad_s': table.joint_velocity_limit_rad_s,

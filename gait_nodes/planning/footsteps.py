@@ -29,13 +29,21 @@ import numpy as np
 
 from gait_nodes.contract import FootstepPlan, ZmpReference
 from gait_nodes.errors import GaitParameterError
+from gait_nodes.planning import rhythm as rhythm_module
 from gait_nodes.planning import support, zmp_reference
 from gait_nodes.planning.gait_params import GaitParameters
 from gait_nodes.planning.layout import FootLayout
+from gait_nodes.planning.rhythm import Rhythm
 from gait_nodes.robot.description import RobotDescription
 
 #: A foot closer than this to its target [m, rad] does not step (no zero-length steps).
 ALREADY_THERE = 1e-6
+#: Longest weight shift before the first step from standstill [s] (at most one step period).
+START_SHIFT_S = 1.0
+#: A step re-timed for swings longer than its rhythm's gets this much more than they need, so
+#: that the later touch-downs (and footholds) it causes still fit; at most MAX_RETIMING times.
+RETIMING_ALLOWANCE = 0.02
+MAX_RETIMING = 4
 NS_PER_S = 1_000_000_000
 
 
@@ -94,13 +102,22 @@ def wrap_angle(angle: np.ndarray) -> np.ndarray:
 
 
 def clamp_velocity(twist: Twist2D, params: GaitParameters, robot: RobotDescription,
-                   layout: FootLayout) -> tuple[Twist2D, list[str]]:
+                   layout: FootLayout, cycle_of=None) -> tuple[Twist2D, list[str]]:
     """The twist the planner walks for a commanded ``twist``, and why it was reduced.
 
     Each component is clamped to its configured maximum; then the whole twist is scaled down so
     that no foot moves more than one stride (``step_length_m`` along x,
     ``reach.max_step_width_m`` along y) and the body turns at most ``reach.max_turn_rad`` in a
     cycle.
+
+    Args:
+        twist: The commanded twist.
+        params: Gait parameters.
+        robot: Robot description (reach).
+        layout: Foot layout.
+        cycle_of: Gait cycle [s] of a twist when the rhythm depends on it (``timing:
+            joint_limit``); raises GaitParameterError for a twist the joints cannot walk.
+            None: ``params.cycle_s``.
     """
     notes = []
     values = list(twist.as_tuple())
@@ -115,10 +132,13 @@ def clamp_velocity(twist: Twist2D, params: GaitParameters, robot: RobotDescripti
                          f'({settings[i]})')
             values[i] = clamped
     result = Twist2D(*values)
-    cycle = params.cycle_s
     offsets = layout.offsets(params.step_width_m)
 
     def fits(candidate: Twist2D) -> bool:
+        try:
+            cycle = params.cycle_s if cycle_of is None else cycle_of(candidate)
+        except GaitParameterError:
+            return False
         if abs(candidate.wz_rad_s) * cycle > robot.reach.max_turn_rad + 1e-12:
             return False
         moved = place(integrate_pose(np.zeros(3), candidate, cycle), offsets) - offsets
@@ -127,16 +147,20 @@ def clamp_velocity(twist: Twist2D, params: GaitParameters, robot: RobotDescripti
 
     if not fits(result):
         low, high = 0.0, 1.0
-        for _ in range(50):
+        # Each test of a joint-limit rhythm solves its fixed point: stop at 1e-7 of the twist.
+        for _ in range(50 if cycle_of is None else 24):
             middle = 0.5 * (low + high)
             low, high = (middle, high) if fits(result.scaled(middle)) else (low, middle)
         reduced = result.scaled(low)
+        cycle = params.cycle_s if cycle_of is None else cycle_of(reduced)
+        rhythm = ('' if cycle_of is None else
+                  ' at the fastest rhythm the joint velocity limit allows')
         notes.append(f'twist ({result.vx_m_s:g}, {result.vy_m_s:g}, {result.wz_rad_s:g}) '
                      f'scaled by {low:.3f} to ({reduced.vx_m_s:.4g}, {reduced.vy_m_s:.4g}, '
-                     f'{reduced.wz_rad_s:.4g}) to keep each swing within one stride '
+                     f'{reduced.wz_rad_s:.4g}) to keep each swing within one stride{rhythm} '
                      f'(step_length_m {params.step_length_m:g} m, reach.max_step_width_m '
                      f'{robot.reach.max_step_width_m:g} m, reach.max_turn_rad '
-                     f'{robot.reach.max_turn_rad:g} rad per {cycle:g} s cycle)')
+                     f'{robot.reach.max_turn_rad:g} rad per {cycle:.4g} s cycle)')
         result = reduced
     return result, notes
 
@@ -232,18 +256,25 @@ class GaitPlanner:
         base_pose: Initial body pose (x [m], y [m], yaw [rad]) in odom; the feet start at their
             nominal places under it.
         start_s: Time of the initial standstill [s].
+        swing_timing: Least swing times at the joint velocity limit
+            (:class:`gait_nodes.swing.timing.SwingTiming`), used with ``timing: joint_limit``;
+            None: every gait keeps the fixed timing of its parameters.
 
     Raises:
         GaitParameterError: ``params`` do not suit the robot.
     """
 
     def __init__(self, robot: RobotDescription, params: GaitParameters | None = None, *,
-                 base_pose: Sequence[float] = (0.0, 0.0, 0.0), start_s: float = 0.0):
+                 base_pose: Sequence[float] = (0.0, 0.0, 0.0), start_s: float = 0.0,
+                 swing_timing=None):
         self.robot = robot
         self.layout = FootLayout.of(robot)
         params = params or GaitParameters.for_robot(robot)
         params.check_robot(robot)
         self._params = params
+        self._timing = swing_timing
+        self._rhythms: dict = {}
+        self._clamped: dict = {}
         self._requested = Twist2D()
         self._twist = Twist2D()
         pose = np.array(base_pose, dtype=float)
@@ -273,6 +304,65 @@ class GaitPlanner:
         """Twist last commanded, before clamping."""
         return self._requested
 
+    @property
+    def swing_timing(self):
+        """The swing timing model (None: fixed timing)."""
+        return self._timing
+
+    def set_swing_timing(self, swing_timing, now_s: float) -> None:
+        """Time the steps from the next step boundary after ``now_s`` with ``swing_timing``."""
+        self._timing = swing_timing
+        self._rhythms.clear()
+        self._clamped.clear()
+        self._twist, _ = self._clamp(self._requested, self._params)
+        self._replan(now_s)
+
+    def rhythm(self, params: GaitParameters | None = None,
+               twist: Twist2D | None = None) -> Rhythm | None:
+        """The joint-limit rhythm of steady walking at ``twist`` (default: the walked twist).
+
+        None with ``timing: fixed`` or without a swing timing model.
+
+        Raises:
+            GaitParameterError: The joints cannot walk ``twist`` at any stride.
+        """
+        params = params or self._params
+        twist = self._twist if twist is None else twist
+        if params.timing != 'joint_limit' or self._timing is None:
+            return None
+        key = (params, twist)
+        if key not in self._rhythms:
+            if len(self._rhythms) > 256:
+                self._rhythms.clear()
+            gait = params.resolved_gait(self.robot)
+            try:
+                self._rhythms[key] = rhythm_module.walking_rhythm(gait, self.layout, params,
+                                                                  twist, self._timing)
+            except GaitParameterError as exc:
+                self._rhythms[key] = exc
+        result = self._rhythms[key]
+        if isinstance(result, GaitParameterError):
+            raise result
+        return result
+
+    def timed(self, params: GaitParameters, twist: Twist2D) -> GaitParameters:
+        """``params`` with the step period and duty factor the steps at ``twist`` walk with."""
+        rhythm = self.rhythm(params, twist)
+        return params if rhythm is None else rhythm.apply(params)
+
+    def _clamp(self, twist: Twist2D, params: GaitParameters) -> tuple[Twist2D, list[str]]:
+        key = (twist, params)
+        if key not in self._clamped:
+            if len(self._clamped) > 256:
+                self._clamped.clear()
+            cycle_of = None
+            if params.timing == 'joint_limit' and self._timing is not None:
+                def cycle_of(candidate):
+                    return self.rhythm(params, candidate).cycle_s
+            self._clamped[key] = clamp_velocity(twist, params, self.robot, self.layout,
+                                                cycle_of)
+        return self._clamped[key]
+
     def set_parameters(self, params: GaitParameters, now_s: float) -> None:
         """Use ``params`` from the next step boundary after ``now_s``.
 
@@ -280,7 +370,7 @@ class GaitPlanner:
             GaitParameterError: ``params`` do not suit the robot (nothing changes).
         """
         params.check_robot(self.robot)
-        twist, _ = clamp_velocity(self._requested, params, self.robot, self.layout)
+        twist, _ = self._clamp(self._requested, params)
         self._params, self._twist = params, twist
         self._replan(now_s)
 
@@ -295,7 +385,7 @@ class GaitPlanner:
         """
         if not all(math.isfinite(v) for v in twist.as_tuple()):
             raise GaitParameterError(f'velocity command {twist.as_tuple()} is not finite')
-        applied, notes = clamp_velocity(twist, self._params, self.robot, self.layout)
+        applied, notes = self._clamp(twist, self._params)
         self._requested = twist
         if applied != self._twist:
             self._twist = applied
@@ -313,8 +403,25 @@ class GaitPlanner:
         return self._steps[-1].state_after if self._steps else self._initial
 
     def _replan(self, now_s: float) -> None:
-        """Drop the steps that have not started by ``now_s``."""
+        """Drop the steps that have not started by ``now_s``; end a standstill at ``now_s``.
+
+        A step that holds the robot standing has nothing to finish: it is cut at ``now_s`` (its
+        ZMP where it is then), so that a command from standstill starts the walk at once.
+        """
         self._steps = [step for step in self._steps if step.start_s <= now_s]
+        if self._steps and self._steps[-1].kind == 'stand' and self._steps[-1].end_s > now_s:
+            step = self._steps[-1]
+            cut = max(now_s, step.start_s)
+            zmp = zmp_reference.sample(step.zmp_times_s, step.zmp_points, np.array([cut]))[0]
+            times = np.array([step.start_s, cut]) if cut > step.start_s else np.array([cut])
+            points = np.array([step.zmp_points[0], zmp]) if cut > step.start_s else zmp[None]
+            after = dataclasses.replace(step.state_after, time_s=cut, zmp=zmp)
+            self._steps[-1] = dataclasses.replace(step, end_s=cut, zmp_times_s=times,
+                                                  zmp_points=points, state_after=after)
+            if cut == step.start_s:
+                self._steps.pop()
+                if not self._steps:
+                    self._initial = dataclasses.replace(self._initial, time_s=cut, zmp=zmp)
 
     def next_boundary_s(self, now_s: float) -> float:
         """Time of the first step boundary after ``now_s`` (where a change takes effect)."""
@@ -341,13 +448,24 @@ class GaitPlanner:
                 last = step.slots[-1]
                 self._before = (last.touch_down_s, last.positions_after, last.yaws_after)
 
-    def _next_step(self, state: _State) -> Step:
+    def _next_step(self, state: _State, swing_s: float | None = None, retimed: int = 0
+                   ) -> Step:
+        """The step after ``state``; with ``swing_s``, its swings last that long [s].
+
+        With ``timing: joint_limit`` a step whose swings need more time than its rhythm gives
+        (the first steps, a change of gait or velocity, the closing steps: footholds that do
+        not follow the steady pattern) is planned again with the time they need.
+        """
         params, twist = self._params, self._twist
         gait = params.resolved_gait(self.robot)
         groups = self.layout.swing_groups(gait)
         offsets = self.layout.offsets(params.step_width_m)
-        half, cycle, swing = params.step_period_s, params.cycle_s, params.swing_s
         t0 = state.time_s
+        params = self.timed(params, twist)
+        if swing_s is not None:
+            params = rhythm_module.rhythm_for_swing(gait, swing_s,
+                                                    self._timing.lift_and_lower_s(),
+                                                    self._timing.name).apply(params)
         if twist.is_zero():
             rest = state.last_anchor if state.mode == 'walking' else state.rest_pose
             targets = place(rest, offsets)
@@ -366,11 +484,12 @@ class GaitPlanner:
 
             mode = 'stopping'
         else:
+            half, cycle, swing = params.step_period_s, params.cycle_s, params.swing_s
             starting = state.mode != 'walking'
             rest = state.rest_pose
             group_index = ((0 if _leads_left(twist) else 1) if starting
                            else state.next_group % len(groups))
-            extra = half if state.mode == 'standing' else 0.0
+            extra = self._start_shift_s(params) if state.mode == 'standing' else 0.0
             first_touch_down = t0 + params.transfer_s(gait) + extra + swing
             if starting:
                 # The body starts so that no foot of the first cycle moves more than a stride.
@@ -394,7 +513,8 @@ class GaitPlanner:
                 return place(anchor, offsets[foot:foot + 1])[0], anchor[2], anchor
 
             mode = 'walking'
-        extra = half if state.mode == 'standing' else 0.0
+        swing = params.swing_s
+        extra = self._start_shift_s(params) if state.mode == 'standing' else 0.0
         t1 = t0 + params.transfer_s(gait) + extra
         positions, foot_yaws = state.positions.copy(), state.yaws.copy()
         slots, last_anchor = [], state.last_anchor
@@ -426,8 +546,43 @@ class GaitPlanner:
         after_state = _State(
             time_s=t_end, positions=positions, yaws=foot_yaws, zmp=points[-1], mode=mode,
             next_group=group_index + 1, rest_pose=rest, last_anchor=last_anchor, **path)
+        needed = self._needed_swing_s(gait, state, slots, points, params.com_height_m)
+        if needed > swing * (1.0 + 1e-9) and retimed < MAX_RETIMING:
+            return self._next_step(state, needed * (1.0 + RETIMING_ALLOWANCE), retimed + 1)
         return Step(gait, kind, t0, t_end, state.positions, state.yaws, tuple(slots), times,
                     points, kept, params, twist, after_state)
+
+    def _needed_swing_s(self, gait: str, state: _State, slots: Sequence[SwingSlot],
+                        zmp_points: np.ndarray, com_height_m: float) -> float:
+        """Longest time [s] the swings of ``slots`` need at the joint limit (0: no model).
+
+        Each swing is probed where it happens (:meth:`gait_nodes.swing.timing.SwingTiming.
+        step_s`): the other feet where they stand, the COM over the ZMP reference of the swing
+        (held at the step's knot in a crawl or biped step, moving along the diagonal in a trot).
+        """
+        if self._params.timing != 'joint_limit' or self._timing is None or not slots:
+            return 0.0
+        from gait_nodes.contract import Swing
+
+        centre = zmp_points[1] if gait != 'trot' else 0.5 * (zmp_points[1] + zmp_points[2])
+        com = np.array([centre[0], centre[1], com_height_m])
+        needed = 0.0
+        positions, yaws = state.positions, state.yaws
+        for slot in slots:
+            body_yaw = float(np.angle(np.exp(1j * yaws).sum()))
+            feet = np.column_stack([positions, np.zeros(len(positions))])
+            swings = {foot: Swing(self.layout.names[foot], slot.lift_off_s, slot.touch_down_s,
+                                  feet[foot], np.array([*slot.positions_after[foot], 0.0]),
+                                  float(yaws[foot]), float(slot.yaws_after[foot]))
+                      for foot in slot.feet}
+            needed = max(needed, self._timing.step_s(swings, feet, yaws, body_yaw, com))
+            positions, yaws = slot.positions_after, slot.yaws_after
+        return needed
+
+    @staticmethod
+    def _start_shift_s(params: GaitParameters) -> float:
+        """Weight shift added before the first step from standstill [s]."""
+        return min(params.step_period_s, START_SHIFT_S)
 
     def _stand_step(self, state: _State, gait: str, rest: np.ndarray) -> Step:
         t0, t_end = state.time_s, state.time_s + self._params.step_period_s

@@ -16,7 +16,13 @@ crawl    one lateral pair, hind then fore            thesis III.B.1: from the di
                                                      pairs, moves twice a cycle
 =======  ==========================================  ===============================
 
-Each foot swings ``(1 - duty_factor) * T``. ``step_length_m`` is the longest stride: how far a
+Each foot swings ``(1 - duty_factor) * T`` (``timing: fixed``). With ``timing: joint_limit``
+and a robot whose swings can be timed at its joint velocity limit (closed-form limb IK), the
+rhythm comes from the limit instead (:mod:`gait_nodes.planning.rhythm`, thesis eq. (2)): each
+swing lasts what the swing method needs for the stride the velocity asks for, each transfer
+half the body's move, and ``step_period_s`` and ``duty_factor`` are not used; a velocity
+faster than the joints allow at the longest stride is reduced to the fastest feasible one.
+``step_length_m`` is the longest stride: how far a
 foot moves in one swing in steady straight walking (the thesis' step size, Kurazume's L); the
 walk itself follows /cmd_vel, so a foot moves ``v T`` per swing, at most ``step_length_m``. For
 the biped, Lucy's step length (the distance between the ankles in double support) is half the
@@ -54,6 +60,7 @@ from gait_nodes.robot.description import RobotDescription
 GAITS = ('biped', 'crawl', 'trot', 'auto')
 SWING_METHODS = ('polynomial', 'value_table')
 COM_METHODS = ('preview', 'sway', 'polynomial')
+TIMINGS = ('fixed', 'joint_limit')
 
 #: Steps per gait cycle (every gait).
 STEPS_PER_CYCLE = 2
@@ -75,7 +82,7 @@ NUMERIC_RANGES: dict[str, tuple[float, float, str]] = {
     'max_wz_rad_s': (0.0, 10.0, 'rad/s'),
 }
 CHOICE_FIELDS: dict[str, tuple[str, ...]] = {
-    'gait': GAITS, 'swing': SWING_METHODS, 'com_method': COM_METHODS,
+    'gait': GAITS, 'swing': SWING_METHODS, 'com_method': COM_METHODS, 'timing': TIMINGS,
 }
 
 
@@ -95,6 +102,9 @@ class GaitParameters:
         zmp_margin_m: Least distance of the ZMP reference inside the support polygon [m].
         swing: Swing-leg method: polynomial | value_table.
         com_method: COM method: preview | sway | polynomial.
+        timing: fixed (``step_period_s`` and ``duty_factor`` as given) | joint_limit (the
+            rhythm follows from the joint velocity limit, see :mod:`gait_nodes.planning.
+            rhythm`; for a robot without a swing timing model the same as fixed).
         max_vx_m_s: Largest forward speed accepted from /cmd_vel [m/s].
         max_vy_m_s: Largest sideways speed accepted from /cmd_vel [m/s].
         max_wz_rad_s: Largest turn rate accepted from /cmd_vel [rad/s].
@@ -111,6 +121,7 @@ class GaitParameters:
     zmp_margin_m: float = 0.01
     swing: str = 'polynomial'
     com_method: str = 'preview'
+    timing: str = 'fixed'
     max_vx_m_s: float = 0.1
     max_vy_m_s: float = 0.05
     max_wz_rad_s: float = 0.1
@@ -144,15 +155,18 @@ class GaitParameters:
         ``step_length_m``, or the robot's ``reach.max_step_length_m`` when that is shorter (a
         Go2 reaches 0.2 m), so that the defaults always suit the robot.
         """
-        step_length_m = min(cls.__dataclass_fields__['step_length_m'].default,
-                            robot.reach.max_step_length_m)
-        defaults = {'step_length_m': step_length_m,
-                    'step_width_m': nominal_stance_width_m(robot),
-                    'com_height_m': robot.com_height_m,
-                    'body_height_m': robot.body_height_m}
-        params = cls(**{**defaults, **values})
+        params = cls(**{**cls.robot_defaults(robot), **values})
         params.check_robot(robot)
         return params
+
+    @classmethod
+    def robot_defaults(cls, robot: RobotDescription) -> dict[str, float]:
+        """The settings whose defaults come from the robot (see :meth:`for_robot`)."""
+        return {'step_length_m': min(cls.__dataclass_fields__['step_length_m'].default,
+                                     robot.reach.max_step_length_m),
+                'step_width_m': nominal_stance_width_m(robot),
+                'com_height_m': robot.com_height_m,
+                'body_height_m': robot.body_height_m}
 
     def replace(self, **changes) -> GaitParameters:
         """A copy with ``changes`` applied (validated again)."""

@@ -1,0 +1,148 @@
+"""The gait's rhythm from the joint velocity limit (``timing: joint_limit``).
+
+Thesis 000, eq. (2): a crawl cycle is four swings one after the other plus the body's move, which
+takes as long as the horizontal part of a swing (``T_swing - T_up - T_down``):
+
+    speed = step / (4 T_swing + (T_swing - T_up - T_down)).
+
+Here every step of a gait (see :mod:`gait_nodes.planning.gait_params`) is a transfer phase (all
+feet down, the ZMP moves) followed by its swing slots, two steps a cycle, so each transfer gets
+half of the thesis' body move (at least :data:`MIN_TRANSFER_S`, for the sideways sway the
+ZMP makes even in place) and each swing lasts what a :class:`gait_nodes.swing.timing.
+SwingTiming` says the swing needs at the limit:
+
+    T_transfer = max(MIN_TRANSFER_S, (T_swing - T_up - T_down) / 2),
+    step period = T_transfer + slots T_swing,   cycle T = 2 step period,
+    duty factor = 1 - T_swing / T.
+
+The commanded velocity sets the stride, the stride sets the swing time and the swing time the
+cycle: in steady walking a foot moves the body's displacement over one cycle, so the rhythm is
+the fixed point of ``T -> cycle(swing time(displacement in T))``, found by iteration (the swing
+time grows more slowly than the stride it covers, so the map contracts at any speed the
+robot can walk).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from gait_nodes.errors import GaitParameterError
+from gait_nodes.planning.gait_params import STEPS_PER_CYCLE, SWING_SLOTS, GaitParameters
+from gait_nodes.planning.layout import FootLayout
+
+#: Shortest transfer phase [s]: the ZMP crosses between the support regions of the two sides.
+MIN_TRANSFER_S = 0.3
+#: The fixed point is found when the cycle changes by less than this [s].
+CYCLE_TOLERANCE_S = 1e-6
+#: Longest cycle [s] before a rhythm is declared infeasible.
+MAX_CYCLE_S = 2.0 * 60.0
+MAX_ITERATIONS = 100
+
+
+@dataclass(frozen=True)
+class Rhythm:
+    """Timing of one gait at one velocity.
+
+    Attributes:
+        swing_s: Each swing [s].
+        transfer_s: Each transfer (all-feet-down) phase [s].
+        slots: Swing slots per step.
+        source: What the swing times come from.
+    """
+
+    swing_s: float
+    transfer_s: float
+    slots: int
+    source: str
+
+    @property
+    def step_period_s(self) -> float:
+        """One step: the transfer and the swing slots [s]."""
+        return self.transfer_s + self.slots * self.swing_s
+
+    @property
+    def cycle_s(self) -> float:
+        """The gait cycle [s]."""
+        return STEPS_PER_CYCLE * self.step_period_s
+
+    @property
+    def duty_factor(self) -> float:
+        """Stance fraction of the cycle."""
+        return 1.0 - self.swing_s / self.cycle_s
+
+    def apply(self, params: GaitParameters) -> GaitParameters:
+        """``params`` with this rhythm's step period and duty factor."""
+        return params.replace(step_period_s=self.step_period_s, duty_factor=self.duty_factor)
+
+
+def rhythm_for_swing(gait: str, swing_s: float, in_place_s: float, source: str) -> Rhythm:
+    """The rhythm of ``gait`` whose swings last ``swing_s`` (eq. (2)'s body move per transfer).
+
+    Args:
+        gait: Resolved gait.
+        swing_s: Swing time [s].
+        in_place_s: Swing time of a step in place (lift and lowering) [s].
+        source: What the swing times come from.
+    """
+    transfer = max(MIN_TRANSFER_S, 0.5 * (swing_s - in_place_s))
+    return Rhythm(float(swing_s), float(transfer), SWING_SLOTS[gait], source)
+
+
+def _rotate(vectors: np.ndarray, angle: float) -> np.ndarray:
+    c, s = math.cos(angle), math.sin(angle)
+    return vectors @ np.array([[c, -s], [s, c]]).T
+
+
+def cycle_displacements(layout: FootLayout, params: GaitParameters, twist, cycle_s: float
+                        ) -> tuple[np.ndarray, float]:
+    """(F, 2) displacement of each foot over one cycle in the body frame [m], and the turn.
+
+    Steady walking: a foot moves, per swing, what the body moves in one cycle (the footholds
+    follow the body's path); the displacement is expressed in the body frame half-way through
+    the turn (the frame the swing happens in).
+    """
+    from gait_nodes.planning.footsteps import integrate_pose, place
+
+    offsets = layout.offsets(params.step_width_m)
+    pose = integrate_pose(np.zeros(3), twist, cycle_s)
+    moved = place(pose, offsets) - offsets
+    return _rotate(moved, -0.5 * pose[2]), float(pose[2])
+
+
+def swing_time_s(timing, displacements: np.ndarray, turn_rad: float,
+                 feet: range | list[int] | None = None) -> float:
+    """Longest least swing time [s] over ``feet`` (default all) for their displacements."""
+    feet = range(len(displacements)) if feet is None else feet
+    return max((timing.swing_s(f, displacements[f], turn_rad) for f in feet),
+               default=timing.lift_and_lower_s())
+
+
+def walking_rhythm(gait: str, layout: FootLayout, params: GaitParameters, twist,
+                   timing) -> Rhythm:
+    """The steady rhythm of ``gait`` at ``twist`` (the fixed point, see the module docstring).
+
+    Raises:
+        GaitParameterError: No rhythm exists (the cycle grows without bound: a velocity the
+            joints cannot reach at any stride), or a swing leaves the reach of the limb IK.
+    """
+    from gait_nodes.errors import SwingPolicyError
+
+    in_place = timing.lift_and_lower_s()
+    rhythm = rhythm_for_swing(gait, in_place, in_place, timing.name)
+    for _ in range(MAX_ITERATIONS):
+        displacements, turn = cycle_displacements(layout, params, twist, rhythm.cycle_s)
+        try:
+            swing_s = swing_time_s(timing, displacements, turn)
+        except SwingPolicyError as exc:
+            raise GaitParameterError(f'no gait rhythm walks {twist.as_tuple()}: {exc}') from None
+        following = rhythm_for_swing(gait, swing_s, in_place, timing.name)
+        if abs(following.cycle_s - rhythm.cycle_s) < CYCLE_TOLERANCE_S:
+            return following
+        if following.cycle_s > MAX_CYCLE_S:
+            break
+        rhythm = following
+    raise GaitParameterError(f'no gait rhythm reaches the velocity {twist.as_tuple()} within '
+                             f'the joint velocity limit ({timing.name})')

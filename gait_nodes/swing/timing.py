@@ -1,0 +1,418 @@
+"""How long a swing must last at the joint velocity limit, and smooth swings to publish.
+
+Thesis 000, eq. (2): the speed of a crawl follows from the swing time the joint velocity limit
+allows, ``speed = step / (4 T_swing + (T_swing - T_up - T_down))``. The footstep planner times
+its gait with a :class:`SwingTiming` (the least swing time for a foot displacement) so that the
+swing-leg policy never has to compress a swing and the joints stay within their limit because
+the plan is feasible, not because a limiter clips it.
+
+Two models, both for robots with closed-form limb IK (``extra.limb_ik``, thesis II.C):
+
+* :class:`TableSwingTiming`: the value table's greedy swing (thesis Appendix A) for the step,
+  smoothed as below;
+* :class:`PolynomialSwingTiming`: the sixth-order swing (Lucy) between the lift-off and landing
+  places around the nominal foot position.
+
+Either swing is timed through the whole-body IK, not the limb alone: while a limb (15 % of the
+RoboSimian-like robot's mass) swings, the body moves the other way so that the full-model COM
+stays on its reference (thesis III.B.1), which speeds the swinging limb's joints up by about a
+fifth. The time is the least one at which no joint of any limb exceeds its limit, times
+``1 + BODY_MOTION_MARGIN`` for what the probe at the nominal stance does not see: the crawl's
+sideways sway puts the body up to 0.1 m off the nominal stance during a swing, and the COM keeps
+walking.
+
+The value table's path is a polyline timed with the fastest joint at the limit on every segment:
+its velocity jumps at every waypoint, and a foot that changes velocity in one tick makes the
+multi-body ZMP jump by metres. :func:`smooth_trajectory` filters it with a triangular kernel of
+``SMOOTHING_S``: positions become averages of the polyline's (so the foot never goes below the
+ground, never slides on it while the kernel is shorter than the lift, and never leaves the
+polyline's convex hull), the velocity is an average of the polyline's velocities (so the
+joint speeds stay within the limit to first order: the max-norm ball is convex), and the
+acceleration is bounded; the swing lasts ``SMOOTHING_S`` longer.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+
+import numpy as np
+
+from gait_nodes.contract import Swing, SwingTrajectory
+from gait_nodes.errors import SwingPolicyError
+
+#: Relative extra time of a swing probed where it happens (:meth:`SwingTiming.step_s`): the COM
+#: drifts a little while the ZMP reference holds still.
+STEP_MARGIN = 0.05
+#: Samples of a probed planned swing.
+STEP_PROBE_SAMPLES = 61
+#: Width of the triangular smoothing kernel of value-table swings [s].
+SMOOTHING_S = 0.2
+#: Fine time step of the smoothing convolution [s].
+FINE_STEP_S = 0.001
+#: Relative extra swing time for the sway and walk of the body during the swing (measured on
+#: the RoboSimian crawl: the whole-body probe's times were 16 % short of what the joints needed).
+BODY_MOTION_MARGIN = 0.25
+#: Lattice of the cached table timings: step x, step y [m], turn [rad].
+LATTICE = (0.02, 0.02, 0.05)
+#: The 8 corners of a lattice cell, as offsets.
+_CORNERS = np.array([[(corner >> axis) & 1 for axis in range(3)] for corner in range(8)])
+#: Samples of a polynomial swing when its joint speeds are measured.
+POLYNOMIAL_PROBE_SAMPLES = 61
+#: Factor on the polynomial swing's times when they stand in for a value table not built yet
+#: (the table's smoothed swings are up to a few per cent slower than the polynomial's).
+STAND_IN_FACTOR = 1.25
+
+
+def smooth_trajectory(trajectory: SwingTrajectory, duration_s: float | None = None,
+                      sample_period_s: float = 0.005, kernel_s: float = SMOOTHING_S
+                      ) -> tuple[SwingTrajectory, float]:
+    """The swing filtered with a triangular kernel, resampled every ``sample_period_s``.
+
+    Args:
+        trajectory: Timed waypoints (a polyline with the foot at rest at both ends).
+        duration_s: Lift-off to touch-down of the result [s]; the filtered swing (which lasts
+            ``kernel_s`` longer than ``trajectory``) is time-scaled to it. None keeps its own.
+        sample_period_s: Largest waypoint spacing of the result [s] (evenly spaced).
+        kernel_s: Kernel width [s] (two boxes of half the width, so the result is C2).
+
+    Returns:
+        ``(smoothed, needed_s)``: the trajectory and the duration the filtered swing has at
+        the waypoints' own timing [s].
+    """
+    times = np.asarray(trajectory.times_s, dtype=float)
+    values = np.column_stack([trajectory.positions_in_world,
+                              np.unwrap(trajectory.yaws_rad)])
+    half = max(int(round(0.5 * kernel_s / FINE_STEP_S)), 1)
+    box = np.full(half, 1.0 / half)
+    kernel = np.convolve(box, box)
+    pad = len(kernel)
+    fine_t = np.arange(-pad, int(math.ceil(times[-1] / FINE_STEP_S)) + pad + 1) * FINE_STEP_S
+    fine = np.column_stack([np.interp(fine_t, times, values[:, i]) for i in range(4)])
+    filtered = np.column_stack([np.convolve(fine[:, i], kernel, mode='valid')
+                                for i in range(4)])
+    # 'valid' output k averages fine[k : k + len(kernel)], centred on fine_t[k + len//2].
+    centres = fine_t[(len(kernel) - 1) // 2:][:len(filtered)]
+    extra = 0.5 * (len(kernel) - 1) * FINE_STEP_S
+    start, end = -extra, times[-1] + extra
+    needed = end - start
+    keep = (centres >= start - 1e-12) & (centres <= end + 1e-12)
+    local_t = centres[keep] - start
+    local = filtered[keep]
+    local[0], local[-1] = values[0], values[-1]
+    local_t[-1] = needed
+    target = needed if duration_s is None else float(duration_s)
+    if not target > 0:
+        raise SwingPolicyError(f'a swing needs a positive duration, got {target} s')
+    scaled_t = local_t * (target / needed)
+    count = max(int(math.ceil(target / sample_period_s - 1e-9)), 1)
+    out_t = np.linspace(0.0, target, count + 1)
+    out = np.column_stack([np.interp(out_t, scaled_t, local[:, i]) for i in range(4)])
+    out[0], out[-1] = values[0], values[-1]
+    yaws = np.angle(np.exp(1j * out[:, 3]))
+    return SwingTrajectory(trajectory.foot, trajectory.start_ns, out_t, out[:, :3], yaws), \
+        needed
+
+
+class SwingTiming:
+    """Least swing time of each foot for a displacement, at the joint velocity limit.
+
+    A subclass gives the swing's shape for a step of the front-right limb (:meth:`shape`:
+    foot states in its mirrored base coordinates at normalized times). The shape is timed
+    through the whole-body IK: the other feet stand at their nominal places and the full-model
+    COM stays where it is at the nominal stance, so the body moves under the swinging limb as
+    it does when the robot walks (it compensates the limb's mass: about 15 % of the foot's
+    displacement for the RoboSimian-like robot), and every joint of every limb counts. The
+    swing then lasts ``max_j max_u |dq_j / du| / W`` times ``1 + BODY_MOTION_MARGIN``.
+
+    Args:
+        robot: The :class:`gait_nodes.robot.model.RobotModel` (with ``extra.limb_ik``).
+        family: IK family 0..7.
+        joint_velocity_limit_rad_s: The limit [rad/s].
+        name: What the times come from (for messages).
+    """
+
+    def __init__(self, robot, family: int, joint_velocity_limit_rad_s: float, name: str):
+        from gait_nodes.robot.whole_body_ik import (
+            IkSettings,
+            WholeBodyIkSolver,
+            nominal_configuration,
+        )
+        from gait_nodes.swing.kinematics import LimbTiming
+
+        self.robot = robot
+        self.timing = LimbTiming(robot, family, joint_velocity_limit_rad_s)
+        self.name = name
+        #: Factor on every time (> 1 for a model standing in for slower swings).
+        self.factor = 1.0
+        ik = self.timing.ik
+        feet = robot.description.feet
+        self._mirrors = [np.asarray(ik.mirrors[ik.foot_index[foot.name]], dtype=float)
+                         for foot in feet]
+        self._reference = next(k for k, m in enumerate(self._mirrors) if (m == 1).all())
+        self._solver = WholeBodyIkSolver(robot, IkSettings(max_iterations=50))
+        self._seed_solver = WholeBodyIkSolver(robot, IkSettings(max_iterations=200))
+        self._q_nominal = nominal_configuration(robot, family)
+        import pinocchio as pin
+
+        self._com = pin.centerOfMass(robot.model, robot.new_data(), self._q_nominal).copy()
+        self._feet = robot.nominal_feet_in_world(self._q_nominal[:3], 0.0)
+        self._cache: dict[tuple[int, int, int], float] = {}
+
+    def shape(self, step_in_base: np.ndarray, turn_rad: float
+              ) -> tuple[np.ndarray, np.ndarray]:
+        """The swing by ``step_in_base`` as ``(u, states)``.
+
+        ``u`` (N,) runs from 0 to 1 in the swing's own time law; ``states`` (N, 4) are the
+        front-right foot's (x, y, z, yaw) in its base frame at the nominal stance (ground at
+        ``-body_height_m``).
+        """
+        raise NotImplementedError
+
+    def raw_s(self, step_in_base: np.ndarray, turn_rad: float) -> float:
+        """Swing time [s] of the front-right limb's step with the body compensating its mass."""
+        u, states = self.shape(np.asarray(step_in_base, dtype=float), float(turn_rad))
+        feet = np.repeat(self._feet[None], len(states), axis=0)
+        yaws = np.zeros(feet.shape[:2])
+        feet[:, self._reference] = self._q_nominal[:3] + states[:, :3]
+        yaws[:, self._reference] = states[:, 3]
+        return self._time_through_ik(u, feet, yaws, 0.0, self._com, self._q_nominal)
+
+    def _time_through_ik(self, u, feet, yaws, body_yaw_rad, com, q_start) -> float:
+        """``max |dq/du| / W`` over every joint, the feet following ``feet`` (N, F, 3).
+
+        The full-model COM is held at ``com`` and the body level at ``body_yaw_rad``.
+        """
+        from gait_nodes.robot.whole_body_ik import IkTargets
+
+        q = np.array(q_start, dtype=float)
+        joints = []
+        for k in range(len(u)):
+            result = self._solver.solve(IkTargets(feet[k], yaws[k], body_yaw_rad,
+                                                  com_in_world=com), q)
+            if result.foot_position_errors_m.max() > 1e-4 or result.com_error_m > 1e-4:
+                raise SwingPolicyError(f'a swing to {np.round(feet[-1], 3).tolist()} leaves '
+                                       f'the reach of the limbs')
+            q = result.q
+            joints.append(self.robot.joint_positions(q))
+        rates = np.abs(np.diff(np.array(joints), axis=0)) / np.diff(u)[:, None]
+        limits = np.asarray(self.robot.velocity_limits_rad_s, dtype=float)
+        return float((rates / limits).max())
+
+    def world_shape(self, swing: Swing, body_yaw_rad: float) -> tuple[np.ndarray, np.ndarray]:
+        """The swing published for a planned ``swing``, as ``(u, states)``.
+
+        ``u`` runs from 0 to 1 in the swing's time law; ``states`` (N, 4) are world positions
+        and yaws.
+        """
+        raise NotImplementedError
+
+    def step_s(self, swings: dict[int, Swing], feet_in_world: np.ndarray,
+               foot_yaws_rad: np.ndarray, body_yaw_rad: float, com_in_world: np.ndarray
+               ) -> float:
+        """Least time [s] of planned swings made together, probed where they happen.
+
+        The whole-body IK follows the swings (as :meth:`world_shape` makes them, each stretched
+        to the common duration) with the other feet at ``feet_in_world`` and the full-model COM
+        held at ``com_in_world`` (where the ZMP reference holds it during the swing), so the
+        body's sway and its compensation of the limbs' mass are those of the walk;
+        ``STEP_MARGIN`` covers the COM's drift.
+
+        Args:
+            swings: Foot index -> its planned swing (world places and yaws; times unused).
+            feet_in_world: (F, 3) contact points of all feet before the swings.
+            foot_yaws_rad: (F,) their yaws [rad].
+            body_yaw_rad: Body yaw [rad].
+            com_in_world: (3,) COM position held during the swings [m].
+        """
+        from gait_nodes.robot.whole_body_ik import IkTargets, seed_configuration
+
+        u = np.linspace(0.0, 1.0, STEP_PROBE_SAMPLES)
+        feet = np.repeat(np.asarray(feet_in_world, dtype=float)[None], len(u), axis=0)
+        yaws = np.repeat(np.asarray(foot_yaws_rad, dtype=float)[None], len(u), axis=0)
+        for foot, swing in swings.items():
+            own_u, states = self.world_shape(swing, body_yaw_rad)
+            own_u = own_u / own_u[-1]
+            feet[:, foot] = np.column_stack([np.interp(u, own_u, states[:, i])
+                                             for i in range(3)])
+            yaws[:, foot] = np.interp(u, own_u, states[:, 3])
+        first = IkTargets(feet[0], yaws[0], body_yaw_rad, com_in_world=np.asarray(com_in_world))
+        q = seed_configuration(self.robot, first, self.timing.family)
+        q = self._seed_solver.solve(first, q).q
+        return (1.0 + STEP_MARGIN) * self.factor * self._time_through_ik(
+            u, feet, yaws, body_yaw_rad, com_in_world, q)
+
+    def _lattice_s(self, step_in_base: np.ndarray, turn_rad: float) -> float:
+        """:meth:`raw_s` interpolated on :data:`LATTICE` (cached; the planner asks often)."""
+        # A swing backwards is the forward one reversed: the same joint speeds, the same time.
+        point = np.array([step_in_base[0], step_in_base[1], turn_rad], dtype=float)
+        if point[0] < 0 or (point[0] == 0 and (point[1] < 0 or (point[1] == 0
+                                                                  and point[2] < 0))):
+            point = -point
+        point = point / LATTICE
+        low = np.floor(point).astype(int)
+        weight = point - low
+        weights = np.prod(np.where(_CORNERS, weight, 1.0 - weight), axis=1)
+        total = 0.0
+        for corner, w in zip(low + _CORNERS, weights, strict=True):
+            if w == 0.0:
+                continue
+            key = (int(corner[0]), int(corner[1]), int(corner[2]))
+            if key not in self._cache:
+                node = np.array(key, dtype=float) * LATTICE
+                self._cache[key] = self.raw_s(node[:2], float(node[2]))
+            total += float(w) * self._cache[key]
+        return total
+
+    def swing_s(self, foot: int, step_in_base: np.ndarray, turn_rad: float = 0.0) -> float:
+        """Least time [s] of foot ``foot``'s swing by ``step_in_base`` (its own base frame).
+
+        Args:
+            foot: Foot index (robot YAML order).
+            step_in_base: (2,) landing minus lift-off in the base frame [m].
+            turn_rad: Landing yaw minus lift-off yaw [rad].
+        """
+        mirror = self._mirrors[foot]
+        step = np.asarray(step_in_base, dtype=float)[:2] * mirror[:2]
+        turn = float(mirror[0] * mirror[1]) * float(turn_rad)
+        return (1.0 + BODY_MOTION_MARGIN) * self._lattice_s(step, turn)
+
+    def lift_and_lower_s(self) -> float:
+        """Swing time [s] of a step in place (the lift and the lowering), with the margin."""
+        return (1.0 + BODY_MOTION_MARGIN) * self._lattice_s(np.zeros(2), 0.0)
+
+
+class TableSwingTiming(SwingTiming):
+    """Times of the value table's smoothed greedy swings (what swing_leg_policy publishes).
+
+    Args:
+        policy: A :class:`gait_nodes.swing.policy.SwingPolicy`.
+        robot: Its RobotModel.
+    """
+
+    def __init__(self, policy, robot):
+        table = policy.table
+        super().__init__(robot, table.family, table.joint_velocity_limit_rad_s,
+                         'the swing value table')
+        self.policy = policy
+
+    def shape(self, step_in_base, turn_rad):
+        """The table's greedy path for the step, smoothed (see :meth:`SwingTiming.shape`)."""
+        path, _ = self.policy.path_for_step(step_in_base, turn_rad)
+        polyline = SwingTrajectory('probe', 0, path.times_s, path.states[:, :3],
+                                   path.states[:, 3])
+        smoothed, needed = smooth_trajectory(polyline, None, needed_probe_period(path))
+        states = np.column_stack([smoothed.positions_in_world, smoothed.yaws_rad])
+        return smoothed.times_s / needed, states
+
+
+    def world_shape(self, swing, body_yaw_rad):
+        """The smoothed table swing placed on ``swing`` (see :meth:`SwingTiming.world_shape`)."""
+        from gait_nodes.swing.policy import limb_step, place_swing
+
+        ik = self.timing.ik
+        mirror = ik.mirrors[ik.foot_index[swing.foot]]
+        step, turn = limb_step(swing, mirror, body_yaw_rad)
+        path, _ = self.policy.path_for_step(step, turn)
+        polyline, _ = place_swing(path, swing, 0, mirror, body_yaw_rad,
+                                  self.policy.table.ground_z_m)
+        smoothed, needed = smooth_trajectory(polyline, None, needed_probe_period(path))
+        states = np.column_stack([smoothed.positions_in_world, np.unwrap(smoothed.yaws_rad)])
+        return smoothed.times_s / needed, states
+
+
+def needed_probe_period(path) -> float:
+    """Sample spacing [s] for timing a swing (about 60 samples)."""
+    return max(path.duration_s / 60.0, 0.005)
+
+
+class PolynomialSwingTiming(SwingTiming):
+    """Times of the sixth-order swing, its fastest joint at the limit.
+
+    The swing runs from half a step behind to half a step ahead of the limb's nominal foot
+    position (front-right coordinates), ``step_height_m`` high at mid-swing.
+
+    Args:
+        robot: The RobotModel.
+        family: IK family.
+        joint_velocity_limit_rad_s: The limit [rad/s].
+        step_height_m: Via-point height above the ground [m].
+        factor: Factor on the times (> 1 when they stand in for slower swings).
+    """
+
+    def __init__(self, robot, family: int, joint_velocity_limit_rad_s: float,
+                 step_height_m: float, factor: float = 1.0):
+        super().__init__(robot, family, joint_velocity_limit_rad_s, 'the polynomial swing')
+        self.factor = float(factor)
+        feet = robot.description.feet
+        self.nominal = np.asarray(feet[self._reference].nominal_position_in_base, dtype=float)
+        self.step_height_m = float(step_height_m)
+
+    def shape(self, step_in_base, turn_rad):
+        """The sixth-order swing around the nominal foot (see :meth:`SwingTiming.shape`)."""
+        from gait_nodes.swing.polynomial import evaluate, sixth_order_coefficients
+
+        step = np.array([step_in_base[0], step_in_base[1], 0.0, turn_rad])
+        centre = np.array([*self.nominal, 0.0])
+        start, end = centre - 0.5 * step, centre + 0.5 * step
+        via = 0.5 * (start + end)
+        via[2] += self.step_height_m
+        coefficients = sixth_order_coefficients(start, end, via, 1.0, 0.5)
+        u = np.linspace(0.0, 1.0, POLYNOMIAL_PROBE_SAMPLES)
+        return u / self.factor, evaluate(coefficients, u)
+
+    def world_shape(self, swing, body_yaw_rad):
+        """The sixth-order swing of ``swing`` (see :meth:`SwingTiming.world_shape`)."""
+        from gait_nodes.swing.polynomial import polynomial_swing
+
+        trajectory, _ = polynomial_swing(swing, 0, self.step_height_m, POLYNOMIAL_PROBE_SAMPLES)
+        states = np.column_stack([trajectory.positions_in_world,
+                                  np.unwrap(trajectory.yaws_rad)])
+        return trajectory.times_s / trajectory.duration_s, states
+
+
+def swing_timing(robot, method: str, step_height_m: float,
+                 log: Callable[[str], None] | None = None) -> tuple[SwingTiming | None, str]:
+    """The timing model of ``method`` for ``robot`` and why it is (or is not) that one.
+
+    ``value_table`` uses the cached default table (:mod:`gait_nodes.swing.cache`) when it is
+    built; when it is not (swing_leg_policy builds it on first use) the polynomial swing's times,
+    which are longer, stand in until it is. A robot without closed-form limb IK has no model
+    (None): its gait keeps the fixed timing of its parameters.
+
+    Args:
+        robot: The RobotModel.
+        method: 'value_table' or 'polynomial'.
+        step_height_m: Swing height [m].
+        log: Called with a message when the table is not there yet.
+    """
+    from gait_nodes.errors import GaitNodesError
+    from gait_nodes.robot.whole_body_ik import limb_ik_family
+
+    family = limb_ik_family(robot)
+    if family is None:
+        return None, f'{robot.name} has no closed-form limb IK: fixed timing'
+    limit = robot.description.joint_velocity_limit_rad_s
+    if method == 'value_table':
+        from gait_nodes.swing.cache import default_table_path
+        from gait_nodes.swing.policy import SwingPolicy
+        from gait_nodes.swing.table import load_table
+
+        path = default_table_path(robot, family, step_height_m, limit)
+        if path.is_file():
+            try:
+                table = load_table(path, robot, limit, family)
+                if math.isclose(table.step_height_m, step_height_m, abs_tol=1e-9):
+                    return TableSwingTiming(SwingPolicy(table, robot), robot), \
+                        f'swing times from the value table {path}'
+            except GaitNodesError as exc:
+                if log is not None:
+                    log(f'{path}: {exc}')
+        reason = (f'the swing value table {path} is not built yet: the polynomial swing\'s '
+                  f'times x {STAND_IN_FACTOR:g} stand in')
+        if log is not None:
+            log(reason)
+        return PolynomialSwingTiming(robot, family, limit, step_height_m, STAND_IN_FACTOR), \
+            reason
+    return PolynomialSwingTiming(robot, family, limit, step_height_m), \
+        'swing times of the polynomial swing'

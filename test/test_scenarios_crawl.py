@@ -1,0 +1,255 @@
+"""End to end: the RoboSimian crawl scenarios walk well (inproc, recorded, re-analysed).
+
+Each scenario runs through ``python -m gait_nodes run`` in inproc mode and is judged from its
+bag alone: with :func:`gait_nodes.bag.analysis.inspect_bag` (ZMP margin against the recorded
+support polygon, diagnostics, joint speeds) and independently, with Pinocchio on the URDF:
+the feet that /tf and /joint_states put on the ground are where /gait/footsteps planned them,
+and the COM the monitor reports is the one /gait/com_reference asked for.
+"""
+
+from __future__ import annotations
+
+import ast
+import math
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from gait_nodes.__main__ import main as run_main
+from gait_nodes.bag.analysis import inspect_bag, zmp_margins
+from gait_nodes.bag.reader import BagReader
+from gait_nodes.diagnostics import ERROR, WARN, level_value
+from gait_nodes.interfaces import deserialize_message, get_message
+from gait_nodes.robot.description import load_robot_description
+
+#: Simulated seconds per scenario: a crawl cycle (about 9 s) after the first full stride; the
+#: online scenario changes its walk until 16 s.
+DURATIONS_S = {'robosimian_crawl': 14.0, 'robosimian_crawl_polynomial': 14.0, 'online': 20.0}
+#: The first swing lifts off this soon after the first /cmd_vel [s].
+FIRST_SWING_WITHIN_S = 2.0
+#: Least ZMP margin inside the recorded support polygon at every sample [m].
+MIN_MARGIN_M = 0.02
+#: Landed feet (Pinocchio FK of /tf + /joint_states) within this of the plan [m].
+FOOT_TOLERANCE_M = 0.003
+#: Monitor COM within this of the COM reference, horizontally [m].
+COM_TOLERANCE_M = 0.003
+
+
+@pytest.fixture(scope='module')
+def bags(tmp_path_factory):
+    """Record each scenario once; the tests share the bags."""
+    recorded = {}
+
+    def record(name):
+        if name not in recorded:
+            path = tmp_path_factory.mktemp(name) / 'bag'
+            code = run_main(['run', '--runtime', 'inproc', '--scenario', name, '--duration',
+                             str(DURATIONS_S[name]), '--record', str(path)])
+            assert code == 0
+            recorded[name] = (path, inspect_bag(path, robot='robosimian'))
+        return recorded[name]
+
+    return record
+
+
+def _messages(path, topic, type_name):
+    cls = get_message(type_name)
+    for channel, log_ns, _, data in BagReader(path).messages():
+        if channel.topic == topic:
+            yield log_ns, deserialize_message(data, cls)
+
+
+def _diagnostic_values(path):
+    """(stamp [ns], name, level, message, {key: value}) of every recorded status."""
+    rows = []
+    for _, msg in _messages(path, '/diagnostics', 'diagnostic_msgs/msg/DiagnosticArray'):
+        stamp = msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec
+        for status in msg.status:
+            rows.append((stamp, status.name, level_value(status.level), status.message,
+                         {kv.key: kv.value for kv in status.values}))
+    return rows
+
+
+SCENARIOS = list(DURATIONS_S)
+
+
+def executed(plans, until_ns=None) -> list[dict]:
+    """The swings the robot made: each plan's swings before the next plan takes over.
+
+    A plan starts at the last contact change before it was published, so a swing of one plan
+    that lifts off at or after the next plan's start was planned again by the next one (and
+    may have moved in time: a velocity change re-times the steps not yet started).
+    """
+    swings = {}
+    for index, plan in enumerate(plans):
+        following = plans[index + 1].start_ns if index + 1 < len(plans) else None
+        for swing in plan.swings():
+            lift_ns = plan.start_ns + round(swing.lift_off_s * 1e9)
+            land_ns = plan.start_ns + round(swing.touch_down_s * 1e9)
+            if (following is not None and lift_ns >= following) or \
+                    (until_ns is not None and land_ns > until_ns):
+                continue
+            swings[(swing.foot, round(lift_ns / 1e6))] = {
+                'foot': swing.foot, 'lift_off_ns': lift_ns, 'touch_down_ns': land_ns,
+                'end': swing.end_in_world, 'length_m': float(np.linalg.norm(
+                    (swing.end_in_world - swing.start_in_world)[:2]))}
+    return sorted(swings.values(), key=lambda s: (s['lift_off_ns'], s['foot']))
+
+
+@pytest.mark.parametrize('name', SCENARIOS)
+def test_first_swing_soon_after_the_first_velocity_command(bags, name):
+    path, inspection = bags(name)
+    first_cmd_ns = next(log_ns for log_ns, _ in _messages(path, '/cmd_vel',
+                                                          'geometry_msgs/msg/Twist'))
+    swings = executed(inspection.series.plans)
+    first_lift_ns = min(s['lift_off_ns'] for s in swings)
+    assert 0.0 < (first_lift_ns - first_cmd_ns) * 1e-9 <= FIRST_SWING_WITHIN_S
+
+
+@pytest.mark.parametrize('name', SCENARIOS)
+def test_zmp_inside_the_support_polygon_and_no_error_or_saturation(bags, name):
+    path, inspection = bags(name)
+    gait = inspection.report['gait']
+    stamps, margins = zmp_margins(inspection.series)
+    assert len(margins) > 0.9 * DURATIONS_S[name] * 200
+    assert margins.min() >= MIN_MARGIN_M, (
+        f'ZMP margin {margins.min():.4f} m at {stamps[np.argmin(margins)] * 1e-9:.3f} s')
+    assert gait['diagnostics']['by_level'].get('ERROR', 0) == 0, gait['diagnostics']
+    diagnostics = _diagnostic_values(path)
+    assert not [d for d in diagnostics if d[2] >= ERROR]
+    saturation = [d for d in diagnostics if d[1] == 'whole_body_ik: velocity saturation']
+    assert saturation and all(int(d[4]['saturated_ticks']) == 0 for d in saturation)
+    # The swing-leg policy never had to compress a swing: the plan gave each the time it needs.
+    assert not [d for d in diagnostics if d[1] == 'swing_leg_policy: timing' and d[2] >= WARN]
+    # Every joint within its limit in what the IK commanded and what the simulator did.
+    for topic in ('/joint_commands', '/joint_states'):
+        assert gait['joint_velocity'][topic]['peak_ratio_to_limit'] <= 1.0 + 1e-9
+
+
+def _applied_speed(diagnostics) -> float:
+    """The forward speed the planner said it walks (its last velocity report)."""
+    reports = [d for d in diagnostics if d[1] == 'footstep_planner: velocity']
+    return float(ast.literal_eval(reports[-1][4]['applied_twist'])[0])
+
+
+@pytest.mark.parametrize('name', ['robosimian_crawl', 'robosimian_crawl_polynomial'])
+def test_walks_the_commanded_or_the_fastest_feasible_speed(bags, name):
+    path, inspection = bags(name)
+    diagnostics = _diagnostic_values(path)
+    commanded = 0.04
+    applied = _applied_speed(diagnostics)
+    velocity = [d for d in diagnostics if d[1] == 'footstep_planner: velocity'][-1]
+    if applied < commanded - 1e-9:
+        # Beyond what the joint limit allows: said so, and walks the fastest feasible speed.
+        assert velocity[2] == WARN and 'fastest rhythm the joint velocity limit' in velocity[3]
+    else:
+        assert applied == pytest.approx(commanded)
+    # Steady walking: each foot's last stride over the time between its last two lift-offs
+    # (the landings are checked against the real feet below).
+    swings = executed(inspection.series.plans)
+    speeds = []
+    for foot in {s['foot'] for s in swings}:
+        own = [s for s in swings if s['foot'] == foot]
+        if len(own) >= 2:
+            cycle_s = (own[-1]['lift_off_ns'] - own[-2]['lift_off_ns']) * 1e-9
+            speeds.append(own[-1]['length_m'] / cycle_s)
+    assert speeds and all(v == pytest.approx(applied, rel=0.1) for v in speeds)
+    # The body kept up with its feet: it moved as far as their mean, give or take half a stride.
+    base = np.array(sorted(inspection.series.base))
+    plans = inspection.series.plans
+    feet_start = plans[0].positions_in_world[0][:, 0].mean()
+    last = plans[-1]
+    feet_end = last.positions_in_world[last.index_at((base[-1, 0] - last.start_ns) * 1e-9)]
+    feet_moved = feet_end[:, 0].mean() - feet_start
+    assert feet_moved > 0.1
+    assert base[-1, 1] - base[0, 1] == pytest.approx(feet_moved, abs=0.15)
+
+
+class _Kinematics:
+    """Feet and COM of the URDF from recorded /tf and /joint_states (Pinocchio only)."""
+
+    def __init__(self):
+        description = load_robot_description('robosimian')
+        self.model = pin.buildModelFromUrdf(str(description.urdf_path),
+                                            pin.JointModelFreeFlyer())
+        self.data = self.model.createData()
+        self.frames = {foot.name: self.model.getFrameId(foot.frame)
+                       for foot in description.feet}
+
+    def configuration(self, base, names, positions) -> np.ndarray:
+        q = pin.neutral(self.model)
+        q[:3] = base[1:4]
+        q[3:7] = (0.0, 0.0, math.sin(0.5 * base[4]), math.cos(0.5 * base[4]))
+        for name, value in zip(names, positions, strict=True):
+            q[self.model.joints[self.model.getJointId(name)].idx_q] = value
+        return q
+
+    def feet(self, q) -> dict[str, np.ndarray]:
+        pin.framesForwardKinematics(self.model, self.data, q)
+        return {name: self.data.oMf[frame].translation.copy()
+                for name, frame in self.frames.items()}
+
+    def com(self, q) -> np.ndarray:
+        return pin.centerOfMass(self.model, self.data, q).copy()
+
+
+def _states(series):
+    joints = series.joints['/joint_states']
+    by_stamp = dict(zip(joints.stamps_ns, joints.positions, strict=True))
+    return joints.names, [(b, by_stamp[b[0]]) for b in sorted(series.base) if b[0] in by_stamp]
+
+
+@pytest.mark.parametrize('name', SCENARIOS)
+def test_feet_land_where_planned_and_com_tracks_its_reference(bags, name):
+    _, inspection = bags(name)
+    series = inspection.series
+    kinematics = _Kinematics()
+    names, states = _states(series)
+    stamps = np.array([b[0] for b, _ in states])
+    swings = executed(series.plans, int(stamps[-1]))
+    checked = 0
+    for swing in swings:
+        # Half-way through the following stance: the foot is down where it was planned.
+        when = swing['touch_down_ns'] + 200_000_000
+        k = int(np.searchsorted(stamps, when))
+        if k >= len(stamps):
+            continue
+        base, positions = states[k]
+        foot = kinematics.feet(kinematics.configuration(base, names, positions))[swing['foot']]
+        assert np.linalg.norm(foot - np.array(swing['end'])) < FOOT_TOLERANCE_M, swing
+        checked += 1
+    assert checked >= 4
+    reference = {stamp: np.array([x, y]) for stamp, x, y, _ in series.com_reference}
+    errors = []
+    for base, positions in states[::10]:
+        if base[0] in reference:
+            com = kinematics.com(kinematics.configuration(base, names, positions))
+            errors.append(np.linalg.norm(com[:2] - reference[base[0]]))
+    assert len(errors) > 100 and max(errors) < COM_TOLERANCE_M
+    monitor = {stamp: np.array([x, y]) for stamp, x, y, _ in series.com}
+    gaps = [np.linalg.norm(monitor[s] - reference[s]) for s in monitor if s in reference]
+    assert max(gaps) < COM_TOLERANCE_M
+
+
+def test_online_commands_take_effect_and_invalid_ones_are_rejected(bags):
+    path, inspection = bags('online')
+    commands = inspection.report['gait']['commands']
+    assert commands['rejected'] == 5 and commands['accepted'] == 2
+    series = inspection.series
+    start_ns = min(b[0] for b in series.base)
+    swings = executed(series.plans)
+    # step_length_m = 0.2 from 4 s: the steady crawl strides between the changes are at most
+    # 0.2 m (a change of velocity or gait re-arranges the feet with longer steps).
+    crawl = [s for s in swings if 9e9 < s['lift_off_ns'] - start_ns < 12e9]
+    assert crawl and max(s['length_m'] for s in crawl) <= 0.2 + 1e-6
+    # The turn from 8 s: the body's yaw changes.
+    yaws = np.array([b[4] for b in sorted(series.base)])
+    assert abs(yaws[-1] - yaws[0]) > 0.05
+    # The trot from 12 s: diagonal feet lift off together.
+    trot = {}
+    for swing in swings:
+        if swing['lift_off_ns'] - start_ns > 12e9:
+            trot.setdefault(swing['lift_off_ns'], set()).add(swing['foot'])
+    assert any(feet in ({'front_left', 'rear_right'}, {'front_right', 'rear_left'})
+               for feet in trot.values())

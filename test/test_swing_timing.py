@@ -1,0 +1,242 @@
+"""Swing times at the joint velocity limit, smoothed swings, and the gait rhythm they give.
+
+Identities checked: a smoothed swing keeps its ends, stays above the ground, has a bounded
+acceleration and (at its own timing) keeps the joints within the limit; a timing model's time
+replayed through the whole-body IK puts the fastest joint exactly at the limit; the planner's
+joint-limit rhythm is the fixed point of thesis eq. (2) and every planned swing lasts at least
+the time its own displacement needs.
+"""
+
+import functools
+
+import numpy as np
+import pinocchio as pin
+import pytest
+from swing_helpers import FAMILY, STEP_HEIGHT_M, robot, tiny_table
+
+from gait_nodes.contract import SwingTrajectory
+from gait_nodes.planning.footsteps import GaitPlanner, Twist2D, plan_walk
+from gait_nodes.planning.gait_params import GaitParameters
+from gait_nodes.planning.rhythm import MIN_TRANSFER_S, cycle_displacements, swing_time_s
+from gait_nodes.robot.whole_body_ik import IkTargets, WholeBodyIkSolver
+from gait_nodes.swing.policy import SwingPolicy
+from gait_nodes.swing.timing import (
+    BODY_MOTION_MARGIN,
+    SMOOTHING_S,
+    STEP_MARGIN,
+    PolynomialSwingTiming,
+    TableSwingTiming,
+    smooth_trajectory,
+)
+
+
+@functools.lru_cache(maxsize=1)
+def policy():
+    table, _ = tiny_table()
+    return SwingPolicy(table, robot())
+
+
+@functools.lru_cache(maxsize=1)
+def polynomial_timing():
+    return PolynomialSwingTiming(robot(), FAMILY, 1.0, STEP_HEIGHT_M)
+
+
+def test_smoothed_swing_keeps_its_ends_stays_up_and_is_smooth():
+    path, _ = policy().path_for_step(np.array([0.2, 0.0]))
+    polyline = SwingTrajectory('x', 0, path.times_s, path.states[:, :3], path.states[:, 3])
+    smooth, needed = smooth_trajectory(polyline, None, 0.002)
+    assert needed == pytest.approx(path.duration_s + SMOOTHING_S, abs=3e-3)
+    assert np.allclose(smooth.positions_in_world[[0, -1]], polyline.positions_in_world[[0, -1]])
+    # Averages of the polyline: never below the ground, never outside its bounding box.
+    low, high = polyline.positions_in_world.min(axis=0), polyline.positions_in_world.max(axis=0)
+    assert np.all(smooth.positions_in_world >= low - 1e-12)
+    assert np.all(smooth.positions_in_world <= high + 1e-12)
+    # Bounded acceleration (the polyline's is infinite at every corner): at most the largest
+    # velocity change over half the kernel.
+    t, p = smooth.times_s, smooth.positions_in_world
+    velocity = np.diff(p, axis=0) / np.diff(t)[:, None]
+    acceleration = np.linalg.norm(np.diff(velocity, axis=0), axis=1) / np.diff(t)[1:]
+    polyline_speed = np.linalg.norm(np.diff(path.states[:, :3], axis=0), axis=1) \
+        / np.diff(path.times_s)
+    assert acceleration.max() < 2.0 * 2.0 * polyline_speed.max() / SMOOTHING_S
+    # Lift-off and touch-down at rest.
+    assert np.linalg.norm(velocity[0]) < 0.02 and np.linalg.norm(velocity[-1]) < 0.02
+    # Stretched to a planned duration: same path, uniformly slower.
+    longer, _ = smooth_trajectory(polyline, 2.0 * needed, 0.002)
+    assert longer.duration_s == pytest.approx(2.0 * needed)
+    halfway = np.array([np.interp(0.5 * longer.duration_s, longer.times_s, longer.
+                                  positions_in_world[:, i]) for i in range(3)])
+    expected = np.array([np.interp(0.5 * needed, t, p[:, i]) for i in range(3)])
+    assert np.allclose(halfway, expected, atol=1e-3)
+
+
+def test_smoothed_table_swing_keeps_the_joints_within_the_limit():
+    # The polyline's velocity is a joint-limited one on each segment; the filter averages
+    # velocities, so the joints stay at the limit to first order.
+    timing = policy().timing
+    for step in (0.1, 0.2):
+        path, _ = policy().path_for_step(np.array([step, 0.0]))
+        polyline = SwingTrajectory('x', 0, path.times_s, path.states[:, :3],
+                                   path.states[:, 3])
+        smooth, _ = smooth_trajectory(polyline, None, 0.002)
+        q, feasible = timing.joints(np.column_stack([smooth.positions_in_world,
+                                                     smooth.yaws_rad]))
+        assert feasible.all()
+        rates = np.abs(np.diff(q, axis=0)) / np.diff(smooth.times_s)[:, None]
+        assert rates.max() <= 1.0 * 1.05
+
+
+def _whole_body_peak(timing, step, duration_s) -> float:
+    """Peak joint speed / limit of the model's swing played in ``duration_s`` through the IK."""
+    model = robot()
+    u, states = timing.shape(np.asarray(step, dtype=float), 0.0)
+    solver = WholeBodyIkSolver(model)
+    q = timing._q_nominal.copy()
+    com = pin.centerOfMass(model.model, model.new_data(), q).copy()
+    feet = model.nominal_feet_in_world(q[:3], 0.0)
+    joints = []
+    for state in states:
+        feet[timing._reference] = timing._q_nominal[:3] + state[:3]
+        yaws = np.zeros(len(feet))
+        yaws[timing._reference] = state[3]
+        q = solver.solve(IkTargets(feet, yaws, 0.0, com_in_world=com), q).q
+        joints.append(model.joint_positions(q))
+    rates = np.abs(np.diff(np.array(joints), axis=0)) / (np.diff(u) * duration_s)[:, None]
+    return float((rates / model.velocity_limits_rad_s).max())
+
+
+@pytest.mark.parametrize('make', [polynomial_timing, lambda: TableSwingTiming(policy(),
+                                                                               robot())])
+def test_model_time_puts_the_fastest_joint_at_the_limit(make):
+    timing = make()
+    for step in (0.04, 0.2):  # lattice nodes: swing_s interpolates between them
+        raw = timing.raw_s(np.array([step, 0.0]), 0.0)
+        assert _whole_body_peak(timing, [step, 0.0], raw) == pytest.approx(1.0, rel=1e-6)
+        # The planner's time has the margin for the body's sway on top.
+        assert timing.swing_s(1, np.array([step, 0.0])) == pytest.approx(
+            (1.0 + BODY_MOTION_MARGIN) * raw, rel=1e-9)
+    # Longer steps take longer; mirrored feet (a rear foot walking forwards) the same time.
+    times = [timing.swing_s(1, np.array([s, 0.0])) for s in (0.0, 0.1, 0.2)]
+    assert times[0] < times[1] < times[2]
+    feet = robot().description.foot_names
+    rear = feet.index('rear_left')
+    assert timing.swing_s(rear, np.array([0.1, 0.0])) == pytest.approx(
+        timing.swing_s(feet.index('front_left'), np.array([-0.1, 0.0])))
+
+
+def _joint_limit_params(**values):
+    return GaitParameters.for_robot(robot().description, gait='crawl', timing='joint_limit',
+                                    **values)
+
+
+def test_rhythm_is_the_fixed_point_of_eq_2():
+    timing = polynomial_timing()
+    params = _joint_limit_params()
+    planner = GaitPlanner(robot().description, params, swing_timing=timing)
+    twist = Twist2D(0.02)
+    rhythm = planner.rhythm(params, twist)
+    displacements, turn = cycle_displacements(planner.layout, params, twist, rhythm.cycle_s)
+    assert rhythm.swing_s == pytest.approx(swing_time_s(timing, displacements, turn), rel=1e-5)
+    # Thesis eq. (2): four swings and the body's move (the swing's horizontal part) per cycle.
+    in_place = timing.lift_and_lower_s()
+    transfer = max(MIN_TRANSFER_S, 0.5 * (rhythm.swing_s - in_place))
+    assert rhythm.cycle_s == pytest.approx(4 * rhythm.swing_s + 2 * transfer)
+    assert rhythm.duty_factor > 0.75
+    # The stride the velocity asks for over that cycle.
+    assert np.abs(displacements[:, 0]).max() == pytest.approx(0.02 * rhythm.cycle_s)
+
+
+def test_too_fast_a_command_walks_the_fastest_feasible_speed_and_says_so():
+    params = _joint_limit_params(max_vx_m_s=1.0)
+    planner = GaitPlanner(robot().description, params, swing_timing=polynomial_timing())
+    applied, notes = planner.set_velocity(Twist2D(0.5), 0.0)
+    assert 0.0 < applied.vx_m_s < 0.5
+    assert notes and 'fastest rhythm the joint velocity limit allows' in notes[-1]
+    rhythm = planner.rhythm()
+    # The fastest speed is the one whose stride is the longest allowed.
+    assert applied.vx_m_s * rhythm.cycle_s == pytest.approx(params.step_length_m, rel=1e-3)
+    slower, notes = planner.set_velocity(Twist2D(0.5 * applied.vx_m_s), 0.0)
+    assert slower.vx_m_s == pytest.approx(0.5 * applied.vx_m_s) and not notes
+
+
+def test_probe_where_the_swing_happens_agrees_with_the_nominal_model():
+    # A swing from half a step behind to half a step ahead of the nominal foot, the other feet
+    # and the COM at the nominal stance: the per-step probe and the planner's lattice model
+    # time the same motion.
+    from gait_nodes.contract import Swing
+
+    timing = polynomial_timing()
+    description = robot().description
+    feet = timing._feet.copy()
+    front_right = description.foot_names.index('front_right')
+    for step in (0.0, 0.1, 0.2):
+        swing = Swing('front_right', 0.0, 1.0, feet[front_right] - [0.5 * step, 0.0, 0.0],
+                      feet[front_right] + [0.5 * step, 0.0, 0.0], 0.0, 0.0)
+        start = feet.copy()
+        start[front_right] = swing.start_in_world
+        probed = timing.step_s({front_right: swing}, start, np.zeros(len(feet)), 0.0,
+                               timing._com)
+        assert probed / (1.0 + STEP_MARGIN) == pytest.approx(
+            timing.raw_s(np.array([step, 0.0]), 0.0), rel=1e-3)
+
+
+def test_every_planned_swing_has_the_time_its_own_step_needs():
+    # Start, a velocity change, a turn, a gait change and the stop: the steps that do not
+    # follow the steady pattern are re-timed to what the probe of their swings needs.
+    timing = polynomial_timing()
+    description = robot().description
+    params = _joint_limit_params()
+    probed = []
+    step_s = timing.step_s
+
+    def spy(swings, *args):
+        needed = step_s(swings, *args)
+        probed.append((tuple(sorted(swings)), tuple(s.end_in_world[0] for s in
+                                                    swings.values()), needed))
+        return needed
+
+    timing.step_s = spy
+    try:
+        commands = [(0.5, Twist2D(0.03)), (6.0, Twist2D(0.02, 0.0, 0.02)),
+                    (12.0, params.replace(gait='trot')), (18.0, Twist2D())]
+        planner = plan_walk(description, params, commands, 30.0, swing_timing=timing)
+    finally:
+        del timing.step_s
+    needed = {(feet, ends): value for feet, ends, value in probed}
+    swings = 0
+    for step in planner.steps:
+        for slot in step.slots:
+            key = (tuple(sorted(slot.feet)), tuple(slot.positions_after[f][0]
+                                                   for f in sorted(slot.feet)))
+            assert slot.touch_down_s - slot.lift_off_s >= needed[key] * (1 - 1e-9)
+            swings += 1
+    assert swings > 10
+    assert {step.gait for step in planner.steps} == {'crawl', 'trot'}
+
+
+def test_a_command_from_standstill_starts_the_walk_at_once():
+    params = _joint_limit_params()
+    planner = GaitPlanner(robot().description, params, swing_timing=polynomial_timing())
+    planner.advance(7.3 + 2 * params.step_period_s)  # standing steps planned ahead
+    planner.set_velocity(Twist2D(0.02), 7.3)
+    planner.advance(20.0)
+    first = min(slot.lift_off_s for step in planner.steps for slot in step.slots)
+    assert 7.3 < first <= 7.3 + 2.0
+    # The ZMP reference is continuous where the standstill was cut.
+    times = np.linspace(7.0, 8.0, 201)
+    zmp = planner.zmp(times)
+    assert np.abs(np.diff(zmp, axis=0)).max() < 0.01
+
+
+def test_without_a_built_table_the_slower_polynomial_times_stand_in(tmp_path, monkeypatch):
+    from gait_nodes.swing.timing import STAND_IN_FACTOR, swing_timing
+
+    monkeypatch.setenv('XDG_CACHE_HOME', str(tmp_path))
+    model, reason = swing_timing(robot(), 'value_table', STEP_HEIGHT_M)
+    assert isinstance(model, PolynomialSwingTiming) and 'not built yet' in reason
+    assert model.swing_s(1, np.array([0.1, 0.0])) == pytest.approx(
+        STAND_IN_FACTOR * polynomial_timing().swing_s(1, np.array([0.1, 0.0])))
+    # A robot without closed-form limb IK has no model: its gait keeps fixed timing.
+    from gait_nodes.robot.model import load_robot_model
+
+    assert swing_timing(load_robot_model('biped'), 'polynomial', STEP_HEIGHT_M)[0] is None
