@@ -52,11 +52,6 @@ def _cmd(at_s: float, text_or_object) -> TimedCommand:
     return TimedCommand(at_s, command=text)
 
 
-#: Whole-body IK tolerances [m] far below the motion of one tick: with the shipped 1e-6 m the
-#: solver stops as soon as it is within a micrometre, the joints move in micrometre stairs and
-#: the monitor's second differences read them as millimetres of ZMP jitter.
-_SMOOTH_IK = {'position_tolerance_m': 1e-9, 'com_tolerance_m': 1e-9}
-
 SCENARIOS: dict[str, Scenario] = {s.name: s for s in (
     Scenario('robosimian_crawl',
              'RoboSimian-like quadruped, crawl, preview-control COM, value-table swing',
@@ -71,14 +66,12 @@ SCENARIOS: dict[str, Scenario] = {s.name: s for s in (
     Scenario('biped_walk',
              'small humanoid: start, walk with a stair-like swing height (Lucy), stop',
              'biped', {'gait': 'biped', 'swing': 'polynomial', 'com_method': 'preview',
-                       'step_height_m': 0.1, 'step_period_s': 1.5, 'duty_factor': 0.72,
-                       **_SMOOTH_IK},
+                       'step_height_m': 0.1, 'step_period_s': 1.5, 'duty_factor': 0.72},
              (_vel(0.0, 0.1), _vel(10.0, 0.0)), 16.0),
     Scenario('go2_trot',
              'Unitree Go2 (example-robot-data), trot with sway compensation',
              'go2', {'gait': 'trot', 'swing': 'polynomial', 'com_method': 'sway',
-                     'step_length_m': 0.2, 'step_period_s': 0.5, 'duty_factor': 0.6,
-                     **_SMOOTH_IK},
+                     'step_length_m': 0.2, 'step_period_s': 0.5, 'duty_factor': 0.6},
              (_vel(0.0, 0.1),)),
     Scenario('online',
              'RoboSimian crawl changed while it walks: step length, velocity, gait, and '
