@@ -17,7 +17,7 @@ import pinocchio as pin
 import pytest
 
 from gait_nodes.__main__ import main as run_main
-from gait_nodes.bag.analysis import inspect_bag, zmp_margins
+from gait_nodes.bag.analysis import executed_swings, inspect_bag, zmp_margins
 from gait_nodes.bag.reader import BagReader
 from gait_nodes.diagnostics import ERROR, WARN, level_value
 from gait_nodes.interfaces import deserialize_message, get_message
@@ -75,26 +75,8 @@ SCENARIOS = list(DURATIONS_S)
 
 
 def executed(plans, until_ns=None) -> list[dict]:
-    """The swings the robot made: each plan's swings before the next plan takes over.
-
-    A plan starts at the last contact change before it was published, so a swing of one plan
-    that lifts off at or after the next plan's start was planned again by the next one (and
-    may have moved in time: a velocity change re-times the steps not yet started).
-    """
-    swings = {}
-    for index, plan in enumerate(plans):
-        following = plans[index + 1].start_ns if index + 1 < len(plans) else None
-        for swing in plan.swings():
-            lift_ns = plan.start_ns + round(swing.lift_off_s * 1e9)
-            land_ns = plan.start_ns + round(swing.touch_down_s * 1e9)
-            if (following is not None and lift_ns >= following) or \
-                    (until_ns is not None and land_ns > until_ns):
-                continue
-            swings[(swing.foot, round(lift_ns / 1e6))] = {
-                'foot': swing.foot, 'lift_off_ns': lift_ns, 'touch_down_ns': land_ns,
-                'end': swing.end_in_world, 'length_m': float(np.linalg.norm(
-                    (swing.end_in_world - swing.start_in_world)[:2]))}
-    return sorted(swings.values(), key=lambda s: (s['lift_off_ns'], s['foot']))
+    """The swings the robot made (inspect's definition: each plan's until the next takes over)."""
+    return executed_swings(plans, until_ns)
 
 
 @pytest.mark.parametrize('name', SCENARIOS)

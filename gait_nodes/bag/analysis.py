@@ -194,17 +194,22 @@ def base_metrics(series: GaitSeries) -> dict | None:
 
 
 def executed_swings(plans: list[contract.FootstepPlan], until_ns: int | None) -> list[dict]:
-    """Swings landed by ``until_ns``, each from the latest plan that contains it.
+    """Swings landed by ``until_ns``: each plan's swings until the next plan takes over.
 
-    A swing is identified by its foot and lift-off time (to 1 ms); a later plan replaces an
-    earlier one's version of the same swing.
+    A plan starts at the last contact change before it was published, so a swing of one plan
+    that lifts off at or after the next plan's start was planned again by the next one (and may
+    have moved in time: a velocity change re-times the steps not yet started); it is the next
+    plan's version that was walked. A swing is identified by its foot and lift-off time (to
+    1 ms); a later plan's version of the same swing replaces an earlier one's.
     """
     by_key = {}
-    for plan in plans:
+    for index, plan in enumerate(plans):
+        following = plans[index + 1].start_ns if index + 1 < len(plans) else None
         for swing in plan.swings():
             lift_ns = plan.start_ns + int(round(swing.lift_off_s * 1e9))
             land_ns = plan.start_ns + int(round(swing.touch_down_s * 1e9))
-            if until_ns is not None and land_ns > until_ns:
+            if (following is not None and lift_ns >= following) or \
+                    (until_ns is not None and land_ns > until_ns):
                 continue
             by_key[(swing.foot, round(lift_ns / 1e6))] = (lift_ns, land_ns, swing)
     swings = []

@@ -178,7 +178,7 @@ def slip_check(robot: RobotModel, series: GaitSeries, stamps: np.ndarray,
     """Largest drift of a foot over the samples its plan says it stands still."""
     if not qs or not series.plans:
         return None
-    plans = sorted(series.plans, key=lambda p: p.start_ns)
+    plans = series.plans  # in the order they were published
     data = robot.new_data()
     feet = np.array([robot.foot_poses(q, data)[0] for q in qs])
     # The swings executed, as intervals per foot: a foot is in stance outside them.
