@@ -93,7 +93,7 @@ def _frozen(array) -> np.ndarray:
 
 
 def _check_finite(values: np.ndarray, what: str) -> None:
-    if not np.all(np.isfinite(values)):
+    if not np.isfinite(values).all():
         raise ContractError(f'{what} holds a NaN or infinite value')
 
 
@@ -321,41 +321,49 @@ class ZmpReference:
                         axis=-1)
 
 
-#: The poses of the last /gait/zmp_reference built, by (stamp [ns], bits of x, bits of y),
-#: with their class.
-_last_zmp_poses: list = [None, {}]
-
-
 def zmp_reference_to_msg(reference: ZmpReference):
-    """nav_msgs/Path for ``reference`` (layout in the module docstring).
+    """nav_msgs/Path for ``reference`` (layout in the module docstring): a new message."""
+    return ZmpReferenceMessages().to_msg(reference)
+
+
+class ZmpReferenceMessages:
+    """Builds the successive /gait/zmp_reference messages of one publisher, sharing poses.
 
     Consecutive references of a planner share most samples: a pose equal to one of the previous
-    call's (same stamp and point) is that same PoseStamped object, not a copy. Published
-    messages are read-only (the ROS 2 intra-process rule the inproc runtime relies on too), so
-    the sharing is invisible; it saves building hundreds of small objects per message.
+    message's (same stamp and point, bit for bit) is that same PoseStamped object, not a copy,
+    which saves building hundreds of small objects per message. For a publisher that never
+    edits a message it built (subscribers treat received messages as read-only, the ROS 2
+    intra-process rule); :func:`zmp_reference_to_msg` gives independent messages.
     """
-    pose_stamped = get_constructor('geometry_msgs/msg/PoseStamped')
-    header = get_constructor('std_msgs/msg/Header')
-    time = get_constructor('builtin_interfaces/msg/Time')
-    pose = get_constructor('geometry_msgs/msg/Pose')
-    point = get_constructor('geometry_msgs/msg/Point')
-    quaternion = get_constructor('geometry_msgs/msg/Quaternion')
-    previous = _last_zmp_poses[1] if _last_zmp_poses[0] is pose_stamped else {}
-    current = {}
-    poses = []
-    stamps = reference.stamps_ns.tolist()
-    zmp = np.ascontiguousarray(reference.zmp_in_world)
-    # Keys compare the exact bits (0.0 and -0.0 are different samples).
-    keys = zip(stamps, *zmp.view(np.int64).T.tolist(), strict=True)
-    for key, (x, y) in zip(keys, zmp.tolist(), strict=True):
-        sample = previous.get(key)
-        if sample is None:
-            sample = pose_stamped(header(time(*divmod(key[0], _NS_PER_S)), WORLD_FRAME),
-                                  pose(point(x, y, 0.0), quaternion(0.0, 0.0, 0.0, 1.0)))
-        current[key] = sample
-        poses.append(sample)
-    _last_zmp_poses[:] = [pose_stamped, current]
-    return get_constructor('nav_msgs/msg/Path')(_header(stamps[0]), poses)
+
+    def __init__(self):
+        self._pose_type = None
+        self._poses: dict = {}
+
+    def to_msg(self, reference: ZmpReference):
+        """nav_msgs/Path for ``reference`` (layout in the module docstring)."""
+        pose_stamped = get_constructor('geometry_msgs/msg/PoseStamped')
+        header = get_constructor('std_msgs/msg/Header')
+        time = get_constructor('builtin_interfaces/msg/Time')
+        pose = get_constructor('geometry_msgs/msg/Pose')
+        point = get_constructor('geometry_msgs/msg/Point')
+        quaternion = get_constructor('geometry_msgs/msg/Quaternion')
+        previous = self._poses if self._pose_type is pose_stamped else {}
+        current = {}
+        poses = []
+        stamps = reference.stamps_ns.tolist()
+        zmp = np.ascontiguousarray(reference.zmp_in_world)
+        # Keys compare the exact bits (0.0 and -0.0 are different samples).
+        keys = zip(stamps, *zmp.view(np.int64).T.tolist(), strict=True)
+        for key, (x, y) in zip(keys, zmp.tolist(), strict=True):
+            sample = previous.get(key)
+            if sample is None:
+                sample = pose_stamped(header(time(*divmod(key[0], _NS_PER_S)), WORLD_FRAME),
+                                      pose(point(x, y, 0.0), quaternion(0.0, 0.0, 0.0, 1.0)))
+            current[key] = sample
+            poses.append(sample)
+        self._pose_type, self._poses = pose_stamped, current
+        return get_constructor('nav_msgs/msg/Path')(_header(stamps[0]), poses)
 
 
 def zmp_reference_from_msg(msg) -> ZmpReference:

@@ -18,7 +18,7 @@ import math
 import sys
 
 from gait_nodes.cli import run_node
-from gait_nodes.contract import footsteps_to_msg, zmp_reference_to_msg
+from gait_nodes.contract import ZmpReferenceMessages, footsteps_to_msg
 from gait_nodes.diagnostics import OK, WARN, DiagnosticsReporter
 from gait_nodes.errors import GaitParameterError, ParameterError
 from gait_nodes.interfaces import get_message
@@ -92,6 +92,7 @@ class FootstepPlanner(Node):
         self._last_now_s = 0.0
         self._pending: tuple[GaitParameters, dict] | None = None
         self._last_plan = None
+        self._zmp_messages = ZmpReferenceMessages()
         self.diagnostics = DiagnosticsReporter(self, self.robot.name)
         self._last_velocity_notes: list[str] = []
         self.footsteps_publisher = self.create_publisher(
@@ -242,7 +243,7 @@ class FootstepPlanner(Node):
             self._last_plan = plan
         reference = self.planner.zmp_reference(now_ns, self.origin_ns, horizon,
                                                self.settings['zmp_sample_period_s'])
-        self.zmp_publisher.publish(zmp_reference_to_msg(reference))
+        self.zmp_publisher.publish(self._zmp_messages.to_msg(reference))
 
     def report_state(self) -> None:
         """Once a second: the gait, the twist and the margin of the planned ZMP."""
