@@ -24,6 +24,8 @@ class _Topic:
         self.publishers: list[_InprocPublisher] = []
         self.subscriptions: list = []
         self.type_name: str | None = None
+        #: Bumped whenever ``subscriptions`` changes (publishers keep their matches until then).
+        self.version = 0
 
 
 class _InprocPublisher:
@@ -34,6 +36,16 @@ class _InprocPublisher:
         self.profile = profile
         latched = profile.durability == DurabilityPolicy.TRANSIENT_LOCAL
         self.history = collections.deque(maxlen=profile.depth) if latched else None
+        self._matched: list = []
+        self._matched_version = -1
+
+    def matched(self) -> list:
+        """The topic's subscriptions DDS would match with this publisher, in creation order."""
+        topic = self.topic
+        if self._matched_version != topic.version:
+            self._matched = [s for s in topic.subscriptions if _compatible(self, s)]
+            self._matched_version = topic.version
+        return self._matched
 
     def publish(self, msg) -> None:
         if self.transport.strict:
@@ -62,6 +74,7 @@ class _InprocSubscription:
     def destroy(self) -> None:
         if self.subscription in self.topic.subscriptions:
             self.topic.subscriptions.remove(self.subscription)
+            self.topic.version += 1
 
 
 def _compatible(publisher: _InprocPublisher, subscription) -> bool:
@@ -110,6 +123,7 @@ class InprocTransport:
         """Subscription; a transient-local one gets the latched history at once."""
         topic = self._topic(subscription.topic_name, subscription.msg_type)
         topic.subscriptions.append(subscription)
+        topic.version += 1
         if subscription.qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL:
             for publisher in topic.publishers:
                 if publisher.history and _compatible(publisher, subscription):
@@ -120,9 +134,9 @@ class InprocTransport:
 
     def deliver(self, publisher: _InprocPublisher, msg) -> None:
         """Queue ``msg`` for every compatible subscription of the topic."""
-        for subscription in publisher.topic.subscriptions:
-            if _compatible(publisher, subscription):
-                self.queue.append((subscription, msg))
+        queue = self.queue
+        for subscription in publisher.matched():
+            queue.append((subscription, msg))
 
     def count(self, name: str, kind: str) -> int:
         """Endpoints on a topic (``kind``: publishers or subscriptions)."""
