@@ -379,8 +379,8 @@ def zmp_reference_from_msg(msg) -> ZmpReference:
                                 f'contract frame is {WORLD_FRAME!r}')
     stamps = [h.stamp.sec * _NS_PER_S + h.stamp.nanosec for h in headers]
     points = [p.pose.position for p in poses]
-    zmp = [(p.x, p.y) for p in points]
-    return ZmpReference(np.array(stamps, dtype=np.int64), np.array(zmp, dtype=float))
+    zmp = np.ascontiguousarray(np.array([[p.x for p in points], [p.y for p in points]]).T)
+    return ZmpReference(np.array(stamps, dtype=np.int64), zmp)
 
 
 # -- /gait/com_reference ---------------------------------------------------------------------
