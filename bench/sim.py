@@ -2,7 +2,8 @@
 """Kinematic simulator and ZMP monitor: per-tick cost, and the inproc graph's real-time factor.
 
     python bench/sim.py [--ticks 2000] [--robots robosimian,talos] [--duration 20]
-                        [--vx 0.03] [--runs 3] [--no-graph] [--no-ticks] [--profile]
+                        [--scenario robosimian_crawl] [--runs 3] [--no-graph] [--no-ticks]
+                        [--profile]
 
 1. Per tick, for each robot, on a 200 Hz walking-like joint trajectory (whole-body IK of a
    swaying, drifting COM with one foot at a time swinging, as bench/ik.py builds it):
@@ -10,8 +11,9 @@
    ``monitor``: central differences + :meth:`ZmpMonitor.evaluate` (centroidal momentum rate,
    ZMP, margin); ``node``: the kinematic_simulator node's whole tick under inproc, messages
    included (the trajectory replayed as /joint_commands). Median and p99 [ms].
-2. The inproc graph (every installed contract node, the recorder writing a bag, a /cmd_vel of
-   ``--vx`` m/s) crawling robosimian at 200 Hz for ``--duration`` s of simulated time, ``--runs``
+2. The inproc graph of ``python -m gait_nodes run --runtime inproc --record DIR`` (every
+   installed contract node, the recorder writing a bag, the scenario's parameters and commands;
+   default ``robosimian_crawl``) at 200 Hz for ``--duration`` s of simulated time, ``--runs``
    times: the real-time factor (target >= 20x) of each run and their median, on the wall clock
    and on the process's CPU time (the machine may be shared: the CPU figure is what the graph
    itself costs, the wall figure adds what other processes took), and where the CPU time goes
@@ -166,38 +168,36 @@ class CallbackClock:
         return timed
 
 
-def graph_run(duration_s: float, vx_m_s: float, profile: bool) -> dict:
-    """One inproc graph run crawling with the recorder: wall and CPU time, per-node CPU time."""
+def graph_run(duration_s: float, scenario_name: str, profile: bool) -> dict:
+    """One inproc graph run of a scenario with the recorder: wall and CPU, per-node CPU time."""
+    import yaml
+
     from gait_nodes import graph, runtime
     from gait_nodes.bag.analysis import inspect_bag
-    from gait_nodes.interfaces import get_message
+    from gait_nodes.scenarios import CommandDriver, get_scenario
 
-    bag_dir = Path(tempfile.mkdtemp(prefix='bench_sim_')) / 'bag'
-    runtime.init(args=['bench'], runtime='inproc', signal_handlers=False)
+    scenario = get_scenario(scenario_name)
+    work = Path(tempfile.mkdtemp(prefix='bench_sim_'))
+    bag_dir = work / 'bag'
+    params_file = work / 'graph_params.yaml'
+    params_file.write_text(yaml.safe_dump({'/**': {'ros__parameters': {
+        'robot': scenario.robot, **scenario.settings}}}))
+    runtime.init(args=['bench', '--ros-args', '--params-file', str(params_file)],
+                 runtime='inproc', signal_handlers=False)
     clock = CallbackClock()
     try:
-        twist = get_message('geometry_msgs/msg/Twist')
-
-        class VelocityCommand(runtime.Node):
-            def __init__(self):
-                super().__init__('velocity_command', use_global_arguments=False)
-                self.publisher = self.create_publisher(twist, '/cmd_vel', 10)
-                self.create_timer(1.0, self.tick)
-
-            def tick(self):
-                msg = twist()
-                msg.linear.x = vx_m_s
-                self.publisher.publish(msg)
-
         setup_start = time.perf_counter()
         names = graph.available_nodes()
         nodes = [graph.load_class(graph.NODES[name])() for name in names]
         nodes.append(graph.load_class(graph.RECORDER)(output=str(bag_dir)))
-        nodes.append(VelocityCommand())
+        driver_node = runtime.Node('gait_run_monitor', use_global_arguments=False)
+        driver = CommandDriver(driver_node, scenario.commands)
+        nodes.append(driver_node)
         executor = runtime.SingleThreadedExecutor()
         for node in nodes:
             clock.wrap(node)
             executor.add_node(node)
+        driver.start()
         setup = time.perf_counter() - setup_start
         profiler = None
         if profile:
@@ -215,7 +215,7 @@ def graph_run(duration_s: float, vx_m_s: float, profile: bool) -> dict:
         runtime.shutdown()
         close = time.perf_counter() - close_start
     report = inspect_bag(bag_dir).report
-    shutil.rmtree(bag_dir.parent, ignore_errors=True)
+    shutil.rmtree(work, ignore_errors=True)
     if profiler is not None:
         import pstats
 
@@ -224,11 +224,11 @@ def graph_run(duration_s: float, vx_m_s: float, profile: bool) -> dict:
             'node_cpu': dict(clock.seconds), 'calls': dict(clock.calls), 'report': report}
 
 
-def graph_runs(duration_s: float, vx_m_s: float, runs: int, profile: bool) -> None:
+def graph_runs(duration_s: float, scenario: str, runs: int, profile: bool) -> None:
     """``runs`` graph runs: real-time factors (each and median) and the per-node CPU cost."""
-    results = [graph_run(duration_s, vx_m_s, profile) for _ in range(runs)]
+    results = [graph_run(duration_s, scenario, profile) for _ in range(runs)]
     first = results[0]
-    print(f'\ninproc graph: {", ".join(first["names"])} + recorder, /cmd_vel {vx_m_s} m/s, '
+    print(f'\ninproc graph: {", ".join(first["names"])} + recorder, scenario {scenario}, '
           f'{duration_s:g} s simulated at {RATE_HZ:g} Hz, {runs} runs')
     walls = [r['wall'] for r in results]
     cpus = [r['cpu'] for r in results]
@@ -266,7 +266,8 @@ def main() -> int:
     parser.add_argument('--ticks', type=int, default=2000)
     parser.add_argument('--robots', default='robosimian,talos')
     parser.add_argument('--duration', type=float, default=20.0)
-    parser.add_argument('--vx', type=float, default=0.03)
+    parser.add_argument('--scenario', default='robosimian_crawl',
+                        help='scenario of the graph run (python -m gait_nodes run --scenario)')
     parser.add_argument('--runs', type=int, default=3, help='graph runs (median reported)')
     parser.add_argument('--no-graph', action='store_true')
     parser.add_argument('--no-ticks', action='store_true', help='only the graph run')
@@ -287,7 +288,7 @@ def main() -> int:
         print(f'  monitor {percentiles(costs["monitor"])}')
         print(f'  node    {percentiles(node)}  (whole tick, messages included)')
     if not options.no_graph:
-        graph_runs(options.duration, options.vx, options.runs, options.profile)
+        graph_runs(options.duration, options.scenario, options.runs, options.profile)
     return 0
 
 
