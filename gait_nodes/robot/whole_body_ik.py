@@ -215,16 +215,15 @@ class WholeBodyIkSolver:
         world = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
         com_error = 0.0
         iteration = 0
+        per_foot = error[:feet_count * rows_per_foot].reshape(feet_count, rows_per_foot)
         while True:
             pin.forwardKinematics(model, data, q)
             pin.updateFramePlacements(model, data)
-            for k, frame in enumerate(frames):
-                r = k * rows_per_foot
-                placement = data.oMf[frame]
-                error[r:r + 3] = frame_targets[k] - placement.translation
-                if self._orient:
-                    error[r + 3:r + 6] = pin.log3(rotation_targets[k] @ placement.rotation.T)
-            per_foot = error[:feet_count * rows_per_foot].reshape(feet_count, rows_per_foot)
+            placements = [data.oMf[frame] for frame in frames]
+            per_foot[:, :3] = frame_targets - np.array([p.translation for p in placements])
+            if self._orient:
+                for k, placement in enumerate(placements):
+                    per_foot[k, 3:] = pin.log3(rotation_targets[k] @ placement.rotation.T)
             position_errors = np.sqrt(np.einsum('ij,ij->i', per_foot[:, :3], per_foot[:, :3]))
             if self._orient:
                 orientation_errors = np.sqrt(np.einsum('ij,ij->i', per_foot[:, 3:],
@@ -258,7 +257,8 @@ class WholeBodyIkSolver:
                 step *= MAX_NEWTON_STEP_RAD / largest
             if free_base:
                 q[:3] += step[:3]
-            q[self._q_idx] = np.clip(q[self._q_idx] + step[base_cols:], self._lower, self._upper)
+            q[self._q_idx] = np.minimum(np.maximum(q[self._q_idx] + step[base_cols:], self._lower),
+                                        self._upper)
         joints = q[self._q_idx]
         at_limit = (joints <= self._lower + 1e-9) | (joints >= self._upper - 1e-9)
         return IkResult(q=q, converged=converged, iterations=iteration,
