@@ -329,16 +329,18 @@ def zmp_reference_to_msg(reference: ZmpReference):
 class ZmpReferenceMessages:
     """Builds the successive /gait/zmp_reference messages of one publisher, sharing poses.
 
-    Consecutive references of a planner share most samples: a pose equal to one of the previous
-    message's (same stamp and point, bit for bit) is that same PoseStamped object, not a copy,
-    which saves building hundreds of small objects per message. For a publisher that never
-    edits a message it built (subscribers treat received messages as read-only, the ROS 2
+    Consecutive references of a planner share most samples: a pose equal to the previous
+    message's at the same stamp (same point, bit for bit) is that same PoseStamped object, not a
+    copy, which saves building hundreds of small objects per message. For a publisher that
+    never edits a message it built (subscribers treat received messages as read-only, the ROS 2
     intra-process rule); :func:`zmp_reference_to_msg` gives independent messages.
     """
 
     def __init__(self):
         self._pose_type = None
-        self._poses: dict = {}
+        self._stamps = np.zeros(0, dtype=np.int64)
+        self._bits = np.zeros((0, 2), dtype=np.int64)
+        self._poses: list = []
 
     def to_msg(self, reference: ZmpReference):
         """nav_msgs/Path for ``reference`` (layout in the module docstring)."""
@@ -348,22 +350,31 @@ class ZmpReferenceMessages:
         pose = get_constructor('geometry_msgs/msg/Pose')
         point = get_constructor('geometry_msgs/msg/Point')
         quaternion = get_constructor('geometry_msgs/msg/Quaternion')
-        previous = self._poses if self._pose_type is pose_stamped else {}
-        current = {}
-        poses = []
-        stamps = reference.stamps_ns.tolist()
+        stamps = reference.stamps_ns
         zmp = np.ascontiguousarray(reference.zmp_in_world)
-        # Keys compare the exact bits (0.0 and -0.0 are different samples).
-        keys = zip(stamps, *zmp.view(np.int64).T.tolist(), strict=True)
-        for key, (x, y) in zip(keys, zmp.tolist(), strict=True):
-            sample = previous.get(key)
-            if sample is None:
-                sample = pose_stamped(header(time(*divmod(key[0], _NS_PER_S)), WORLD_FRAME),
-                                      pose(point(x, y, 0.0), quaternion(0.0, 0.0, 0.0, 1.0)))
-            current[key] = sample
-            poses.append(sample)
-        self._pose_type, self._poses = pose_stamped, current
-        return get_constructor('nav_msgs/msg/Path')(_header(stamps[0]), poses)
+        bits = zmp.view(np.int64)  # exact comparison: 0.0 and -0.0 are different samples
+        # Samples equal to the previous message's from the same stamp on (stamps increase).
+        reused = np.zeros(len(stamps), dtype=bool)
+        offset = int(np.searchsorted(self._stamps, stamps[0]))
+        if self._pose_type is pose_stamped and offset < len(self._stamps):
+            count = min(len(self._stamps) - offset, len(stamps))
+            window = slice(offset, offset + count)
+            reused[:count] = ((self._stamps[window] == stamps[:count])
+                              & (self._bits[window] == bits[:count]).all(axis=1))
+        # The leading run of reused samples is one slice of the previous list.
+        run = len(reused) if reused.all() else int(np.argmin(reused))
+        poses = self._poses[offset:offset + run]
+        for k in range(run, len(stamps)):
+            if reused[k]:
+                poses.append(self._poses[offset + k])
+            else:
+                x, y = zmp[k].tolist()
+                poses.append(pose_stamped(
+                    header(time(*divmod(int(stamps[k]), _NS_PER_S)), WORLD_FRAME),
+                    pose(point(x, y, 0.0), quaternion(0.0, 0.0, 0.0, 1.0))))
+        self._pose_type, self._stamps, self._bits, self._poses = \
+            pose_stamped, stamps.copy(), bits.copy(), poses
+        return get_constructor('nav_msgs/msg/Path')(_header(int(stamps[0])), poses)
 
 
 def zmp_reference_from_msg(msg) -> ZmpReference:
