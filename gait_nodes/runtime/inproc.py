@@ -6,7 +6,12 @@ deliveries cause, first in first out) before time moves on. The same inputs ther
 same sequence of callbacks and byte-identical outputs, as fast as the CPU allows.
 
 Messages are handed to subscribers by reference, without serialization: a callback must treat a
-received message as read-only, as rclpy's intra-process communication also requires.
+received message as read-only, as rclpy's intra-process communication also requires, and a
+publisher must not edit a message once published. Under that rule node code may share unchanging
+sub-messages between the messages it publishes (the kinematic_simulator shares stamps, joint
+names and polygon vertices, the footstep_planner the poses its successive ZMP references have in
+common), which saves building them again and is invisible to subscribers. Raw subscriptions that
+receive the same message one after the other share its one serialization.
 """
 
 from __future__ import annotations
