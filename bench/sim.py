@@ -2,7 +2,8 @@
 """Kinematic simulator and ZMP monitor: per-tick cost, and the inproc graph's real-time factor.
 
     python bench/sim.py [--ticks 2000] [--robots robosimian,talos] [--duration 20]
-                        [--vx 0.03] [--no-graph] [--profile]
+                        [--scenario robosimian_crawl] [--runs 3] [--no-graph] [--no-ticks]
+                        [--profile]
 
 1. Per tick, for each robot, on a 200 Hz walking-like joint trajectory (whole-body IK of a
    swaying, drifting COM with one foot at a time swinging, as bench/ik.py builds it):
@@ -10,10 +11,14 @@
    ``monitor``: central differences + :meth:`ZmpMonitor.evaluate` (centroidal momentum rate,
    ZMP, margin); ``node``: the kinematic_simulator node's whole tick under inproc, messages
    included (the trajectory replayed as /joint_commands). Median and p99 [ms].
-2. The inproc graph (every installed contract node, the recorder writing a bag, a /cmd_vel of
-   ``--vx`` m/s) crawling robosimian at 200 Hz for ``--duration`` s of simulated time: wall
-   time, real-time factor (target >= 20x), and where the wall time goes (each node's timer and
-   subscription callbacks, and the executor's own share).
+2. The inproc graph of ``python -m gait_nodes run --runtime inproc --record DIR`` (every
+   installed contract node, the recorder writing a bag, the scenario's parameters and commands;
+   default ``robosimian_crawl``) at 200 Hz for ``--duration`` s of simulated time, ``--runs``
+   times: the real-time factor (target >= 20x) of each run and their median, on the wall clock
+   and on the process's CPU time (the machine may be shared: the CPU figure is what the graph
+   itself costs, the wall figure adds what other processes took), and where the CPU time goes
+   (each node's timer and subscription callbacks per 5 ms tick, and the executor's own share;
+   medians over the runs).
 
 Figures only: nothing is asserted.
 """
@@ -137,7 +142,7 @@ def node_costs(robot_name: str, joints: list[np.ndarray]) -> list[float]:
 
 
 class CallbackClock:
-    """Accumulates the wall time of every timer and subscription callback, per node."""
+    """Accumulates the CPU time of every timer and subscription callback, per node."""
 
     def __init__(self):
         self.seconds = collections.Counter()
@@ -153,48 +158,46 @@ class CallbackClock:
 
     def _timed(self, name: str, callback):
         def timed(*args):
-            start = time.perf_counter()
+            start = time.thread_time()
             try:
                 return callback(*args)
             finally:
-                self.seconds[name] += time.perf_counter() - start
+                self.seconds[name] += time.thread_time() - start
                 self.calls[name] += 1
 
         return timed
 
 
-def graph_run(duration_s: float, vx_m_s: float, profile: bool) -> None:
-    """The inproc graph crawling with the recorder: real-time factor and where time goes."""
+def graph_run(duration_s: float, scenario_name: str, profile: bool) -> dict:
+    """One inproc graph run of a scenario with the recorder: wall and CPU, per-node CPU time."""
+    import yaml
+
     from gait_nodes import graph, runtime
     from gait_nodes.bag.analysis import inspect_bag
-    from gait_nodes.interfaces import get_message
+    from gait_nodes.scenarios import CommandDriver, get_scenario
 
-    bag_dir = Path(tempfile.mkdtemp(prefix='bench_sim_')) / 'bag'
-    runtime.init(args=['bench'], runtime='inproc', signal_handlers=False)
+    scenario = get_scenario(scenario_name)
+    work = Path(tempfile.mkdtemp(prefix='bench_sim_'))
+    bag_dir = work / 'bag'
+    params_file = work / 'graph_params.yaml'
+    params_file.write_text(yaml.safe_dump({'/**': {'ros__parameters': {
+        'robot': scenario.robot, **scenario.settings}}}))
+    runtime.init(args=['bench', '--ros-args', '--params-file', str(params_file)],
+                 runtime='inproc', signal_handlers=False)
     clock = CallbackClock()
     try:
-        twist = get_message('geometry_msgs/msg/Twist')
-
-        class VelocityCommand(runtime.Node):
-            def __init__(self):
-                super().__init__('velocity_command', use_global_arguments=False)
-                self.publisher = self.create_publisher(twist, '/cmd_vel', 10)
-                self.create_timer(1.0, self.tick)
-
-            def tick(self):
-                msg = twist()
-                msg.linear.x = vx_m_s
-                self.publisher.publish(msg)
-
         setup_start = time.perf_counter()
         names = graph.available_nodes()
         nodes = [graph.load_class(graph.NODES[name])() for name in names]
         nodes.append(graph.load_class(graph.RECORDER)(output=str(bag_dir)))
-        nodes.append(VelocityCommand())
+        driver_node = runtime.Node('gait_run_monitor', use_global_arguments=False)
+        driver = CommandDriver(driver_node, scenario.commands)
+        nodes.append(driver_node)
         executor = runtime.SingleThreadedExecutor()
         for node in nodes:
             clock.wrap(node)
             executor.add_node(node)
+        driver.start()
         setup = time.perf_counter() - setup_start
         profiler = None
         if profile:
@@ -202,38 +205,59 @@ def graph_run(duration_s: float, vx_m_s: float, profile: bool) -> None:
 
             profiler = cProfile.Profile()
             profiler.enable()
-        start = time.perf_counter()
+        start, start_cpu = time.perf_counter(), time.thread_time()
         executor.spin_for(duration_s)
-        wall = time.perf_counter() - start
+        wall, cpu = time.perf_counter() - start, time.thread_time() - start_cpu
         if profiler is not None:
             profiler.disable()
     finally:
         close_start = time.perf_counter()
         runtime.shutdown()
         close = time.perf_counter() - close_start
-    print(f'\ninproc graph: {", ".join(names)} + recorder, /cmd_vel {vx_m_s} m/s, '
-          f'{duration_s:g} s simulated at {RATE_HZ:g} Hz')
-    print(f'  wall {wall:.2f} s -> real-time factor {duration_s / wall:.1f}x (target >= 20x); '
-          f'node start-up {setup:.2f} s, bag close {close:.2f} s (not counted)')
-    callbacks = sum(clock.seconds.values())
-    for name, seconds in clock.seconds.most_common():
-        print(f'  {name:24s} {seconds:7.3f} s  {100 * seconds / wall:5.1f} %  '
-              f'{seconds / duration_s * 1e3 / RATE_HZ * 1e3:7.1f} us per 5 ms tick  '
-              f'({clock.calls[name]} callbacks)')
-    print(f'  {"executor and delivery":24s} {wall - callbacks:7.3f} s  '
-          f'{100 * (wall - callbacks) / wall:5.1f} %')
     report = inspect_bag(bag_dir).report
+    shutil.rmtree(work, ignore_errors=True)
+    if profiler is not None:
+        import pstats
+
+        pstats.Stats(profiler).sort_stats('tottime').print_stats(25)
+    return {'names': names, 'wall': wall, 'cpu': cpu, 'setup': setup, 'close': close,
+            'node_cpu': dict(clock.seconds), 'calls': dict(clock.calls), 'report': report}
+
+
+def graph_runs(duration_s: float, scenario: str, runs: int, profile: bool) -> None:
+    """``runs`` graph runs: real-time factors (each and median) and the per-node CPU cost."""
+    results = [graph_run(duration_s, scenario, profile) for _ in range(runs)]
+    first = results[0]
+    print(f'\ninproc graph: {", ".join(first["names"])} + recorder, scenario {scenario}, '
+          f'{duration_s:g} s simulated at {RATE_HZ:g} Hz, {runs} runs')
+    walls = [r['wall'] for r in results]
+    cpus = [r['cpu'] for r in results]
+    print(f'  real-time factor, median: wall {duration_s / np.median(walls):.1f}x, '
+          f'CPU {duration_s / np.median(cpus):.1f}x (target >= 20x)')
+    print('  runs: ' + ', '.join(f'wall {w:.2f} s ({duration_s / w:.1f}x) CPU {c:.2f} s '
+                                 f'({duration_s / c:.1f}x)' for w, c in zip(walls, cpus,
+                                                                           strict=True)))
+    print(f'  node start-up {first["setup"]:.2f} s, bag close {first["close"]:.2f} s '
+          f'(not counted)')
+    ticks = duration_s * RATE_HZ
+    cpu = float(np.median(cpus))
+    names = sorted(first['node_cpu'], key=lambda n: -first['node_cpu'][n])
+    print(f'  CPU per 5 ms tick (median of the runs): total {cpu / ticks * 1e6:.1f} us')
+    callbacks = 0.0
+    for name in names:
+        seconds = float(np.median([r['node_cpu'].get(name, 0.0) for r in results]))
+        callbacks += seconds
+        print(f'    {name:24s} {seconds / ticks * 1e6:7.1f} us  {100 * seconds / cpu:5.1f} %  '
+              f'({first["calls"][name]} callbacks)')
+    print(f'    {"executor and delivery":24s} {(cpu - callbacks) / ticks * 1e6:7.1f} us  '
+          f'{100 * (cpu - callbacks) / cpu:5.1f} %')
+    report = first['report']
     gait = report.get('gait', {})
     margin = gait.get('zmp_margin') or {}
     base = gait.get('base') or {}
     print(f'  bag: {report["message_count"]} messages; walked {base.get("distance_m")} m; '
           f'ZMP margin min {margin.get("min_m")} m, {margin.get("samples_outside")} of '
           f'{margin.get("samples")} samples outside')
-    shutil.rmtree(bag_dir.parent, ignore_errors=True)
-    if profiler is not None:
-        import pstats
-
-        pstats.Stats(profiler).sort_stats('tottime').print_stats(25)
 
 
 def main() -> int:
@@ -242,11 +266,14 @@ def main() -> int:
     parser.add_argument('--ticks', type=int, default=2000)
     parser.add_argument('--robots', default='robosimian,talos')
     parser.add_argument('--duration', type=float, default=20.0)
-    parser.add_argument('--vx', type=float, default=0.03)
+    parser.add_argument('--scenario', default='robosimian_crawl',
+                        help='scenario of the graph run (python -m gait_nodes run --scenario)')
+    parser.add_argument('--runs', type=int, default=3, help='graph runs (median reported)')
     parser.add_argument('--no-graph', action='store_true')
+    parser.add_argument('--no-ticks', action='store_true', help='only the graph run')
     parser.add_argument('--profile', action='store_true', help='cProfile the graph run')
     options = parser.parse_args()
-    for name in options.robots.split(','):
+    for name in [] if options.no_ticks else options.robots.split(','):
         try:
             robot = load_robot_model(name)
         except ConfigError as exc:
@@ -261,7 +288,7 @@ def main() -> int:
         print(f'  monitor {percentiles(costs["monitor"])}')
         print(f'  node    {percentiles(node)}  (whole tick, messages included)')
     if not options.no_graph:
-        graph_run(options.duration, options.vx, options.profile)
+        graph_runs(options.duration, options.scenario, options.runs, options.profile)
     return 0
 
 

@@ -65,13 +65,20 @@ DEFAULTS = {
 MAX_CATCH_UP_TICKS = 50
 
 
-def plan_yaw(plan: contract.FootstepPlan, t_s: float) -> tuple[float, float]:
+def plan_yaw_means(plan: contract.FootstepPlan) -> np.ndarray:
+    """(K,) body yaw [rad] at each contact change: circular mean of the foot yaws, unwrapped."""
+    return np.unwrap(np.angle(np.exp(1j * plan.yaws_rad).sum(axis=1)))
+
+
+def plan_yaw(plan: contract.FootstepPlan, t_s: float,
+             means: np.ndarray | None = None) -> tuple[float, float]:
     """Body yaw [rad] and yaw rate [rad/s] of a footstep plan at ``t_s`` from its start.
 
     The yaw is the circular mean of the planned foot yaws at each contact change, unwrapped and
-    linear in time between them.
+    linear in time between them (``means``: :func:`plan_yaw_means` of ``plan``, if known).
     """
-    means = np.unwrap(np.angle(np.exp(1j * plan.yaws_rad).sum(axis=1)))
+    if means is None:
+        means = plan_yaw_means(plan)
     times = plan.times_s
     if len(times) < 2 or t_s <= times[0] or t_s >= times[-1]:
         return float(np.interp(t_s, times, means)), 0.0
@@ -109,6 +116,7 @@ class ComPreviewController(Node):
                                  MEASURED_COM_TOPIC, self._on_measured_com, 10)
         self._reference = None
         self._plan = None
+        self._plan_yaws = None
         self._generator = None
         self._last_published = None
         self._timer = self.create_timer(self._settings.preview.dt_s, self._tick)
@@ -200,9 +208,11 @@ class ComPreviewController(Node):
 
     def _on_footsteps(self, msg) -> None:
         try:
-            self._plan = contract.footsteps_from_msg(msg)
+            plan = contract.footsteps_from_msg(msg)
         except contract.ContractError as exc:
             self.diagnostics.drop(FOOTSTEPS_TOPIC, str(exc))
+            return
+        self._plan, self._plan_yaws = plan, plan_yaw_means(plan)
 
     def _on_measured_com(self, msg) -> None:
         xy = (msg.point.x, msg.point.y)
@@ -262,7 +272,8 @@ class ComPreviewController(Node):
     def _publish(self, sample) -> None:
         yaw, yaw_rate = 0.0, 0.0
         if self._plan is not None:
-            yaw, yaw_rate = plan_yaw(self._plan, (sample.stamp_ns - self._plan.start_ns) * 1e-9)
+            yaw, yaw_rate = plan_yaw(self._plan, (sample.stamp_ns - self._plan.start_ns) * 1e-9,
+                                     self._plan_yaws)
             yaw = math.remainder(yaw, 2 * math.pi)
         height = self._settings.preview.com_height_m
         state = contract.ComState(

@@ -38,7 +38,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from gait_nodes.errors import GaitNodesError
-from gait_nodes.interfaces import get_message
+from gait_nodes.interfaces import get_constructor
 
 #: World frame of every planned quantity (REP-105).
 WORLD_FRAME = 'odom'
@@ -48,6 +48,7 @@ BASE_FRAME = 'base_link'
 COM_JOINT_NAME = 'com'
 #: Two foot transforms closer than this [m, rad] are "the same place".
 SAME_PLACE_TOLERANCE = 1e-9
+_NS_PER_S = 1_000_000_000
 
 
 class ContractError(GaitNodesError):
@@ -56,9 +57,7 @@ class ContractError(GaitNodesError):
 
 def ns_to_time_msg(stamp_ns: int):
     """builtin_interfaces/Time for integer nanoseconds since the epoch (or since sim start)."""
-    msg = get_message('builtin_interfaces/msg/Time')()
-    msg.sec, msg.nanosec = divmod(int(stamp_ns), 1_000_000_000)
-    return msg
+    return get_constructor('builtin_interfaces/msg/Time')(*divmod(int(stamp_ns), _NS_PER_S))
 
 
 def time_msg_to_ns(msg) -> int:
@@ -68,9 +67,8 @@ def time_msg_to_ns(msg) -> int:
 
 def seconds_to_duration_msg(seconds: float):
     """builtin_interfaces/Duration for a non-negative number of seconds, rounded to 1 ns."""
-    msg = get_message('builtin_interfaces/msg/Duration')()
-    msg.sec, msg.nanosec = divmod(int(round(seconds * 1e9)), 1_000_000_000)
-    return msg
+    return get_constructor('builtin_interfaces/msg/Duration')(
+        *divmod(int(round(seconds * 1e9)), _NS_PER_S))
 
 
 def duration_msg_to_seconds(msg) -> float:
@@ -95,7 +93,7 @@ def _frozen(array) -> np.ndarray:
 
 
 def _check_finite(values: np.ndarray, what: str) -> None:
-    if not np.all(np.isfinite(values)):
+    if not np.isfinite(values).all():
         raise ContractError(f'{what} holds a NaN or infinite value')
 
 
@@ -105,12 +103,15 @@ def _check_frame(header, what: str) -> None:
                             f'{WORLD_FRAME!r}')
 
 
+def _header(stamp_ns: int, frame_id: str = WORLD_FRAME):
+    return get_constructor('std_msgs/msg/Header')(ns_to_time_msg(stamp_ns), frame_id)
+
+
 def _transform(position: Sequence[float], yaw_rad: float):
-    msg = get_message('geometry_msgs/msg/Transform')()
-    msg.translation.x, msg.translation.y, msg.translation.z = (float(v) for v in position)
-    q = yaw_to_quaternion(float(yaw_rad))
-    msg.rotation.x, msg.rotation.y, msg.rotation.z, msg.rotation.w = q
-    return msg
+    x, y, z = position
+    return get_constructor('geometry_msgs/msg/Transform')(
+        get_constructor('geometry_msgs/msg/Vector3')(float(x), float(y), float(z)),
+        get_constructor('geometry_msgs/msg/Quaternion')(*yaw_to_quaternion(float(yaw_rad))))
 
 
 def _transform_values(msg) -> tuple[list[float], float]:
@@ -119,10 +120,10 @@ def _transform_values(msg) -> tuple[list[float], float]:
 
 
 def _twist(linear: Sequence[float], angular_z: float = 0.0):
-    msg = get_message('geometry_msgs/msg/Twist')()
-    msg.linear.x, msg.linear.y, msg.linear.z = (float(v) for v in linear)
-    msg.angular.z = float(angular_z)
-    return msg
+    vector = get_constructor('geometry_msgs/msg/Vector3')
+    x, y, z = linear
+    return get_constructor('geometry_msgs/msg/Twist')(vector(float(x), float(y), float(z)),
+                                                      vector(0.0, 0.0, float(angular_z)))
 
 
 # -- /gait/footsteps -------------------------------------------------------------------------
@@ -249,20 +250,13 @@ class FootstepPlan:
 
 def footsteps_to_msg(plan: FootstepPlan):
     """trajectory_msgs/MultiDOFJointTrajectory for ``plan`` (layout in the module docstring)."""
-    msg = get_message('trajectory_msgs/msg/MultiDOFJointTrajectory')()
-    point_type = get_message('trajectory_msgs/msg/MultiDOFJointTrajectoryPoint')
-    msg.header.frame_id = WORLD_FRAME
-    msg.header.stamp = ns_to_time_msg(plan.start_ns)
-    msg.joint_names = list(plan.foot_names)
-    points = []
-    for k, t_s in enumerate(plan.times_s):
-        point = point_type()
-        point.transforms = [_transform(plan.positions_in_world[k, f], plan.yaws_rad[k, f])
-                            for f in range(len(plan.foot_names))]
-        point.time_from_start = seconds_to_duration_msg(float(t_s))
-        points.append(point)
-    msg.points = points
-    return msg
+    point_type = get_constructor('trajectory_msgs/msg/MultiDOFJointTrajectoryPoint')
+    positions, yaws = plan.positions_in_world.tolist(), plan.yaws_rad.tolist()
+    points = [point_type([_transform(p, y) for p, y in zip(positions[k], yaws[k], strict=True)],
+                         [], [], seconds_to_duration_msg(t_s))
+              for k, t_s in enumerate(plan.times_s.tolist())]
+    return get_constructor('trajectory_msgs/msg/MultiDOFJointTrajectory')(
+        _header(plan.start_ns), list(plan.foot_names), points)
 
 
 def footsteps_from_msg(msg) -> FootstepPlan:
@@ -328,34 +322,76 @@ class ZmpReference:
 
 
 def zmp_reference_to_msg(reference: ZmpReference):
-    """nav_msgs/Path for ``reference`` (layout in the module docstring)."""
-    msg = get_message('nav_msgs/msg/Path')()
-    pose_type = get_message('geometry_msgs/msg/PoseStamped')
-    msg.header.frame_id = WORLD_FRAME
-    msg.header.stamp = ns_to_time_msg(int(reference.stamps_ns[0]))
-    poses = []
-    for stamp_ns, (x, y) in zip(reference.stamps_ns, reference.zmp_in_world, strict=True):
-        pose = pose_type()
-        pose.header.frame_id = WORLD_FRAME
-        pose.header.stamp = ns_to_time_msg(int(stamp_ns))
-        pose.pose.position.x, pose.pose.position.y = float(x), float(y)
-        poses.append(pose)
-    msg.poses = poses
-    return msg
+    """nav_msgs/Path for ``reference`` (layout in the module docstring): a new message."""
+    return ZmpReferenceMessages().to_msg(reference)
+
+
+class ZmpReferenceMessages:
+    """Builds the successive /gait/zmp_reference messages of one publisher, sharing poses.
+
+    Consecutive references of a planner share most samples: a pose equal to the previous
+    message's at the same stamp (same point, bit for bit) is that same PoseStamped object, not a
+    copy, which saves building hundreds of small objects per message. For a publisher that
+    never edits a message it built (subscribers treat received messages as read-only, the ROS 2
+    intra-process rule); :func:`zmp_reference_to_msg` gives independent messages.
+    """
+
+    def __init__(self):
+        self._pose_type = None
+        self._stamps = np.zeros(0, dtype=np.int64)
+        self._bits = np.zeros((0, 2), dtype=np.int64)
+        self._poses: list = []
+
+    def to_msg(self, reference: ZmpReference):
+        """nav_msgs/Path for ``reference`` (layout in the module docstring)."""
+        pose_stamped = get_constructor('geometry_msgs/msg/PoseStamped')
+        header = get_constructor('std_msgs/msg/Header')
+        time = get_constructor('builtin_interfaces/msg/Time')
+        pose = get_constructor('geometry_msgs/msg/Pose')
+        point = get_constructor('geometry_msgs/msg/Point')
+        quaternion = get_constructor('geometry_msgs/msg/Quaternion')
+        stamps = reference.stamps_ns
+        zmp = np.ascontiguousarray(reference.zmp_in_world)
+        bits = zmp.view(np.int64)  # exact comparison: 0.0 and -0.0 are different samples
+        # Samples equal to the previous message's from the same stamp on (stamps increase).
+        reused = np.zeros(len(stamps), dtype=bool)
+        offset = int(np.searchsorted(self._stamps, stamps[0]))
+        if self._pose_type is pose_stamped and offset < len(self._stamps):
+            count = min(len(self._stamps) - offset, len(stamps))
+            window = slice(offset, offset + count)
+            reused[:count] = ((self._stamps[window] == stamps[:count])
+                              & (self._bits[window] == bits[:count]).all(axis=1))
+        # The leading run of reused samples is one slice of the previous list.
+        run = len(reused) if reused.all() else int(np.argmin(reused))
+        poses = self._poses[offset:offset + run]
+        for k in range(run, len(stamps)):
+            if reused[k]:
+                poses.append(self._poses[offset + k])
+            else:
+                x, y = zmp[k].tolist()
+                poses.append(pose_stamped(
+                    header(time(*divmod(int(stamps[k]), _NS_PER_S)), WORLD_FRAME),
+                    pose(point(x, y, 0.0), quaternion(0.0, 0.0, 0.0, 1.0))))
+        self._pose_type, self._stamps, self._bits, self._poses = \
+            pose_stamped, stamps.copy(), bits.copy(), poses
+        return get_constructor('nav_msgs/msg/Path')(_header(int(stamps[0])), poses)
 
 
 def zmp_reference_from_msg(msg) -> ZmpReference:
     """The :class:`ZmpReference` of a /gait/zmp_reference Path; :class:`ContractError` if bad."""
     _check_frame(msg.header, '/gait/zmp_reference')
-    if not msg.poses:
+    poses = msg.poses
+    if not poses:
         raise ContractError('/gait/zmp_reference has no poses')
-    for pose in msg.poses:
-        if pose.header.frame_id not in ('', WORLD_FRAME):
-            raise ContractError(f'a /gait/zmp_reference pose is in frame '
-                                f'{pose.header.frame_id!r}; the contract frame is {WORLD_FRAME!r}')
-    stamps = [time_msg_to_ns(p.header.stamp) for p in msg.poses]
-    zmp = [(p.pose.position.x, p.pose.position.y) for p in msg.poses]
-    return ZmpReference(np.array(stamps, dtype=np.int64), np.array(zmp, dtype=float))
+    headers = [p.header for p in poses]
+    for frame_id in dict.fromkeys(h.frame_id for h in headers):
+        if frame_id not in ('', WORLD_FRAME):
+            raise ContractError(f'a /gait/zmp_reference pose is in frame {frame_id!r}; the '
+                                f'contract frame is {WORLD_FRAME!r}')
+    stamps = [h.stamp.sec * _NS_PER_S + h.stamp.nanosec for h in headers]
+    points = [p.pose.position for p in poses]
+    zmp = np.ascontiguousarray(np.array([[p.x for p in points], [p.y for p in points]]).T)
+    return ZmpReference(np.array(stamps, dtype=np.int64), zmp)
 
 
 # -- /gait/com_reference ---------------------------------------------------------------------
@@ -396,22 +432,15 @@ def com_reference_to_msg(states: Sequence[ComState]):
     """MultiDOFJointTrajectory with ``states[0]`` at the header stamp and the rest as horizon."""
     if not states:
         raise ContractError('a COM reference needs at least one state')
-    msg = get_message('trajectory_msgs/msg/MultiDOFJointTrajectory')()
-    point_type = get_message('trajectory_msgs/msg/MultiDOFJointTrajectoryPoint')
-    msg.header.frame_id = WORLD_FRAME
-    msg.header.stamp = ns_to_time_msg(states[0].stamp_ns)
-    msg.joint_names = [COM_JOINT_NAME]
-    points = []
-    for state in states:
-        point = point_type()
-        point.transforms = [_transform(state.position_in_world, state.yaw_rad)]
-        point.velocities = [_twist(state.velocity_in_world, state.yaw_rate_rad_s)]
-        point.accelerations = [_twist(state.acceleration_in_world)]
-        point.time_from_start = seconds_to_duration_msg((state.stamp_ns - states[0].stamp_ns)
-                                                        * 1e-9)
-        points.append(point)
-    msg.points = points
-    return msg
+    point_type = get_constructor('trajectory_msgs/msg/MultiDOFJointTrajectoryPoint')
+    start_ns = states[0].stamp_ns
+    points = [point_type([_transform(state.position_in_world.tolist(), state.yaw_rad)],
+                         [_twist(state.velocity_in_world.tolist(), state.yaw_rate_rad_s)],
+                         [_twist(state.acceleration_in_world.tolist())],
+                         seconds_to_duration_msg((state.stamp_ns - start_ns) * 1e-9))
+              for state in states]
+    return get_constructor('trajectory_msgs/msg/MultiDOFJointTrajectory')(
+        _header(start_ns), [COM_JOINT_NAME], points)
 
 
 def com_reference_from_msg(msg) -> list[ComState]:
@@ -488,20 +517,13 @@ class SwingTrajectory:
 
 def swing_trajectory_to_msg(swing: SwingTrajectory):
     """MultiDOFJointTrajectory for one swing (layout in the module docstring)."""
-    msg = get_message('trajectory_msgs/msg/MultiDOFJointTrajectory')()
-    point_type = get_message('trajectory_msgs/msg/MultiDOFJointTrajectoryPoint')
-    msg.header.frame_id = WORLD_FRAME
-    msg.header.stamp = ns_to_time_msg(swing.start_ns)
-    msg.joint_names = [swing.foot]
-    points = []
-    for t_s, position, yaw in zip(swing.times_s, swing.positions_in_world, swing.yaws_rad,
-                                  strict=True):
-        point = point_type()
-        point.transforms = [_transform(position, yaw)]
-        point.time_from_start = seconds_to_duration_msg(float(t_s))
-        points.append(point)
-    msg.points = points
-    return msg
+    point_type = get_constructor('trajectory_msgs/msg/MultiDOFJointTrajectoryPoint')
+    points = [point_type([_transform(position, yaw)], [], [], seconds_to_duration_msg(t_s))
+              for t_s, position, yaw in zip(swing.times_s.tolist(),
+                                            swing.positions_in_world.tolist(),
+                                            swing.yaws_rad.tolist(), strict=True)]
+    return get_constructor('trajectory_msgs/msg/MultiDOFJointTrajectory')(
+        _header(swing.start_ns), [swing.foot], points)
 
 
 def swing_trajectory_from_msg(msg) -> SwingTrajectory:

@@ -37,7 +37,7 @@ import math
 import sys
 
 from gait_nodes.cli import run_node
-from gait_nodes.contract import footsteps_to_msg, zmp_reference_to_msg
+from gait_nodes.contract import ZmpReferenceMessages, footsteps_to_msg
 from gait_nodes.diagnostics import OK, WARN, DiagnosticsReporter
 from gait_nodes.errors import GaitParameterError, ParameterError
 from gait_nodes.interfaces import get_message
@@ -127,6 +127,7 @@ class FootstepPlanner(Node):
         self._last_now_s = 0.0
         self._pending: tuple[GaitParameters, dict] | None = None
         self._last_plan = None
+        self._zmp_messages = ZmpReferenceMessages()
         self._last_velocity_notes: list[str] = []
         self.footsteps_publisher = self.create_publisher(
             get_message('trajectory_msgs/msg/MultiDOFJointTrajectory'), '/gait/footsteps',
@@ -369,7 +370,7 @@ class FootstepPlanner(Node):
             self._last_plan = plan
         reference = self.planner.zmp_reference(now_ns, self.origin_ns, horizon,
                                                self.settings['zmp_sample_period_s'])
-        self.zmp_publisher.publish(zmp_reference_to_msg(reference))
+        self.zmp_publisher.publish(self._zmp_messages.to_msg(reference))
 
     def report_state(self) -> None:
         """Once a second: the gait, the twist, the rhythm and the margin of the planned ZMP."""

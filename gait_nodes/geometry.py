@@ -50,27 +50,36 @@ def foot_discs_polygon(centres: np.ndarray, radius_m: float,
     return convex_hull((centres[:, None, :] + ring[None, :, :]).reshape(-1, 2))
 
 
-def signed_distance(points: np.ndarray, hull: np.ndarray) -> np.ndarray:
+def polygon_edges(hull: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Vertices (M, 2), edge vectors (M, 2) and squared edge lengths (M,) of a polygon (M, 2).
+
+    What :func:`signed_distance` needs of the polygon: keep it while the polygon is the same.
+    """
+    starts = np.asarray(hull, dtype=float).reshape(-1, 2)
+    edges = np.roll(starts, -1, axis=0) - starts
+    return starts, edges, np.maximum(np.einsum('ij,ij->i', edges, edges), 1e-300)
+
+
+def signed_distance(points: np.ndarray, hull: np.ndarray,
+                    edges: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+                    ) -> np.ndarray:
     """Stability margin of planar points (N, 2) against a convex polygon (M, 2), CCW.
 
     Positive inside (distance to the nearest edge), negative outside (minus the distance to the
     polygon), zero on the boundary. A one- or two-vertex hull (a point or a segment) has no
-    inside: every point gets minus its distance to it.
+    inside: every point gets minus its distance to it. ``edges``: :func:`polygon_edges` of
+    ``hull``, if known.
 
     Returns:
         (N,) margins [m].
     """
     points = np.asarray(points, dtype=float).reshape(-1, 2)
-    hull = np.asarray(hull, dtype=float).reshape(-1, 2)
-    starts = hull
-    ends = np.roll(hull, -1, axis=0)
-    edges = ends - starts  # (M, 2)
-    lengths_sq = np.maximum(np.einsum('ij,ij->i', edges, edges), 1e-300)
+    starts, edges, lengths_sq = edges if edges is not None else polygon_edges(hull)
     relative = points[:, None, :] - starts[None, :, :]  # (N, M, 2)
     t = np.clip(np.einsum('nmj,mj->nm', relative, edges) / lengths_sq, 0.0, 1.0)
     nearest = starts[None] + t[..., None] * edges[None]
     distance = np.linalg.norm(points[:, None, :] - nearest, axis=2).min(axis=1)
-    if len(hull) < 3:
+    if len(starts) < 3:
         return -distance
     cross = edges[None, :, 0] * relative[..., 1] - edges[None, :, 1] * relative[..., 0]
     inside = np.all(cross >= 0.0, axis=1)

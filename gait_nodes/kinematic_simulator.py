@@ -47,7 +47,7 @@ from gait_nodes.contract import (
 )
 from gait_nodes.diagnostics import ERROR, OK, WARN, DiagnosticsReporter
 from gait_nodes.errors import GaitNodesError, ParameterError
-from gait_nodes.interfaces import get_message
+from gait_nodes.interfaces import get_constructor, get_message
 from gait_nodes.paths import node_defaults as shipped_node_defaults
 from gait_nodes.robot.model import RobotModel, load_robot_model
 from gait_nodes.robot.whole_body_ik import nominal_configuration
@@ -143,6 +143,13 @@ def joint_command_from_msg(msg, robot: RobotModel, previous: np.ndarray,
         raise ContractError(f'{len(names)} joint names but {len(msg.position)} positions')
     if len(msg.velocity) not in (0, len(names)):
         raise ContractError(f'{len(names)} joint names but {len(msg.velocity)} velocities')
+    if tuple(names) == robot.joint_names:
+        # Every joint in the robot's order (what whole_body_ik sends): no lookups needed.
+        positions = np.array(msg.position, dtype=float)
+        if not (np.isfinite(positions).all()
+                and np.isfinite(np.array(msg.velocity, dtype=float)).all()):
+            raise ContractError('a joint command holds a NaN or infinite value')
+        return positions
     if len(set(names)) != len(names):
         repeated = sorted({n for n in names if names.count(n) > 1})
         raise ContractError(f'joint names repeat: {repeated}')
@@ -227,6 +234,18 @@ class KinematicSimulator(Node):
             'tf2_msgs/msg/TFMessage', 'visualization_msgs/msg/Marker',
             'visualization_msgs/msg/MarkerArray', 'rosgraph_msgs/msg/Clock',
             'builtin_interfaces/msg/Time')}
+        # Positional constructors of every message built per tick (get_constructor).
+        self._new = {name.rsplit('/', 1)[1]: get_constructor(name) for name in (
+            'sensor_msgs/msg/JointState', 'std_msgs/msg/Header', 'geometry_msgs/msg/Point',
+            'geometry_msgs/msg/PointStamped', 'geometry_msgs/msg/PolygonStamped',
+            'geometry_msgs/msg/Polygon', 'geometry_msgs/msg/TransformStamped',
+            'geometry_msgs/msg/Transform', 'geometry_msgs/msg/Vector3',
+            'geometry_msgs/msg/Quaternion', 'geometry_msgs/msg/Pose', 'tf2_msgs/msg/TFMessage',
+            'visualization_msgs/msg/Marker', 'visualization_msgs/msg/MarkerArray',
+            'std_msgs/msg/ColorRGBA', 'builtin_interfaces/msg/Duration',
+            'sensor_msgs/msg/CompressedImage', 'visualization_msgs/msg/MeshFile',
+            'builtin_interfaces/msg/Time')}
+        self._joint_names = list(self.robot.joint_names)
         joint_state = self._msg['JointState']
         point = self._msg['PointStamped']
         self._joint_states = self.create_publisher(joint_state, '/joint_states', 10)
@@ -267,8 +286,7 @@ class KinematicSimulator(Node):
         return self.create_timer(1.0 / rate_hz, self.tick, clock=clock)
 
     def _stamp(self, stamp_ns: int):
-        sec, nanosec = divmod(int(stamp_ns), 1_000_000_000)
-        return self._msg['Time'](sec=sec, nanosec=nanosec)
+        return self._new['Time'](*divmod(int(stamp_ns), 1_000_000_000))
 
     def _now_ns(self) -> int:
         if self._owns_time:
@@ -430,44 +448,38 @@ class KinematicSimulator(Node):
 
     # -- outputs -------------------------------------------------------------------------------
 
+    # Messages are built in one constructor call each (the per-tick cost of this node is mostly
+    # Python objects). Published messages are read-only (ROS 2's intra-process rule, which the
+    # inproc runtime relies on): the stamp, the joint name list and the polygon vertices are
+    # shared between messages rather than copied.
+
     def _publish_state(self, now_ns: int, q: np.ndarray, velocities: np.ndarray) -> None:
+        new = self._new
         stamp = self._stamp(now_ns)
-        joints = self._msg['JointState']()
-        joints.header.stamp = stamp
-        joints.name = list(self.robot.joint_names)
-        joints.position = self.robot.joint_positions(q).tolist()
-        joints.velocity = velocities.tolist()
-        self._joint_states.publish(joints)
-        transform = self._msg['TransformStamped']()
-        transform.header.stamp = stamp
-        transform.header.frame_id = WORLD_FRAME
-        transform.child_frame_id = BASE_FRAME
-        t, r = transform.transform.translation, transform.transform.rotation
-        t.x, t.y, t.z = (float(v) for v in q[:3])
-        r.x, r.y, r.z, r.w = (float(v) for v in q[3:7])
-        tf = self._msg['TFMessage']()
-        tf.transforms = [transform]
-        self._tf.publish(tf)
+        self._joint_states.publish(new['JointState'](
+            new['Header'](stamp, ''), self._joint_names,
+            self.robot.joint_positions(q).tolist(), velocities.tolist(), []))
+        x, y, z, qx, qy, qz, qw = q[:7].tolist()
+        transform = new['TransformStamped'](
+            new['Header'](stamp, WORLD_FRAME), BASE_FRAME,
+            new['Transform'](new['Vector3'](x, y, z), new['Quaternion'](qx, qy, qz, qw)))
+        self._tf.publish(new['TFMessage']([transform]))
 
     def _point(self, stamp, xyz):
-        msg = self._msg['PointStamped']()
-        msg.header.stamp = stamp
-        msg.header.frame_id = WORLD_FRAME
-        msg.point.x, msg.point.y, msg.point.z = (float(v) for v in xyz)
-        return msg
+        new = self._new
+        return new['PointStamped'](new['Header'](stamp, WORLD_FRAME),
+                                   new['Point'](*np.asarray(xyz, dtype=float).tolist()))
 
     def _publish_monitor(self, stamp_ns: int, state: ZmpState) -> None:
         stamp = self._stamp(stamp_ns)
-        if np.all(np.isfinite(state.zmp_in_world)):
+        if np.isfinite(state.zmp_in_world).all():
             self._zmp.publish(self._point(stamp, state.zmp_in_world))
         self._com.publish(self._point(stamp, state.com_in_world))
         polygon = self.monitor.support_polygon(state.contact_points_in_world)
-        msg = self._msg['PolygonStamped']()
-        msg.header.stamp = stamp
-        msg.header.frame_id = WORLD_FRAME
         vertices, outline = self._polygon_points(polygon)
-        msg.polygon.points = list(vertices)
-        self._polygon.publish(msg)
+        new = self._new
+        self._polygon.publish(new['PolygonStamped'](new['Header'](stamp, WORLD_FRAME),
+                                                    new['Polygon'](vertices)))
         if self.params.publish_markers:
             self._markers.publish(self._marker_array(stamp, state, outline))
 
@@ -483,33 +495,32 @@ class KinematicSimulator(Node):
             self._polygon_key = key
         return self._polygon_cache
 
+    def _marker(self, stamp, marker_id: int, kind: int, action: int, position, scale,
+                rgb, points: list):
+        new = self._new
+        return new['Marker'](
+            new['Header'](stamp, WORLD_FRAME), 'gait', marker_id, kind, action,
+            new['Pose'](new['Point'](*position), new['Quaternion'](0.0, 0.0, 0.0, 1.0)),
+            new['Vector3'](*scale), new['ColorRGBA'](*rgb, 1.0), new['Duration'](0, 0), False,
+            points, [], '', new['CompressedImage'](new['Header'](new['Time'](0, 0), ''), '', b''),
+            [], '', '', new['MeshFile']('', b''), False)
+
     def _marker_array(self, stamp, state: ZmpState, outline_points: list):
         marker_type = self._msg['Marker']
         markers = []
         for marker_id, (xyz, rgb, size) in enumerate((
                 (state.zmp_in_world, (1.0, 0.1, 0.1), 0.04),
                 (state.com_in_world, (0.1, 0.8, 0.1), 0.05))):
-            marker = marker_type(type=marker_type.SPHERE, id=marker_id)
-            if not np.all(np.isfinite(xyz)):
-                marker.action = marker_type.DELETE
-            else:
-                marker.pose.position.x, marker.pose.position.y, marker.pose.position.z = (
-                    float(v) for v in xyz)
-            marker.scale.x = marker.scale.y = marker.scale.z = size
-            markers.append((marker, rgb))
-        outline = marker_type(type=marker_type.LINE_STRIP, id=2)
-        outline.scale.x = 0.01
-        outline.points = list(outline_points)
-        markers.append((outline, (0.2, 0.4, 1.0)))
-        array = self._msg['MarkerArray']()
-        for marker, (red, green, blue) in markers:
-            marker.header.stamp = stamp
-            marker.header.frame_id = WORLD_FRAME
-            marker.ns = 'gait'
-            marker.pose.orientation.w = 1.0
-            marker.color.r, marker.color.g, marker.color.b, marker.color.a = red, green, blue, 1.0
-        array.markers = [marker for marker, _ in markers]
-        return array
+            xyz = np.asarray(xyz, dtype=float)
+            finite = bool(np.isfinite(xyz).all())
+            markers.append(self._marker(
+                stamp, marker_id, marker_type.SPHERE,
+                marker_type.ADD if finite else marker_type.DELETE,
+                xyz.tolist() if finite else (0.0, 0.0, 0.0), (size, size, size), rgb, []))
+        markers.append(self._marker(stamp, 2, marker_type.LINE_STRIP, marker_type.ADD,
+                                    (0.0, 0.0, 0.0), (0.01, 0.0, 0.0), (0.2, 0.4, 1.0),
+                                    list(outline_points)))
+        return self._new['MarkerArray'](markers)
 
     # -- diagnostics ---------------------------------------------------------------------------
 

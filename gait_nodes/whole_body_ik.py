@@ -42,7 +42,7 @@ from gait_nodes.contract import (
 )
 from gait_nodes.diagnostics import OK, WARN, DiagnosticsReporter
 from gait_nodes.errors import GaitNodesError, ParameterError
-from gait_nodes.interfaces import get_message
+from gait_nodes.interfaces import get_constructor, get_message
 from gait_nodes.paths import node_defaults as shipped_node_defaults
 from gait_nodes.robot.model import load_robot_model
 from gait_nodes.robot.whole_body_ik import (
@@ -159,6 +159,7 @@ class WholeBodyIk(Node):
         self._q_command = self.q_nominal.copy()
         self._reseed = False
         self._plan = None
+        self._plan_order = None
         self._com_states = None
         self._com_received_ns = None
         self._swings: dict = {}
@@ -175,6 +176,10 @@ class WholeBodyIk(Node):
         self.add_on_set_parameters_callback(self._on_set_parameters)
 
         self.diagnostics = DiagnosticsReporter(self, self.robot.name)
+        self._new = {name.rsplit('/', 1)[1]: get_constructor(name) for name in (
+            'sensor_msgs/msg/JointState', 'std_msgs/msg/Header', 'builtin_interfaces/msg/Time')}
+        # Shared by every /joint_commands message (published messages are read-only).
+        self._joint_names = list(self.robot.joint_names)
         self.publisher = self.create_publisher(get_message('sensor_msgs/msg/JointState'),
                                                '/joint_commands', 10)
         trajectory = get_message('trajectory_msgs/msg/MultiDOFJointTrajectory')
@@ -248,6 +253,7 @@ class WholeBodyIk(Node):
             self.diagnostics.drop('/gait/footsteps', str(exc))
             return
         self._plan = plan
+        self._plan_order = [plan.foot_names.index(name) for name in self.robot.foot_names]
 
     def _on_swing(self, msg) -> None:
         try:
@@ -298,9 +304,9 @@ class WholeBodyIk(Node):
         plan = self._plan
         t_plan = (now_ns - plan.start_ns) * 1e-9
         index = plan.index_at(t_plan)
-        order = [plan.foot_names.index(name) for name in self.robot.foot_names]
-        feet = np.array(plan.positions_in_world[index][order])
-        yaws = np.array(plan.yaws_rad[index][order])
+        order = self._plan_order
+        feet = plan.positions_in_world[index][order]
+        yaws = plan.yaws_rad[index][order]
         fallbacks = 0
         for k, name in enumerate(self.robot.foot_names):
             swing = current_swing(plan, name, t_plan)
@@ -372,12 +378,12 @@ class WholeBodyIk(Node):
             self._publish_summary(now_ns)
 
     def _publish(self, now_ns: int, q: np.ndarray, velocities: np.ndarray) -> None:
-        msg = get_message('sensor_msgs/msg/JointState')()
-        msg.header.stamp = self.get_clock().now().to_msg()
-        msg.name = list(self.robot.joint_names)
-        msg.position = [float(v) for v in self.robot.joint_positions(q)]
-        msg.velocity = [float(v) for v in velocities]
-        self.publisher.publish(msg)
+        new = self._new
+        stamp = new['Time'](*divmod(self.get_clock().now().nanoseconds, 1_000_000_000))
+        self.publisher.publish(new['JointState'](
+            new['Header'](stamp, ''), self._joint_names,
+            self.robot.joint_positions(q).tolist(), np.asarray(velocities, dtype=float).tolist(),
+            []))
 
     def _publish_summary(self, now_ns: int) -> None:
         window, self._window = self._window, _Window()

@@ -113,3 +113,33 @@ def test_swing_trajectory_round_trip():
 def test_yaw_quaternion_identity():
     for yaw in np.linspace(-3.1, 3.1, 13):
         assert contract.quaternion_to_yaw(*contract.yaw_to_quaternion(yaw)) == pytest.approx(yaw)
+
+
+def test_zmp_reference_messages_equal_fresh_ones_while_sharing_poses():
+    """The planner's pose-sharing builder gives the bytes of independent messages."""
+    rng = np.random.default_rng(3)
+    knots = rng.normal(size=(300, 2))
+    knots[120] = (0.0, -0.0)
+
+    def reference(first, points=knots):
+        return ZmpReference(np.arange(first, first + 101) * 10_000_000, points[first:first + 101])
+
+    builder = contract.ZmpReferenceMessages()
+    previous = None
+    changed = knots.copy()
+    changed[121] = (0.0, 0.0)  # differs from its neighbour's -0.0 only in the sign bit
+    for first, points in [(0, knots), (2, knots), (4, knots), (3, knots), (60, knots),
+                          (60, changed), (20, knots), (150, knots), (152, changed)]:
+        msg = builder.to_msg(reference(first, points))
+        assert serialize_message(msg) == serialize_message(
+            contract.zmp_reference_to_msg(reference(first, points)))
+        if previous is not None and first == 4:
+            assert msg.poses[0] is previous.poses[2]  # shared, not rebuilt
+        previous = msg
+
+
+def test_zmp_reference_to_msg_gives_independent_messages():
+    ref = ZmpReference(np.arange(10) * 10_000_000, np.zeros((10, 2)))
+    first, second = contract.zmp_reference_to_msg(ref), contract.zmp_reference_to_msg(ref)
+    first.poses[3].pose.position.x = 5.0
+    assert second.poses[3].pose.position.x == 0.0

@@ -18,8 +18,9 @@ from gait_nodes.errors import InterfaceError
 from gait_nodes.interfaces.msgdef import MsgDef, available_types, load_msg
 
 __all__ = [
-    'available_types', 'definition_text', 'deserialize_message', 'get_message', 'is_message',
-    'message_type_name', 'msgdef', 'serialize_message', 'type_hash', 'validate_message',
+    'available_types', 'definition_text', 'deserialize_message', 'get_constructor', 'get_message',
+    'is_message', 'message_type_name', 'msgdef', 'serialize_message', 'type_hash',
+    'validate_message',
 ]
 
 _lock = threading.RLock()
@@ -69,18 +70,62 @@ def generated_class(type_name: str) -> type:
         return _classes[type_name]
 
 
-def _rclpy_active() -> bool:
-    from gait_nodes.runtime.selection import active_runtime
-
-    return active_runtime() == 'rclpy'
+#: Classes already looked up, by the name as asked, for the runtime in ``_resolved_runtime``
+#: (node code calls get_message per message built: the lookup must cost a dict access).
+_resolved: dict[str, type] = {}
+_resolved_runtime: list = [None]
+_selection = []
 
 
 def get_message(type_name: str) -> type:
     """Message class for ``pkg/msg/Name`` (also accepts ``pkg/Name``) in the active runtime."""
+    if not _selection:
+        from gait_nodes.runtime import selection
+
+        _selection.append(selection)
+    runtime = _selection[0].active_runtime()
+    if runtime is _resolved_runtime[0]:
+        cls = _resolved.get(type_name)
+        if cls is not None:
+            return cls
+    else:
+        _resolved.clear()
+        _resolved_runtime[0] = runtime
+    cls = _resolve_message(type_name, runtime == 'rclpy')
+    _resolved[type_name] = cls
+    return cls
+
+
+_constructors: dict[type, object] = {}
+
+
+def get_constructor(type_name: str):
+    """Callable building a ``type_name`` message from all its fields given positionally.
+
+    The fields come in the order of the ``.msg`` definition. This is the fast way to build many
+    messages: the generated class itself (a dataclass), or for rclpy's classes (keyword
+    arguments only) a wrapper passing the fields by name.
+    """
+    cls = get_message(type_name)
+    constructor = _constructors.get(cls)
+    if constructor is None:
+        if hasattr(cls, '__ros_type__'):
+            constructor = cls
+        else:
+            names = tuple(cls.get_fields_and_field_types())
+
+            def constructor(*values, _cls=cls, _names=names):
+                return _cls(**dict(zip(_names, values, strict=True)))
+
+        _constructors[cls] = constructor
+    return constructor
+
+
+def _resolve_message(type_name: str, rclpy_active: bool) -> type:
     parts = type_name.split('/')
     if len(parts) == 2:
         type_name = f'{parts[0]}/msg/{parts[1]}'
-    if _rclpy_active():
+    if rclpy_active:
         import importlib
 
         package, _, name = type_name.split('/')

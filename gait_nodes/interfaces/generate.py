@@ -117,6 +117,16 @@ class _SerializerBuilder:
                         f'b += {name}.pack({", ".join(self.pending_values)})')
         self.pending_fmt, self.pending_values = '', []
 
+    def pure(self, indent: int, line: str) -> None:
+        """Emit a line that does not touch ``b`` ahead of the pending run (which keeps growing).
+
+        Its values are read when the run is packed, after this line: names bound here are
+        fresh, and the message is not modified meanwhile.
+        """
+        if self.pending_fmt and indent != self.pending_indent:
+            self.flush()
+        self.w.emit(indent, line)
+
     def align(self, indent: int, align: int, state: _Alignment) -> None:
         pad = state.static_pad(align)
         if pad is None:
@@ -141,20 +151,22 @@ class _SerializerBuilder:
         state.advance(size)
 
     def string(self, indent: int, field: FieldDef, expr: str, state: _Alignment) -> None:
+        # The length joins the pending run of primitives; the characters follow it.
         self.align(indent, 4, state)
-        self.flush()
         var = self.w.unique('s')
         if field.base_type == 'wstring':
-            self.w.emit(indent, f'{var} = {expr}.encode("utf-16-le")')
-            self.w.emit(indent, f'b += U32.pack(len({var}) // 2)')
+            self.pure(indent, f'{var} = {expr}.encode("utf-16-le")')
+            self.push(indent, 'I', [f'len({var}) // 2'])
+            self.flush()
             self.w.emit(indent, f'b += {var}')
         else:
-            self.w.emit(indent, f'{var} = {expr}.encode()')
+            self.pure(indent, f'{var} = {expr}.encode()')
             if field.string_bound:
-                self.w.emit(indent, f'if len({expr}) > {field.string_bound}: '
-                                    f'raise ValueError("string longer than bound '
-                                    f'{field.string_bound}")')
-            self.w.emit(indent, f'b += U32.pack(len({var}) + 1)')
+                self.pure(indent, f'if len({expr}) > {field.string_bound}: '
+                                  f'raise ValueError("string longer than bound '
+                                  f'{field.string_bound}")')
+            self.push(indent, 'I', [f'len({var}) + 1'])
+            self.flush()
             self.w.emit(indent, f'b += {var}')
             self.w.emit(indent, "b += b'\\x00'")
         state.reset(1)
@@ -169,12 +181,37 @@ class _SerializerBuilder:
 
     def struct(self, indent: int, msgdef: MsgDef, expr: str, state: _Alignment) -> None:
         if len(msgdef.fields) > 1:
-            self.flush()
             var = self.w.unique('m')
-            self.w.emit(indent, f'{var} = {expr}')
+            self.pure(indent, f'{var} = {expr}')
             expr = var
         for field in msgdef.fields:
             self.field(indent, field, f'{expr}.{field.name}', state)
+
+    def flat_layout(self, msgdef: MsgDef, expr: str) -> tuple[str, list[str], int] | None:
+        """Format, value expressions and alignment of a struct of same-size primitives only.
+
+        Such a struct has no padding inside and its size is a multiple of its alignment, so a
+        sequence of them is one run of primitives (None for any other struct).
+        """
+        fmt, values, sizes = '', [], set()
+        for field in msgdef.fields:
+            if field.container is not None or field.is_string:
+                return None
+            if field.is_primitive:
+                char, size = PRIMITIVES[field.base_type]
+                fmt += char
+                values.append(f'{expr}.{field.name}')
+                sizes.add(size)
+                continue
+            inner = self.flat_layout(self.definitions[field.base_type], f'{expr}.{field.name}')
+            if inner is None:
+                return None
+            fmt += inner[0]
+            values.extend(inner[1])
+            sizes.add(inner[2])
+        if len(sizes) != 1:
+            return None
+        return fmt, values, sizes.pop()
 
     def field(self, indent: int, field: FieldDef, expr: str, state: _Alignment) -> None:
         if field.container is None:
@@ -182,18 +219,17 @@ class _SerializerBuilder:
             return
         single = dataclasses.replace(field, container=None, size=None)
         var = self.w.unique('v')
-        self.flush()
-        self.w.emit(indent, f'{var} = {expr}')
+        self.pure(indent, f'{var} = {expr}')
         if field.container == 'array':
-            self.w.emit(indent, f'if len({var}) != {field.size}: '
-                                f'raise ValueError("{field.name} must have exactly '
-                                f'{field.size} elements, got %d" % len({var}))')
+            self.pure(indent, f'if len({var}) != {field.size}: '
+                              f'raise ValueError("{field.name} must have exactly '
+                              f'{field.size} elements, got %d" % len({var}))')
             count = field.size
         else:
             if field.size:
-                self.w.emit(indent, f'if len({var}) > {field.size}: '
-                                    f'raise ValueError("{field.name} has %d elements, at most '
-                                    f'{field.size} allowed" % len({var}))')
+                self.pure(indent, f'if len({var}) > {field.size}: '
+                                  f'raise ValueError("{field.name} has %d elements, at most '
+                                  f'{field.size} allowed" % len({var}))')
             self.primitive(indent, 'uint32', f'len({var})', state)
             count = None
         if field.is_primitive:
@@ -213,11 +249,36 @@ class _SerializerBuilder:
                     state.advance(size * count)
             return
         loop_var = self.w.unique('e')
+        if not field.is_string:
+            flat = self.flat_layout(self.definitions[field.base_type], loop_var)
+            if flat is not None:
+                self._flat_run(indent, var, count, *flat, state)
+                return
         self.flush()
         self.w.emit(indent, f'for {loop_var} in {var}:')
         self.single(indent + 1, single, loop_var, _Alignment(1))
         self.flush()
         state.reset(1)
+
+    def _flat_run(self, indent: int, var: str, count: int | None, fmt: str, values: list[str],
+                  size: int, state: _Alignment) -> None:
+        """A sequence (``count`` None) or array of flat structs: aligned once, one pack each."""
+        loop_var = values[0].split('.')[0]
+        element = self.w.struct_const('<' + fmt)
+        if count is None:
+            self.flush()
+            self.w.emit(indent, f'if {var}:')
+            if size > 4:
+                self.w.emit(indent + 1, f'b += PAD[(4 - len(b)) % {size}]')
+            self.w.emit(indent + 1, f'for {loop_var} in {var}:')
+            self.w.emit(indent + 2, f'b += {element}.pack({", ".join(values)})')
+            state.reset(min(size, 4))
+        elif count:
+            self.align(indent, size, state)
+            self.flush()
+            self.w.emit(indent, f'for {loop_var} in {var}:')
+            self.w.emit(indent + 1, f'b += {element}.pack({", ".join(values)})')
+            state.advance(size * len(fmt) * count)
 
     def _primitive_run(self, indent: int, base: str, var: str) -> None:
         fmt = PRIMITIVES[base][0]

@@ -114,6 +114,10 @@ class RobotModel:
         self._v_index = np.array(v_idx, dtype=int)
         self._position_in_vector = {name: k for k, name in enumerate(names)}
         self._scalar = np.array([model.joints[model.getJointId(n)].nq == 1 for n in names])
+        # Index arrays of the joint vector <-> q maps, computed once (used every tick).
+        self._continuous = np.flatnonzero(~self._scalar)
+        self._scalar_q_index = self._q_index[self._scalar]
+        self._all_scalar = bool(self._scalar.all())
 
         for foot in description.feet:
             supports = set(model.supports[model.frames[
@@ -244,16 +248,18 @@ class RobotModel:
 
     def set_joint_positions(self, q: np.ndarray, joint_positions: np.ndarray) -> None:
         """Write a joint vector into ``q`` in place."""
-        scalar = self._scalar
-        q[self._q_index[scalar]] = joint_positions[scalar]
-        for k in np.flatnonzero(~scalar):  # continuous joints: (cos, sin)
+        if self._all_scalar:
+            q[self._q_index] = joint_positions
+            return
+        q[self._scalar_q_index] = joint_positions[self._scalar]
+        for k in self._continuous:  # continuous joints: (cos, sin)
             q[self._q_index[k]:self._q_index[k] + 2] = (math.cos(joint_positions[k]),
                                                         math.sin(joint_positions[k]))
 
     def joint_positions(self, q: np.ndarray) -> np.ndarray:
         """The joint vector of ``q`` [rad]."""
         values = np.array(q[self._q_index], dtype=float)
-        for k in np.flatnonzero(~self._scalar):
+        for k in self._continuous:
             values[k] = math.atan2(q[self._q_index[k] + 1], q[self._q_index[k]])
         return values
 

@@ -97,10 +97,11 @@ class IkTargets:
         if (self.com_in_world is None) == (self.base_position_in_world is None):
             raise ValueError('targets: give exactly one of com_in_world and '
                              'base_position_in_world')
-        values = [feet, yaws, [self.base_yaw_rad],
-                  self.com_in_world if self.com_in_world is not None
-                  else self.base_position_in_world]
-        if not all(np.all(np.isfinite(np.asarray(v, dtype=float))) for v in values):
+        point = self.com_in_world if self.com_in_world is not None \
+            else self.base_position_in_world
+        if not (np.isfinite(feet).all() and np.isfinite(yaws).all()
+                and math.isfinite(self.base_yaw_rad)
+                and np.isfinite(np.asarray(point, dtype=float)).all()):
             raise ValueError('targets hold a NaN or infinite value')
         object.__setattr__(self, 'feet_in_world', feet)
         object.__setattr__(self, 'foot_yaws_rad', yaws)
@@ -152,6 +153,31 @@ class WholeBodyIkSolver:
         self._rows_per_foot = 6 if self._orient else 3
         self._frame_offset = np.array([0.0, 0.0, robot.foot_frame_height_m])
         self._offsets = np.array(robot.foot_rotation_offsets)
+        # Per foot: the last (yaw, sole rotation target) (stance feet keep their yaw for long).
+        self._rotation_targets: list = [(None, None)] * len(robot.foot_frame_ids)
+        # Per free_base: Jacobian with its constant base columns, and the identity.
+        self._templates: dict[bool, tuple[np.ndarray, np.ndarray]] = {}
+
+    def _template(self, free_base: bool) -> tuple[np.ndarray, np.ndarray]:
+        template = self._templates.get(free_base)
+        if template is None:
+            feet_count = len(self.robot.foot_frame_ids)
+            rows = feet_count * self._rows_per_foot + (3 if free_base else 0)
+            jacobian = np.zeros((rows, (3 if free_base else 0) + len(self._v_idx)))
+            if free_base:
+                for k in range(feet_count):
+                    r = k * self._rows_per_foot
+                    jacobian[r:r + 3, :3] = np.eye(3)
+                jacobian[-3:, :3] = np.eye(3)
+            template = self._templates[free_base] = (jacobian, np.eye(jacobian.shape[1]))
+        return template
+
+    def _rotation_target(self, k: int, yaw_rad: float) -> np.ndarray:
+        cached_yaw, target = self._rotation_targets[k]
+        if cached_yaw != yaw_rad:
+            target = yaw_rotation(yaw_rad) @ self._offsets[k]
+            self._rotation_targets[k] = (yaw_rad, target)
+        return target
 
     def solve(self, targets: IkTargets, q_start: np.ndarray) -> IkResult:
         """Configuration reaching ``targets``, starting the iteration at ``q_start``.
@@ -167,7 +193,7 @@ class WholeBodyIkSolver:
                              f'{len(targets.feet_in_world)}')
         settings = self.settings
         q = np.array(q_start, dtype=float)
-        if not np.all(np.isfinite(q)):
+        if not np.isfinite(q).all():
             raise ValueError('q_start holds a NaN or infinite value')
         half = 0.5 * targets.base_yaw_rad
         q[3:7] = (0.0, 0.0, math.sin(half), math.cos(half))
@@ -175,36 +201,29 @@ class WholeBodyIkSolver:
         if not free_base:
             q[:3] = targets.base_position_in_world
         frame_targets = targets.feet_in_world + self._frame_offset
-        rotation_targets = [yaw_rotation(y) @ self._offsets[k]
-                            for k, y in enumerate(targets.foot_yaws_rad)]
-        n_joints = len(self._v_idx)
+        rotation_targets = [self._rotation_target(k, y)
+                            for k, y in enumerate(targets.foot_yaws_rad.tolist())] \
+            if self._orient else None
         base_cols = 3 if free_base else 0
-        rows = feet_count * self._rows_per_foot + (3 if free_base else 0)
-        jacobian = np.zeros((rows, base_cols + n_joints))
-        error = np.zeros(rows)
-        if free_base:
-            for k in range(feet_count):
-                r = k * self._rows_per_foot
-                jacobian[r:r + 3, :3] = np.eye(3)
-            jacobian[-3:, :3] = np.eye(3)
+        template, identity = self._template(free_base)
+        jacobian = template.copy()
+        error = np.zeros(len(jacobian))
         position_errors = np.zeros(feet_count)
         orientation_errors = np.zeros(feet_count)
         frames = robot.foot_frame_ids
         rows_per_foot = self._rows_per_foot
         world = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
-        identity = np.eye(jacobian.shape[1])
         com_error = 0.0
         iteration = 0
+        per_foot = error[:feet_count * rows_per_foot].reshape(feet_count, rows_per_foot)
         while True:
             pin.forwardKinematics(model, data, q)
             pin.updateFramePlacements(model, data)
-            for k, frame in enumerate(frames):
-                r = k * rows_per_foot
-                placement = data.oMf[frame]
-                error[r:r + 3] = frame_targets[k] - placement.translation
-                if self._orient:
-                    error[r + 3:r + 6] = pin.log3(rotation_targets[k] @ placement.rotation.T)
-            per_foot = error[:feet_count * rows_per_foot].reshape(feet_count, rows_per_foot)
+            placements = [data.oMf[frame] for frame in frames]
+            per_foot[:, :3] = frame_targets - np.array([p.translation for p in placements])
+            if self._orient:
+                for k, placement in enumerate(placements):
+                    per_foot[k, 3:] = pin.log3(rotation_targets[k] @ placement.rotation.T)
             position_errors = np.sqrt(np.einsum('ij,ij->i', per_foot[:, :3], per_foot[:, :3]))
             if self._orient:
                 orientation_errors = np.sqrt(np.einsum('ij,ij->i', per_foot[:, 3:],
@@ -238,15 +257,16 @@ class WholeBodyIkSolver:
                 step *= MAX_NEWTON_STEP_RAD / largest
             if free_base:
                 q[:3] += step[:3]
-            q[self._q_idx] = np.clip(q[self._q_idx] + step[base_cols:], self._lower, self._upper)
+            q[self._q_idx] = np.minimum(np.maximum(q[self._q_idx] + step[base_cols:], self._lower),
+                                        self._upper)
         joints = q[self._q_idx]
         at_limit = (joints <= self._lower + 1e-9) | (joints >= self._upper - 1e-9)
         return IkResult(q=q, converged=converged, iterations=iteration,
                         foot_position_errors_m=position_errors.copy(),
                         foot_orientation_errors_rad=orientation_errors.copy(),
                         com_error_m=com_error,
-                        joints_at_limit=tuple(n for n, hit in zip(self.joint_names, at_limit,
-                                                                  strict=True) if hit))
+                        joints_at_limit=tuple(self.joint_names[k]
+                                              for k in np.flatnonzero(at_limit)))
 
 
 # -- seeds and the nominal stance -------------------------------------------------------------

@@ -125,4 +125,11 @@ class Clock:
 
     def now(self) -> Time:
         """Current time."""
-        return Time(nanoseconds=self.now_ns(), clock_type=self.clock_type)
+        nanoseconds = self.now_ns()
+        if type(nanoseconds) is not int or nanoseconds < 0:
+            return Time(nanoseconds=nanoseconds, clock_type=self.clock_type)
+        # The common case without Time.__init__'s conversions (called many times per tick).
+        time = object.__new__(Time)
+        time.nanoseconds = nanoseconds
+        time.clock_type = self.clock_type
+        return time

@@ -58,17 +58,14 @@ class SingleThreadedExecutor:
     def _running(self) -> bool:
         return self.context.ok() and not self.context.shutdown_requested.is_set()
 
-    def _timers(self):
-        for node in self._nodes:
-            yield from node._timers
-
     def _next_timer(self):
-        best = None
-        for timer in self._timers():
-            if timer.is_canceled():
-                continue
-            if best is None or timer.next_call_ns < best.next_call_ns:
-                best = timer
+        best, best_ns = None, 0
+        for node in self._nodes:
+            for timer in node._timers:
+                if timer._canceled:
+                    continue
+                if best is None or timer.next_call_ns < best_ns:
+                    best, best_ns = timer, timer.next_call_ns
         return best
 
     # --- one unit of work -----------------------------------------------------------------
@@ -118,10 +115,18 @@ class SingleThreadedExecutor:
     def _drain(self) -> None:
         transport = self.context.transport
         queue = transport.queue
+        # A message goes to all its subscriptions in a row: raw ones in a row share its bytes.
+        serialized_msg = serialized = None
         while queue:
             subscription, msg = queue.popleft()
             transport.delivered += 1
-            _deliver(subscription, msg)
+            if subscription.raw and not isinstance(msg, bytes):
+                if msg is not serialized_msg:
+                    serialized_msg, serialized = msg, msg.serialize()
+                subscription.callback(serialized)
+            else:
+                serialized_msg = None
+                subscription.callback(msg)
 
     # --- loops ------------------------------------------------------------------------------
 

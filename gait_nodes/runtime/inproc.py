@@ -6,7 +6,12 @@ deliveries cause, first in first out) before time moves on. The same inputs ther
 same sequence of callbacks and byte-identical outputs, as fast as the CPU allows.
 
 Messages are handed to subscribers by reference, without serialization: a callback must treat a
-received message as read-only, as rclpy's intra-process communication also requires.
+received message as read-only, as rclpy's intra-process communication also requires, and a
+publisher must not edit a message once published. Under that rule node code may share unchanging
+sub-messages between the messages it publishes (the kinematic_simulator shares stamps, joint
+names and polygon vertices, the footstep_planner the poses its successive ZMP references have in
+common), which saves building them again and is invisible to subscribers. Raw subscriptions that
+receive the same message one after the other share its one serialization.
 """
 
 from __future__ import annotations
@@ -24,6 +29,8 @@ class _Topic:
         self.publishers: list[_InprocPublisher] = []
         self.subscriptions: list = []
         self.type_name: str | None = None
+        #: Bumped whenever ``subscriptions`` changes (publishers keep their matches until then).
+        self.version = 0
 
 
 class _InprocPublisher:
@@ -34,6 +41,16 @@ class _InprocPublisher:
         self.profile = profile
         latched = profile.durability == DurabilityPolicy.TRANSIENT_LOCAL
         self.history = collections.deque(maxlen=profile.depth) if latched else None
+        self._matched: list = []
+        self._matched_version = -1
+
+    def matched(self) -> list:
+        """The topic's subscriptions DDS would match with this publisher, in creation order."""
+        topic = self.topic
+        if self._matched_version != topic.version:
+            self._matched = [s for s in topic.subscriptions if _compatible(self, s)]
+            self._matched_version = topic.version
+        return self._matched
 
     def publish(self, msg) -> None:
         if self.transport.strict:
@@ -62,6 +79,7 @@ class _InprocSubscription:
     def destroy(self) -> None:
         if self.subscription in self.topic.subscriptions:
             self.topic.subscriptions.remove(self.subscription)
+            self.topic.version += 1
 
 
 def _compatible(publisher: _InprocPublisher, subscription) -> bool:
@@ -110,6 +128,7 @@ class InprocTransport:
         """Subscription; a transient-local one gets the latched history at once."""
         topic = self._topic(subscription.topic_name, subscription.msg_type)
         topic.subscriptions.append(subscription)
+        topic.version += 1
         if subscription.qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL:
             for publisher in topic.publishers:
                 if publisher.history and _compatible(publisher, subscription):
@@ -120,9 +139,9 @@ class InprocTransport:
 
     def deliver(self, publisher: _InprocPublisher, msg) -> None:
         """Queue ``msg`` for every compatible subscription of the topic."""
-        for subscription in publisher.topic.subscriptions:
-            if _compatible(publisher, subscription):
-                self.queue.append((subscription, msg))
+        queue = self.queue
+        for subscription in publisher.matched():
+            queue.append((subscription, msg))
 
     def count(self, name: str, kind: str) -> int:
         """Endpoints on a topic (``kind``: publishers or subscriptions)."""

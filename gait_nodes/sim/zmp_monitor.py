@@ -33,7 +33,7 @@ import numpy as np
 import pinocchio as pin
 
 from gait_nodes.com.trajectory import GRAVITY_M_S2
-from gait_nodes.geometry import convex_hull, foot_discs_polygon, signed_distance
+from gait_nodes.geometry import convex_hull, foot_discs_polygon, polygon_edges, signed_distance
 
 #: The project's one gravity (the cart-table planners' and Pinocchio's default model gravity),
 #: so that the monitor judges the planned motion with the planners' physics.
@@ -113,6 +113,7 @@ class ZmpMonitor:
         self.gravity = np.array([0.0, 0.0, -gravity_m_s2])
         self._hull_key = None
         self._hull_cache = (np.zeros((0, 2)), np.zeros((0, 2)))
+        self._hull_edges = None
 
     def com_and_zmp(self, q: np.ndarray, v: np.ndarray, a: np.ndarray
                     ) -> tuple[np.ndarray, np.ndarray, float]:
@@ -136,10 +137,12 @@ class ZmpMonitor:
         if key != self._hull_key:
             if len(points) == 0:
                 self._hull_cache = (np.zeros((0, 2)), np.zeros((0, 2)))
+                self._hull_edges = None
             else:
                 self._hull_cache = (convex_hull(points[:, :2]),
                                     foot_discs_polygon(points[:, :2], self.foot_radius_m,
                                                        POLYGON_SEGMENTS_PER_FOOT))
+                self._hull_edges = polygon_edges(self._hull_cache[0])
             self._hull_key = key
         return self._hull_cache
 
@@ -153,8 +156,8 @@ class ZmpMonitor:
         if len(centres_hull) == 0 or not np.all(np.isfinite(zmp_in_world[:2])):
             return -np.inf
         # geometry.disc_support_margin, with the centres' hull kept between calls.
-        return float(signed_distance(np.asarray(zmp_in_world)[None, :2], centres_hull)[0]
-                     + self.foot_radius_m)
+        return float(signed_distance(np.asarray(zmp_in_world)[None, :2], centres_hull,
+                                     self._hull_edges)[0] + self.foot_radius_m)
 
     def evaluate(self, q: np.ndarray, v: np.ndarray, a: np.ndarray,
                  contact_points_in_world: np.ndarray) -> ZmpState:
