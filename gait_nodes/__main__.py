@@ -380,6 +380,9 @@ def main(args: list[str] | None = None) -> int:
         names = _selected_nodes(options)
         if options.record == '':
             options.record = time.strftime('bags/gait_%Y_%m_%d-%H_%M_%S')
+        if options.record and os.path.exists(options.record):
+            raise ArgumentError(f'--record {options.record}: exists already; choose a new '
+                                f'directory (a bag is never overwritten)')
         if options.record and not graph.module_exists(graph.RECORDER):
             raise ArgumentError('--record needs the recorder node, not installed in this '
                                 'version')

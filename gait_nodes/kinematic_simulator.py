@@ -146,10 +146,11 @@ def joint_command_from_msg(msg, robot: RobotModel, previous: np.ndarray,
     if tuple(names) == robot.joint_names:
         # Every joint in the robot's order (what whole_body_ik sends): no lookups needed.
         positions = np.array(msg.position, dtype=float)
-        if not (np.isfinite(positions).all()
-                and np.isfinite(np.array(msg.velocity, dtype=float)).all()):
+        velocity = (np.array(msg.velocity, dtype=float) if len(msg.velocity)
+                    else np.zeros(len(positions)))
+        if not (np.isfinite(positions).all() and np.isfinite(velocity).all()):
             raise ContractError('a joint command holds a NaN or infinite value')
-        return positions
+        return positions, velocity
     if len(set(names)) != len(names):
         repeated = sorted({n for n in names if names.count(n) > 1})
         raise ContractError(f'joint names repeat: {repeated}')

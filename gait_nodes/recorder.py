@@ -49,6 +49,7 @@ class Recorder(Node):
         if not 0 < flush_period_s <= 1.0:
             raise ArgumentError(f'flush_period_s must be in (0, 1] s, got {flush_period_s}')
         topics = topics or dict(graph.TOPICS)
+        self.writer = None  # destroy_node after a refused output has no bag to close
         self.writer = BagWriter(output, flush_period_s=flush_period_s)
         for name, type_name in topics.items():
             latched = name in LATCHED_TOPICS
@@ -74,9 +75,10 @@ class Recorder(Node):
 
     def destroy_node(self) -> None:
         """Finish the bag, then release the node."""
-        self.writer.close()
-        self.get_logger().info(f'bag closed: {self.writer.message_count} messages in '
-                               f'{self.writer.path}')
+        if self.writer is not None:
+            self.writer.close()
+            self.get_logger().info(f'bag closed: {self.writer.message_count} messages in '
+                                   f'{self.writer.path}')
         super().destroy_node()
 
 

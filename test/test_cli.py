@@ -118,6 +118,7 @@ def test_run_inproc_records_inspects_and_plots(tmp_path):
     (['--runtime', 'inproc', '--duration', 'nan'], {}, ['nan']),
     (['--runtime', 'inproc', '--nodes', 'teleporter'], {}, ['teleporter']),
     (['--fast', '--runtime', 'dds'], {}, ['--fast', 'dds']),
+    (['--fast', '--record', 'bad.yaml'], {}, ['bad.yaml', 'exists']),
     (['--runtime', 'inproc', '--ros-args', '--bogus'], {}, ['--bogus']),
     (['--runtime', 'inproc', '--ros-args', '-p', 'gain'], {}, ['gain']),
     (['--runtime', 'inproc', '--ros-args', '--params-file', 'missing.yaml'], {},
@@ -130,8 +131,8 @@ def test_run_inproc_records_inspects_and_plots(tmp_path):
     (['--runtime', 'rclpy'], {}, ['rclpy']),
     (['--no-such-option'], {}, ['--no-such-option']),
 ], ids=['runtime-flag', 'runtime-env', 'negative-duration', 'word-duration', 'nan-duration',
-        'unknown-node', 'fast-with-dds', 'unknown-ros-flag', 'param-without-value',
-        'missing-params-file',
+        'unknown-node', 'fast-with-dds', 'record-exists', 'unknown-ros-flag',
+        'param-without-value', 'missing-params-file',
         'bad-yaml-params-file', 'list-params-file', 'binary-params-file', 'bad-yaml-value',
         'rclpy-without-ros', 'unknown-option'])
 def test_run_refuses_bad_input_on_one_line(tmp_path, args, env, words):

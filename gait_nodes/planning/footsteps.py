@@ -40,6 +40,9 @@ from gait_nodes.robot.description import RobotDescription
 ALREADY_THERE = 1e-6
 #: Longest weight shift before the first step from standstill [s] (at most one step period).
 START_SHIFT_S = 1.0
+#: Part of that weight shift during which the ZMP reference holds still (the COM controller's
+#: preview of the shift).
+START_HOLD_FRACTION = 0.5
 #: A step re-timed for swings longer than its rhythm's gets this much more than they need, so
 #: that the later touch-downs (and footholds) it causes still fit; at most MAX_RETIMING times.
 RETIMING_ALLOWANCE = 0.02
@@ -549,6 +552,13 @@ class GaitPlanner:
         needed = self._needed_swing_s(gait, state, slots, points, params.com_height_m)
         if needed > swing * (1.0 + 1e-9) and retimed < MAX_RETIMING:
             return self._next_step(state, needed * (1.0 + RETIMING_ALLOWANCE), retimed + 1)
+        if extra > 0.0 and kind == 'walk':
+            # From standstill the ZMP stays put for part of the weight shift: the plan reaches
+            # the COM controller when the command comes, and a ZMP that starts moving at once
+            # leaves it no preview for the pendulum's initial counter-move.
+            hold = START_HOLD_FRACTION * extra
+            times = np.concatenate([times[:1], [t0 + hold], times[1:]])
+            points = np.concatenate([points[:1], points])
         return Step(gait, kind, t0, t_end, state.positions, state.yaws, tuple(slots), times,
                     points, kept, params, twist, after_state)
 
