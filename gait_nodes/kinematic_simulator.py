@@ -69,6 +69,8 @@ NODE_NAME = 'kinematic_simulator'
 MAX_LAG_PERIODS = 10
 #: How far [periods] a joint setpoint is carried forward with its velocity when the next is late.
 MAX_EXTRAPOLATION_PERIODS = 2
+#: Setpoints kept for interpolation (0.1 s of a 200 Hz stream).
+SETPOINT_BUFFER = 20
 LEVEL_WORDS = {OK: 'OK', WARN: 'WARN', ERROR: 'ERROR'}
 
 
@@ -93,6 +95,7 @@ class KinematicSimulatorParams:
     publish_clock: bool
     warn_margin_m: float
     stale_after_s: float
+    command_delay_s: float
     diagnostics_period_s: float
     contact_height_tolerance_m: float
     ground_height_m: float
@@ -110,6 +113,7 @@ class KinematicSimulatorParams:
             publish_clock=_flag(values, 'publish_clock'),
             warn_margin_m=_number(values, 'warn_margin_m', 0.0, 1.0),
             stale_after_s=_number(values, 'stale_after_s', 0.0, 60.0, low_open=True),
+            command_delay_s=_number(values, 'command_delay_s', 0.0, 0.1),
             diagnostics_period_s=_number(values, 'diagnostics_period_s', 0.0, 60.0,
                                          low_open=True),
             contact_height_tolerance_m=_number(values, 'contact_height_tolerance_m', 0.0, 0.5),
@@ -207,6 +211,8 @@ class KinematicSimulator(Node):
         self._command = self.robot.joint_positions(q_initial)
         self._command_velocity = np.zeros(len(self._command))
         self._command_stamp_ns: int | None = None
+        #: (stamp [ns], joint vector) of the latest setpoints, oldest first.
+        self._setpoints: deque = deque(maxlen=SETPOINT_BUFFER)
         self._plan: FootstepPlan | None = None
         self._plan_order: np.ndarray | None = None
         self._last_command_ns: int | None = None
@@ -329,23 +335,37 @@ class KinematicSimulator(Node):
         except ContractError as exc:
             self.diagnostics.drop('/joint_commands', str(exc))
             return
+        if self._setpoints and stamp_ns <= self._setpoints[-1][0]:
+            self._setpoints.clear()  # a stamp out of order (a restarted publisher): start over
+        self._setpoints.append((stamp_ns, self._command))
         self._command_stamp_ns = stamp_ns
         self._last_command_ns = self._now_ns()
         if self.inputs is not None:
             self.inputs.heard('/joint_commands', self._last_command_ns)
 
     def _command_at(self, now_ns: int) -> np.ndarray:
-        """The command stream at ``now_ns``: the last setpoint advanced by its velocity.
+        """The command stream at ``now_ns - command_delay_s``, by its stamps.
 
-        A position servo fed by a jittery stream interpolates between setpoints; carrying the
-        last one forward with its commanded velocity (for at most ``MAX_EXTRAPOLATION_PERIODS``)
-        does the same without delay, so the joints follow the commanded motion and not the
-        arrival times of its messages.
+        A position servo fed by a stream of stamped setpoints (as a trajectory controller is)
+        interpolates between them: the joints follow the commanded motion, not the arrival
+        times of its messages. Between the two setpoints around that instant the command is
+        interpolated linearly; past the newest it is carried forward with its commanded
+        velocity for at most ``MAX_EXTRAPOLATION_PERIODS``. Under inproc delivery has no
+        latency and no delay is taken.
         """
         if self._command_stamp_ns is None:
             return self._command
+        delay_ns = 0 if self.context.runtime == 'inproc' else self.params.command_delay_s * 1e9
+        at_ns = now_ns - delay_ns
+        setpoints = self._setpoints
+        if len(setpoints) > 1 and at_ns < setpoints[-1][0]:
+            for k in range(len(setpoints) - 1, 0, -1):
+                (t0, q0), (t1, q1) = setpoints[k - 1], setpoints[k]
+                if t0 <= at_ns:
+                    return q0 + (q1 - q0) * ((at_ns - t0) / (t1 - t0))
+            return setpoints[0][1]
         period_ns = 1e9 / self.params.rate_hz
-        ahead_ns = min(max(now_ns - self._command_stamp_ns, 0), MAX_EXTRAPOLATION_PERIODS
+        ahead_ns = min(max(at_ns - self._command_stamp_ns, 0), MAX_EXTRAPOLATION_PERIODS
                        * period_ns)
         return self._command + self._command_velocity * (ahead_ns * 1e-9)
 

@@ -379,7 +379,9 @@ class WholeBodyIk(Node):
 
     def _publish(self, now_ns: int, q: np.ndarray, velocities: np.ndarray) -> None:
         new = self._new
-        stamp = new['Time'](*divmod(self.get_clock().now().nanoseconds, 1_000_000_000))
+        # Stamped with the instant the targets were taken at, not the end of the solve: the
+        # simulator follows the setpoints by their stamps.
+        stamp = new['Time'](*divmod(now_ns, 1_000_000_000))
         self.publisher.publish(new['JointState'](
             new['Header'](stamp, ''), self._joint_names,
             self.robot.joint_positions(q).tolist(), np.asarray(velocities, dtype=float).tolist(),

@@ -82,18 +82,23 @@ class SingleThreadedExecutor:
     def _dds_step(self, timeout_sec: float | None) -> bool:
         transport = self.context.transport
         timer = self._next_timer()
-        if timer is not None and timer.is_ready():
+        called = timer is not None and timer.is_ready()
+        if called:
             timer.call()
-            return True
-        wait_ns = None if timeout_sec is None else int(timeout_sec * NS_PER_S)
-        if timer is not None and not timer.clock.ros_time_is_active:
-            until = max(timer.time_until_next_call(), 0)
-            wait_ns = until if wait_ns is None else min(wait_ns, until)
-        ready = transport.wait(wait_ns if wait_ns is not None else 10 * NS_PER_S)
+            # What arrived meanwhile is delivered before the next timer, as rclpy's executor
+            # serves every entity of one wait: a node whose timer is always due (one that runs
+            # behind) would otherwise never see its subscriptions again.
+            ready = transport.wait(0)
+        else:
+            wait_ns = None if timeout_sec is None else int(timeout_sec * NS_PER_S)
+            if timer is not None and not timer.clock.ros_time_is_active:
+                until = max(timer.time_until_next_call(), 0)
+                wait_ns = until if wait_ns is None else min(wait_ns, until)
+            ready = transport.wait(wait_ns if wait_ns is not None else 10 * NS_PER_S)
         for subscription, msg in ready:
             if subscription._node in self._nodes:
                 _deliver(subscription, msg)
-        return bool(ready)
+        return called or bool(ready)
 
     def _inproc_step(self, end_ns: int | None) -> bool:
         """Deliver what is queued, else advance to the next timer and run it.
