@@ -572,7 +572,7 @@ def test_nodes_stop_when_their_launcher_is_killed(tmp_path):
     process = subprocess.Popen(command, env=dds_env(), cwd=tmp_path, stdout=subprocess.DEVNULL,
                                stderr=subprocess.DEVNULL)
     try:
-        _wait_until(lambda: len(_children(process.pid)) == 2, 20, 'the two node processes')
+        _wait_until(lambda: len(_children(process.pid)) == 2, 60, 'the two node processes')
         nodes = _children(process.pid)
         _wait_until(lambda: all(_handles_sigterm(pid) for pid in nodes), 60,
                     'the nodes to be up')
