@@ -104,6 +104,7 @@ class ComPreviewController(Node):
                                     self.get_clock().now().nanoseconds,
                                     holding='running on the last reference, held at its end')
         self._measured_com: deque = deque(maxlen=50)  # (received [ns], stamp [ns], (x, y))
+        self._started_ns = self.get_clock().now().nanoseconds
         self._publisher = self.create_publisher(
             get_message('trajectory_msgs/msg/MultiDOFJointTrajectory'), COM_TOPIC, 10)
         self.create_subscription(get_message('nav_msgs/msg/Path'), ZMP_TOPIC,
@@ -222,6 +223,21 @@ class ComPreviewController(Node):
         self._measured_com.append((self.get_clock().now().nanoseconds,
                                    contract.time_msg_to_ns(msg.header.stamp), xy))
 
+    def _waiting_for_the_robot(self, now_ns: int) -> bool:
+        """Whether to wait for the measured COM before the first reference (dds, rclpy).
+
+        Started into a running graph (a restart), the controller must begin where the robot's
+        COM is, not at the ZMP reference, which may be a body shift away; it waits up to two
+        ``stale_after_s`` for /gait/com, then starts from the reference. Under inproc every
+        node starts together and nothing is waited for.
+        """
+        if self.context.runtime == 'inproc':
+            return False
+        fresh = any((now_ns - s[0]) * 1e-9 <= self._values['stale_after_s']
+                    for s in self._measured_com)
+        return not fresh and (now_ns - self._started_ns) * 1e-9 < 2 * self._values[
+            'stale_after_s']
+
     def _start_state(self, now_ns: int) -> np.ndarray:
         """(3, 2) position, velocity, acceleration the generator starts from."""
         samples = [s for s in self._measured_com
@@ -249,6 +265,8 @@ class ComPreviewController(Node):
             return
         preview = self._settings.preview
         if self._generator is None:
+            if self._waiting_for_the_robot(now_ns):
+                return
             self._generator = make_generator(self._settings, self._start_state(now_ns), now_ns,
                                              self._reference)
         behind = (now_ns - self._generator.stamp_ns) // preview.dt_ns
