@@ -8,9 +8,10 @@ Runs, with the project's own commands and nothing else:
 - ``python -m gait_nodes.swing_table sweep --quiet`` (thesis IV.B, Fig. 14: crawl speed against
   step size for value tables built at the robot's joint limit) and keeps its optimum.
 
-It prints a Markdown table (also written to ``--out``). The speed reported is the net speed,
-displacement of base_link in odom over the walk's duration, so a crawl's sideways sway does not
-count as progress; the commanded speed is the scenario's first /cmd_vel.
+It prints a Markdown table (also written to ``--out``). Speeds are net speeds, displacement of
+base_link in odom over a time, so a crawl's sideways sway does not count as progress: over the
+whole run (start-up and stop included), and while stepping (from the first executed lift-off
+to the last touch-down); the commanded speed is the scenario's first /cmd_vel.
 
     python bench/results.py [--scenarios a,b] [--no-sweep] [--out results.md]
 """
@@ -26,8 +27,27 @@ import tempfile
 import time
 from pathlib import Path
 
+import numpy as np
+
 from gait_nodes.scenarios import SCENARIOS
 from gait_nodes.swing.sweep import FT_PER_MIN
+
+
+def stepping_speed(bag: Path) -> float | None:
+    """Base displacement from the first executed lift-off to the last touch-down, per second."""
+    from gait_nodes.bag.analysis import executed_swings, inspect_bag
+
+    series = inspect_bag(bag).series
+    base = np.array(sorted(series.base))
+    if len(base) < 2 or not series.plans:
+        return None
+    swings = executed_swings(series.plans, int(base[-1, 0]))
+    if not swings:
+        return None
+    start = min(s['lift_off_ns'] for s in swings)
+    end = max(s['touch_down_ns'] for s in swings)
+    xy = np.array([np.interp(t, base[:, 0], base[:, k]) for t in (start, end) for k in (1, 2)])
+    return float(np.hypot(xy[2] - xy[0], xy[3] - xy[1]) / ((end - start) * 1e-9))
 
 
 def run_scenario(name: str, folder: Path) -> dict:
@@ -40,6 +60,7 @@ def run_scenario(name: str, folder: Path) -> dict:
         raise SystemExit(f'{" ".join(command)} failed ({result.returncode}):\n{result.stderr}')
     summary = json.loads(result.stdout)
     summary['command_wall_s'] = time.perf_counter() - started
+    summary['stepping_speed_m_s'] = stepping_speed(folder / name)
     return summary
 
 
@@ -61,6 +82,7 @@ def scenario_row(name: str, summary: dict) -> dict:
         'swing': scenario.settings.get('swing', '-'),
         'com': scenario.settings.get('com_method', '-'),
         'commanded_m_s': commanded, 'net_speed_m_s': net,
+        'stepping_speed_m_s': summary.get('stepping_speed_m_s'),
         'steps': steps.get('count', 0), 'mean_step_m': steps.get('mean_length_m'),
         'margin_min_mm': None if margin.get('min_m') is None else 1000 * margin['min_m'],
         'margin_mean_mm': None if margin.get('mean_m') is None else 1000 * margin['mean_m'],
@@ -94,14 +116,15 @@ def _number(value, digits: int) -> str:
 
 def markdown(rows: list[dict], sweep: dict | None) -> str:
     """The results as Markdown tables."""
-    lines = ['| scenario | robot | gait | swing | COM | commanded [m/s] | net speed [m/s] '
-             '| steps (mean [m]) | ZMP margin min / mean [mm] | outside [s] '
+    lines = ['| scenario | robot | gait | swing | COM | commanded [m/s] | speed: run / '
+             'stepping [m/s] | steps (mean [m]) | ZMP margin min / mean [mm] | outside [s] '
              '| joint vel. peak / limit | ERROR / WARN | real-time factor |',
              '| --- ' * 13 + '|']
     for r in rows:
         lines.append(
             f'| `{r["scenario"]}` | {r["robot"]} | {r["gait"]} | {r["swing"]} | {r["com"]} '
-            f'| {_number(r["commanded_m_s"], 3)} | {_number(r["net_speed_m_s"], 4)} '
+            f'| {_number(r["commanded_m_s"], 3)} | {_number(r["net_speed_m_s"], 4)} / '
+            f'{_number(r["stepping_speed_m_s"], 4)} '
             f'| {r["steps"]} ({_number(r["mean_step_m"], 3)}) '
             f'| {_number(r["margin_min_mm"], 1)} / {_number(r["margin_mean_mm"], 1)} '
             f'| {_number(r["outside_s"], 3)} | {_number(r["joint_peak_ratio"], 2)} '
