@@ -274,3 +274,31 @@ def test_spin_returns_when_no_timer_is_left(inproc):
     timer = node.create_timer(0.5, once)
     runtime.spin(node)
     assert calls == [NS_PER_S // 2]
+
+
+def test_a_second_shutdown_signal_inside_the_first_does_not_deadlock():
+    """A second shutdown request inside the first one's Event.set returns at once.
+
+    (SIGINT then SIGTERM: a launcher stopping its node, then dying.) It must not wait on the
+    lock its own thread holds.
+    """
+    import threading
+
+    runtime.init(args=[], runtime='inproc', signal_handlers=False)
+    try:
+        context = runtime.default_context()
+        context.request_shutdown()
+        done = threading.Event()
+
+        def second_signal_inside_set():
+            with context.shutdown_requested._cond:  # as if interrupted inside Event.set
+                context.request_shutdown()
+            done.set()
+
+        worker = threading.Thread(target=second_signal_inside_set, daemon=True)
+        worker.start()
+        worker.join(5.0)
+        assert done.is_set(), 'the second request blocked on the held lock'
+        assert context.shutdown_requested.is_set()
+    finally:
+        runtime.shutdown()

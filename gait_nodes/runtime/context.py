@@ -24,6 +24,7 @@ class Context:
         self._on_shutdown: list = []
         self._lock = threading.Lock()
         self.shutdown_requested = threading.Event()
+        self._shutdown_asked = False
 
     def init(self, args=None, runtime: str | None = None, domain_id: int | None = None) -> None:
         """Start the runtime: parse ``--ros-args`` from ``args`` and open the transport."""
@@ -46,6 +47,7 @@ class Context:
 
             self.transport = InprocTransport(self)
         self.shutdown_requested.clear()
+        self._shutdown_asked = False
         self._ok = True
 
     def ok(self) -> bool:
@@ -55,7 +57,15 @@ class Context:
         return self._ok
 
     def request_shutdown(self) -> None:
-        """Ask spinning executors to return (signal-safe)."""
+        """Ask spinning executors to return (signal-safe).
+
+        Idempotent before it touches a lock: a second signal that interrupts the first one's
+        ``Event.set`` (Ctrl-C twice, or SIGINT then SIGTERM from a dying launcher) returns at
+        once instead of waiting forever on the lock its own thread holds.
+        """
+        if self._shutdown_asked:
+            return
+        self._shutdown_asked = True
         self.shutdown_requested.set()
         if self.transport is not None:
             self.transport.notify()
