@@ -380,6 +380,10 @@ def main(args: list[str] | None = None) -> int:
         names = _selected_nodes(options)
         if options.record == '':
             options.record = time.strftime('bags/gait_%Y_%m_%d-%H_%M_%S')
+        if (options.plot or options.no_plot) and options.record is None:
+            raise ArgumentError('--plot and --no-plot apply to a recording: add --record')
+        if options.plot and options.no_plot:
+            raise ArgumentError('--plot DIR and --no-plot contradict each other: choose one')
         if options.record and os.path.exists(options.record):
             raise ArgumentError(f'--record {options.record}: exists already; choose a new '
                                 f'directory (a bag is never overwritten)')

@@ -119,6 +119,8 @@ def test_run_inproc_records_inspects_and_plots(tmp_path):
     (['--runtime', 'inproc', '--nodes', 'teleporter'], {}, ['teleporter']),
     (['--fast', '--runtime', 'dds'], {}, ['--fast', 'dds']),
     (['--fast', '--record', 'bad.yaml'], {}, ['bad.yaml', 'exists']),
+    (['--fast', '--plot', 'p'], {}, ['--plot', '--record']),
+    (['--fast', '--record', 'r', '--plot', 'p', '--no-plot'], {}, ['--plot', '--no-plot']),
     (['--runtime', 'inproc', '--ros-args', '--bogus'], {}, ['--bogus']),
     (['--runtime', 'inproc', '--ros-args', '-p', 'gain'], {}, ['gain']),
     (['--runtime', 'inproc', '--ros-args', '--params-file', 'missing.yaml'], {},
@@ -131,7 +133,8 @@ def test_run_inproc_records_inspects_and_plots(tmp_path):
     (['--runtime', 'rclpy'], {}, ['rclpy']),
     (['--no-such-option'], {}, ['--no-such-option']),
 ], ids=['runtime-flag', 'runtime-env', 'negative-duration', 'word-duration', 'nan-duration',
-        'unknown-node', 'fast-with-dds', 'record-exists', 'unknown-ros-flag',
+        'unknown-node', 'fast-with-dds', 'record-exists', 'plot-without-record',
+        'plot-and-no-plot', 'unknown-ros-flag',
         'param-without-value', 'missing-params-file',
         'bad-yaml-params-file', 'list-params-file', 'binary-params-file', 'bad-yaml-value',
         'rclpy-without-ros', 'unknown-option'])
