@@ -17,8 +17,24 @@ next /cmd_vel. 0 (the default) keeps the last /cmd_vel until the next one, as
 ``python -m gait_nodes.command --vel`` expects; a launcher that streams /cmd_vel sets it.
 
 Rejoin: started into a running graph (dds, rclpy), the planner waits up to ``JOIN_WAIT_S`` for
-the robot's base pose (/tf odom -> base_link) and plans from there (feet at their nominal places
-under that pose) instead of from the origin.
+the robot's measured state (/tf odom -> base_link and /joint_states, forward kinematics of the
+robot model: footholds, foot yaws, COM) and plans from there: the first steps start from the
+actual footholds and the ZMP reference from the measured COM. A robot still finishing the steps
+of the planner it replaces (a foot in the air, the base moving) is waited for up to
+``STAND_WAIT_S``; a foot still in the air then is put down first (a landing swing straight down,
+:class:`gait_nodes.planning.footsteps.MeasuredStart`). Without /joint_states (or a robot model
+without kinematics) the feet start at their nominal places under the /tf base pose.
+
+Pause: outside inproc the planner follows the stale-input reports of the nodes that move the
+robot (``whole_body_ik: inputs`` naming /gait/com_reference, ``kinematic_simulator: inputs``
+naming /joint_commands). While one of them reports its input stale during a walk, the robot is
+held where it stands, so the plan must not run on in time: the planner pauses (WARN, ``footstep_
+planner: walk``), publishes a plan that holds the measured footholds (a foot in the air held where
+it is) with the ZMP reference on the measured COM, and once every report is OK again for
+``RESUME_AFTER_S`` it plans anew from the robot's measured state and walks on (OK). The planner
+also checks that each planned swing gets its /gait/swing_trajectory: one missing when its foot
+lifts off (the swing-leg policy is down; the whole-body IK follows its fallback swing) is reported
+as a stale input (WARN, ``footstep_planner: inputs``) until the next one arrives.
 
 With ``timing: joint_limit`` (the shipped default) on a robot with closed-form limb IK, the
 rhythm follows from the joint velocity limit and the swing method
@@ -36,13 +52,23 @@ import json
 import math
 import sys
 
+import numpy as np
+
 from gait_nodes.cli import run_node
-from gait_nodes.contract import ZmpReferenceMessages, footsteps_to_msg
-from gait_nodes.diagnostics import OK, WARN, DiagnosticsReporter
-from gait_nodes.errors import GaitParameterError, ParameterError
+from gait_nodes.contract import (
+    WORLD_FRAME,
+    ContractError,
+    FootstepPlan,
+    ZmpReference,
+    ZmpReferenceMessages,
+    footsteps_to_msg,
+    swing_trajectory_from_msg,
+)
+from gait_nodes.diagnostics import OK, WARN, DiagnosticsReporter, level_value
+from gait_nodes.errors import GaitNodesError, GaitParameterError, ParameterError
 from gait_nodes.interfaces import get_message
 from gait_nodes.paths import node_defaults
-from gait_nodes.planning.footsteps import GaitPlanner, Twist2D
+from gait_nodes.planning.footsteps import GaitPlanner, MeasuredStart, Twist2D, place
 from gait_nodes.planning.gait_params import (
     NUMERIC_RANGES,
     GaitParameters,
@@ -66,6 +92,23 @@ CLOCK_JUMP_S = 10.0
 NS_PER_S = 1_000_000_000
 #: Longest wait of a planner started into a running graph for the robot's pose on /tf [s].
 JOIN_WAIT_S = 1.0
+#: Longest wait of a planner started into a running walk for the robot to stand still [s].
+STAND_WAIT_S = 6.0
+#: The robot stands still when its base moved less than this over STILL_S [m].
+STILL_M = 1e-4
+STILL_S = 0.2
+#: A measured foot this close to its nominal foothold is planned from the nominal one [m].
+NOMINAL_SNAP_M = 1e-3
+#: A foot higher than this above the ground is in the air [m].
+AIRBORNE_M = 0.005
+#: Status on /diagnostics -> the input whose loss holds the robot still.
+DEPENDENCIES = {'whole_body_ik: inputs': '/gait/com_reference',
+                'kinematic_simulator: inputs': '/joint_commands'}
+#: Every dependency OK again for this long before a paused walk resumes [s].
+RESUME_AFTER_S = 0.5
+#: A planned swing with no /gait/swing_trajectory this long after its lift-off is missed [s].
+SWING_GRACE_S = 0.05
+SWING_TOPIC = '/gait/swing_trajectory'
 
 
 def shipped_defaults() -> dict[str, object]:
@@ -86,6 +129,92 @@ def check_node_settings(values: dict[str, object]) -> None:
     if samples > MAX_ZMP_SAMPLES:
         raise ParameterError(f'zmp_horizon_s / zmp_sample_period_s = {samples:.0f} samples; at '
                              f'most {MAX_ZMP_SAMPLES}')
+
+
+class MeasuredState:
+    """The robot's measured state: /tf base pose and /joint_states, by forward kinematics.
+
+    Args:
+        model: The robot model (:class:`gait_nodes.robot.model.RobotModel`).
+    """
+
+    def __init__(self, model):
+        self.model = model
+        self._joints = np.array(model.joint_positions(model.configuration((0, 0, 0), 0.0)))
+        self._base: np.ndarray | None = None
+        self.base_ns: int | None = None
+        self.joints_ns: int | None = None
+        self.history: list[tuple[int, float, float]] = []  # (received [ns], x, y) of the base
+
+    def on_base(self, pose: np.ndarray, now_ns: int) -> None:
+        """Base pose (x, y, z, qx, qy, qz, qw) in odom received at ``now_ns``."""
+        self._base, self.base_ns = pose, now_ns
+        self.history.append((now_ns, float(pose[0]), float(pose[1])))
+        del self.history[:-64]
+
+    def on_joints(self, names, positions, now_ns: int) -> None:
+        """Joint positions received at ``now_ns`` (unknown names raise GaitNodesError)."""
+        self._joints[self.model.indices(list(names))] = positions
+        self.joints_ns = now_ns
+
+    def since(self, now_ns: int) -> bool:
+        """Whether both the base pose and the joints were received at or after ``now_ns``."""
+        return (self.base_ns is not None and self.joints_ns is not None
+                and min(self.base_ns, self.joints_ns) >= now_ns)
+
+    def base_pose(self) -> tuple[float, float, float] | None:
+        """(x, y, yaw) of the base in odom, or None."""
+        if self._base is None:
+            return None
+        x, y, _, qx, qy, qz, qw = self._base
+        return (float(x), float(y), math.atan2(2.0 * (qw * qz + qx * qy),
+                                               1.0 - 2.0 * (qy * qy + qz * qz)))
+
+    def still(self, now_ns: int) -> bool:
+        """Whether the base moved less than STILL_M over the last STILL_S."""
+        recent = [(t, x, y) for t, x, y in self.history if (now_ns - t) * 1e-9 <= STILL_S]
+        if not recent or (now_ns - recent[0][0]) * 1e-9 < 0.5 * STILL_S:
+            return False
+        xy = np.array([(x, y) for _, x, y in recent])
+        return bool(np.ptp(xy, axis=0).max() < STILL_M) if len(xy) > 1 else False
+
+    def measure(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(F, 3) footholds, (F,) foot yaws [rad], (3,) COM in odom [m], feet in YAML order."""
+        q = np.array(self.model.configuration((0.0, 0.0, 0.0), 0.0, self._joints))
+        q[:7] = self._base
+        feet, yaws = self.model.foot_poses(q)
+        return feet, yaws, self.model.com(q)
+
+
+def measured_start(feet: np.ndarray, yaws: np.ndarray, com: np.ndarray,
+                   nominal: np.ndarray, nominal_yaws: np.ndarray, stand_zmp: np.ndarray,
+                   ground_height_m: float = 0.0) -> MeasuredStart | None:
+    """The start of a plan from measured feet and COM (None: standing at the nominal stance).
+
+    A foot on the ground within NOMINAL_SNAP_M of its nominal foothold is planned from that
+    foothold (the measurement is not the plan's exact number); when every foot is and the COM is
+    that close to the stance's ZMP, the plan starts as from standstill (None).
+
+    Args:
+        feet: (F, 3) measured footholds [m].
+        yaws: (F,) measured foot yaws [rad].
+        com: (3,) measured COM [m]: the ZMP reference starts under it.
+        nominal: (F, 2) nominal footholds under the base [m].
+        nominal_yaws: (F,) their yaws [rad].
+        stand_zmp: (2,) ZMP of the nominal stance [m].
+        ground_height_m: Ground height in odom [m].
+    """
+    feet = np.array(feet, dtype=float)
+    yaws = np.array(yaws, dtype=float)
+    on_ground = feet[:, 2] - ground_height_m <= AIRBORNE_M
+    close = on_ground & (np.linalg.norm(feet[:, :2] - nominal, axis=1) < NOMINAL_SNAP_M)
+    zmp = np.asarray(com, dtype=float)[:2]
+    if close.all() and np.linalg.norm(zmp - stand_zmp) < NOMINAL_SNAP_M:
+        return None
+    feet[close, :2] = nominal[close]
+    feet[close, 2] = ground_height_m
+    yaws[close] = nominal_yaws[close]
+    return MeasuredStart(feet, yaws, zmp, ground_height_m, AIRBORNE_M)
 
 
 class FootstepPlanner(Node):
@@ -124,6 +253,15 @@ class FootstepPlanner(Node):
         # Under inproc every node starts together; elsewhere the robot may be somewhere already.
         self._joined = self.context.runtime == 'inproc'
         self._base_pose: tuple[float, float, float] | None = None
+        self._measured: MeasuredState | None = None
+        self._measured_subscriptions: list = []
+        self._dependencies: dict[str, bool] = {}
+        self._pause: dict | None = None
+        self._join_start_ns: int | None = None
+        self._swings_heard: set[tuple[str, int]] = set()
+        self._swings_checked: set[tuple[str, int]] = set()
+        self.swing_inputs = InputWatchdog([], 1.0, self.origin_ns, events=[SWING_TOPIC],
+                                          holding='the whole-body IK follows its fallback swing')
         self._last_now_s = 0.0
         self._pending: tuple[GaitParameters, dict] | None = None
         self._last_plan = None
@@ -140,9 +278,13 @@ class FootstepPlanner(Node):
                                  self.on_cmd_vel, 10)
         self.create_subscription(get_message('std_msgs/msg/String'), '/gait/command',
                                  self.on_command, 10)
+        self.create_subscription(get_message('trajectory_msgs/msg/MultiDOFJointTrajectory'),
+                                 SWING_TOPIC, self.on_swing, 10)
+        if self.context.runtime != 'inproc':
+            self.create_subscription(get_message('diagnostic_msgs/msg/DiagnosticArray'),
+                                     '/diagnostics', self.on_diagnostics, 50)
         if not self._joined:
-            self._tf_subscription = self.create_subscription(
-                get_message('tf2_msgs/msg/TFMessage'), '/tf', self.on_tf, 100)
+            self._listen(True)
         self.add_on_set_parameters_callback(self.on_set_parameters)
         self.add_post_set_parameters_callback(self.on_parameters_set)
         self.timer = self.create_timer(1.0 / self.settings['rate_hz'], self.tick)
@@ -246,29 +388,218 @@ class FootstepPlanner(Node):
                  'takes_effect_s': self.planner.next_boundary_s(now_s)})
 
     def on_tf(self, msg) -> None:
-        """Keep the robot's base pose (x, y, yaw) in odom until the planner has joined."""
+        """Keep the robot's base pose (joining or paused: the measured state)."""
         for transform in msg.transforms:
-            if transform.header.frame_id.lstrip('/') == 'odom' and \
+            if transform.header.frame_id.lstrip('/') == WORLD_FRAME and \
                     transform.child_frame_id.lstrip('/') == 'base_link':
                 t, r = transform.transform.translation, transform.transform.rotation
+                pose = np.array([t.x, t.y, t.z, r.x, r.y, r.z, r.w], dtype=float)
+                if not np.isfinite(pose).all() or np.linalg.norm(pose[3:]) < 0.5:
+                    continue
+                pose[3:] /= np.linalg.norm(pose[3:])
                 yaw = math.atan2(2.0 * (r.w * r.z + r.x * r.y), 1.0 - 2.0 * (r.y ** 2 + r.z ** 2))
-                if all(math.isfinite(v) for v in (t.x, t.y, yaw)):
-                    self._base_pose = (float(t.x), float(t.y), yaw)
+                self._base_pose = (float(t.x), float(t.y), yaw)
+                if self._measured is not None:
+                    self._measured.on_base(pose, self.get_clock().now().nanoseconds)
+
+    def on_joint_states(self, msg) -> None:
+        """Keep the robot's joint positions (joining or paused: the measured state)."""
+        if self._measured is None:
+            return
+        positions = np.array(msg.position, dtype=float)
+        if len(positions) != len(msg.name) or not np.isfinite(positions).all():
+            return
+        try:
+            self._measured.on_joints(msg.name, positions, self.get_clock().now().nanoseconds)
+        except (GaitNodesError, ValueError):
+            return
+
+    def _listen(self, on: bool) -> None:
+        """Subscribe to the robot's measured state (/tf, /joint_states) or stop."""
+        if on and not self._measured_subscriptions:
+            if self._measured is None:
+                model = self._model()
+                if model is not None:
+                    self._measured = MeasuredState(model)
+            self._measured_subscriptions = [
+                self.create_subscription(get_message('tf2_msgs/msg/TFMessage'), '/tf',
+                                         self.on_tf, 100),
+                self.create_subscription(get_message('sensor_msgs/msg/JointState'),
+                                         '/joint_states', self.on_joint_states, 10)]
+        elif not on:
+            for subscription in self._measured_subscriptions:
+                self.destroy_subscription(subscription)
+            self._measured_subscriptions = []
+
+    def _model(self):
+        """The robot model for forward kinematics, or None (a robot without one)."""
+        if self._robot_model is None:
+            from gait_nodes.robot.model import load_robot_model
+
+            try:
+                self._robot_model = load_robot_model(str(self.robot.path))
+            except GaitNodesError as exc:
+                self.get_logger().warning(f'no forward kinematics ({exc}): a rejoining planner '
+                                          f'starts the feet at their nominal places')
+                return None
+        return self._robot_model
+
+    def _start(self, now_ns: int) -> MeasuredStart | None:
+        """The measured state to plan from (None: nominal stance under the base pose)."""
+        measured = self._measured
+        if measured is None or measured.joints_ns is None or measured.base_ns is None:
+            return None
+        feet, yaws, com = measured.measure()
+        pose = np.array(measured.base_pose())
+        params = self.planner.params
+        nominal = place(pose, self.planner.layout.offsets(params.step_width_m))
+        from gait_nodes.planning.zmp_reference import stand_point
+
+        return measured_start(feet, yaws, com, nominal, np.full(len(nominal), pose[2]),
+                              stand_point(self.planner.layout, nominal))
+
+    def _plan_from_robot(self, now_ns: int) -> None:
+        """Start a new plan at ``now_ns`` from the robot's measured state (or its base pose)."""
+        twist = self.planner.requested_twist
+        start = self._start(now_ns)
+        pose = self._measured.base_pose() if self._measured is not None \
+            and self._measured.base_ns is not None else self._base_pose
+        if start is not None:
+            # The walk's path starts where the footholds are centred, with the base's yaw: the
+            # base itself may lean off them (the IK keeps the COM where the reference was).
+            offsets = self.planner.layout.offsets(self.planner.params.step_width_m)
+            centre = start.feet_in_world[:, :2].mean(axis=0) - place(
+                np.array([0.0, 0.0, pose[2]]), offsets).mean(axis=0)
+            pose = (float(centre[0]), float(centre[1]), float(pose[2]))
+        self.planner = GaitPlanner(self.robot, self.planner.params, base_pose=pose,
+                                   swing_timing=self.planner.swing_timing, start=start)
+        self.origin_ns, self._last_now_s = now_ns, 0.0
+        self.planner.set_velocity(twist, 0.0)
+        where = 'its nominal stance' if start is None else (
+            f'the measured footholds, ZMP at {np.round(start.zmp_in_world, 4).tolist()}'
+            + (f', landing {[self.robot.foot_names[f] for f in np.flatnonzero(start.airborne())]}'
+               if start.airborne().any() else ''))
+        self.get_logger().info(f'planning from the robot\'s pose {pose}: {where}')
 
     def _join(self, now_ns: int) -> bool:
-        """Whether the planner may plan: it knows where the robot is, or waited long enough."""
-        if self._base_pose is None and (now_ns - self.origin_ns) * 1e-9 < JOIN_WAIT_S:
+        """Whether the planner may plan: it knows where the robot is, or waited long enough.
+
+        The robot still finishing the steps of the planner this one replaces (a foot in the
+        air, the base moving) is waited for up to STAND_WAIT_S.
+        """
+        if self._join_start_ns is None:
+            self._join_start_ns = now_ns  # the wait counts from the first tick, after the setup
+        waited_s = (now_ns - self._join_start_ns) * 1e-9
+        measured = self._measured
+        if measured is not None and measured.since(self.origin_ns):
+            if waited_s < STAND_WAIT_S:
+                feet, _, _ = measured.measure()
+                if (feet[:, 2] > AIRBORNE_M).any() or not measured.still(now_ns):
+                    return False
+        elif self._base_pose is None and waited_s < JOIN_WAIT_S:
             return False
+        elif measured is not None and self._base_pose is not None and waited_s < JOIN_WAIT_S:
+            return False  # the pose, not the joints yet
         if self._base_pose is not None:
-            twist = self.planner.requested_twist
-            self.planner = GaitPlanner(self.robot, self.planner.params, base_pose=self._base_pose,
-                                       swing_timing=self.planner.swing_timing)
-            self.origin_ns, self._last_now_s = now_ns, 0.0
-            self.planner.set_velocity(twist, 0.0)
-            self.get_logger().info(f'planning from the robot\'s pose {self._base_pose}')
+            self._plan_from_robot(now_ns)
         self._joined = True
-        self.destroy_subscription(self._tf_subscription)
+        self._listen(False)
         return True
+
+    # --- pause while the robot is held ---------------------------------------------------------
+
+    def on_diagnostics(self, msg) -> None:
+        """Follow the stale-input reports of the nodes that move the robot."""
+        for status in msg.status:
+            topic = DEPENDENCIES.get(status.name)
+            if topic is None:
+                continue
+            stale = next((v.value for v in status.values if v.key == 'stale'), '')
+            self._dependencies[status.name] = (level_value(status.level) >= WARN
+                                               and topic in stale.split(','))
+
+    def _in_motion(self, now_s: float) -> bool:
+        return not self.planner.twist.is_zero() or any(
+            step.slots and step.end_s > now_s for step in self.planner.steps)
+
+    def _paused(self, now_ns: int, now_s: float) -> bool:
+        """Pause, hold and resume (see the module docstring); True while paused."""
+        stale = sorted(name for name, is_stale in self._dependencies.items() if is_stale)
+        pause = self._pause
+        if pause is None:
+            if not stale or not self._in_motion(now_s):
+                return False
+            zmp = self.planner.zmp(np.array([now_s]))[0]
+            pause = self._pause = {'since_ns': now_ns, 'hold': None, 'zmp': zmp,
+                                   'fresh_ns': None}
+            self._listen(True)
+            self.diagnostics.report('walk', WARN, f'paused: {", ".join(stale)} stale; holding '
+                                    f'the robot where it stands', {'stale': ','.join(stale)})
+        if pause['hold'] is None and self._measured is not None \
+                and self._measured.since(pause['since_ns']):
+            feet, yaws, com = self._measured.measure()
+            pause['hold'] = (feet, yaws)
+            pause['zmp'] = com[:2]
+            order = [self.robot.foot_names.index(n) for n in self.planner.layout.names]
+            plan = FootstepPlan(now_ns, self.planner.layout.names, np.zeros(1),
+                                feet[order][None], yaws[order][None])
+            self.footsteps_publisher.publish(footsteps_to_msg(plan))
+            self._last_plan = None
+        horizon = self.settings['zmp_horizon_s']
+        period_ns = int(round(self.settings['zmp_sample_period_s'] * NS_PER_S))
+        count = int(math.ceil(horizon * NS_PER_S / period_ns - 1e-9)) + 1
+        stamps = now_ns + period_ns * np.arange(count, dtype=np.int64)
+        self.zmp_publisher.publish(self._zmp_messages.to_msg(
+            ZmpReference(stamps, np.tile(pause['zmp'], (count, 1)))))
+        if stale:
+            pause['fresh_ns'] = None
+            return True
+        if pause['fresh_ns'] is None:
+            pause['fresh_ns'] = now_ns
+        if (now_ns - pause['fresh_ns']) * 1e-9 < RESUME_AFTER_S:
+            return True
+        if pause['hold'] is not None and not self._measured.since(pause['fresh_ns']):
+            return True
+        held_s = (now_ns - pause['since_ns']) * 1e-9
+        self._pause = None
+        if pause['hold'] is not None:
+            self._plan_from_robot(now_ns)
+        self._listen(False)
+        self.diagnostics.report('walk', OK, f'walking on after a pause of {held_s:.2f} s, '
+                                f'planned from the robot\'s measured state',
+                                {'paused_s': held_s})
+        return False
+
+    # --- swing trajectories --------------------------------------------------------------------
+
+    def on_swing(self, msg) -> None:
+        """Note the swing trajectory of a planned swing (see :meth:`_check_swings`)."""
+        try:
+            trajectory = swing_trajectory_from_msg(msg)
+        except ContractError:
+            return  # the whole-body IK reports malformed swings
+        self._swings_heard.add((trajectory.foot, int(trajectory.start_ns)))
+        self.swing_inputs.heard(SWING_TOPIC, self.get_clock().now().nanoseconds)
+
+    def _check_swings(self, plan, now_ns: int) -> None:
+        """A planned swing that lifted off without its trajectory: the swing policy is down."""
+        grace_ns = int(SWING_GRACE_S * NS_PER_S)
+        for swing in plan.swings():
+            lift_ns = plan.start_ns + int(round(swing.lift_off_s * NS_PER_S))
+            key = (swing.foot, lift_ns)
+            if key in self._swings_checked or not lift_ns + grace_ns <= now_ns:
+                continue
+            self._swings_checked.add(key)
+            if key not in self._swings_heard and now_ns - lift_ns < 2 * grace_ns + NS_PER_S:
+                self.swing_inputs.missed(SWING_TOPIC, f'the swing of {swing.foot} lifting off '
+                                                      f'at {lift_ns * 1e-9:.3f} s')
+        old = now_ns - 60 * NS_PER_S
+        self._swings_checked = {k for k in self._swings_checked if k[1] > old}
+        self._swings_heard = {k for k in self._swings_heard if k[1] > old}
+        if self.swing_inputs.update(now_ns):
+            aspect, level, message, values = self.swing_inputs.status(now_ns)
+            self.diagnostics.report('swing inputs', level, message if level != OK else
+                                    f'a swing trajectory for every swing: {SWING_TOPIC}', values)
 
     def _check_cmd_vel(self, now_ns: int, now_s: float) -> None:
         timeout = self.settings['cmd_vel_timeout_s']
@@ -361,13 +692,18 @@ class FootstepPlanner(Node):
         now_s = self._restart_if_clock_jumped(now_ns, now_s)
         self._last_now_s = now_s
         self._check_cmd_vel(now_ns, now_s)
+        if self._paused(now_ns, now_s):
+            return
+        now_ns, now_s = self.now_s()
         horizon = self.settings['zmp_horizon_s']
         self.planner.advance(now_s + horizon + self.planner.params.step_period_s)
         self.planner.prune(now_s)
-        plan = self.planner.footstep_plan(now_s, self.origin_ns)
+        plan = _within(self.planner.footstep_plan(now_s, self.origin_ns), now_ns,
+                       now_ns + int(horizon * NS_PER_S))
         if self._last_plan is None or not _same_plan(plan, self._last_plan):
             self.footsteps_publisher.publish(footsteps_to_msg(plan))
             self._last_plan = plan
+        self._check_swings(plan, now_ns)
         reference = self.planner.zmp_reference(now_ns, self.origin_ns, horizon,
                                                self.settings['zmp_sample_period_s'])
         self.zmp_publisher.publish(self._zmp_messages.to_msg(reference))
@@ -403,6 +739,31 @@ class FootstepPlanner(Node):
         return {'step_period_s': rhythm.step_period_s, 'swing_s': rhythm.swing_s,
                 'transfer_s': rhythm.transfer_s, 'duty_factor': rhythm.duty_factor,
                 'stride_m': math.hypot(twist.vx_m_s, twist.vy_m_s) * rhythm.cycle_s}
+
+
+def _within(plan: FootstepPlan, now_ns: int, until_ns: int) -> FootstepPlan:
+    """``plan`` up to its last contact change by ``until_ns`` with every foot down.
+
+    The published footsteps reach no further than the ZMP reference: if the planner stops, the
+    whole-body IK ends the walk with the feet down where the COM controller, which holds the
+    reference's end, keeps the robot balanced (not with steps the ZMP reference never covered).
+    A swing that has lifted off by ``now_ns`` is always kept to its landing.
+    """
+    times_ns = plan.start_ns + np.round(plan.times_s * NS_PER_S).astype(np.int64)
+    swings = [(s.lift_off_s, s.touch_down_s) for s in plan.swings()]
+    now_s = (now_ns - plan.start_ns) * 1e-9
+    landing_s = max((touch for lift, touch in swings if lift <= now_s), default=0.0)
+    until_ns = max(until_ns, plan.start_ns + int(round(landing_s * NS_PER_S)))
+    last = 0
+    for k, t_s in enumerate(plan.times_s):
+        if times_ns[k] > until_ns:
+            break
+        if not any(lift < t_s < touch for lift, touch in swings):
+            last = k
+    if last == len(plan.times_s) - 1:
+        return plan
+    return FootstepPlan(plan.start_ns, plan.foot_names, plan.times_s[:last + 1],
+                        plan.positions_in_world[:last + 1], plan.yaws_rad[:last + 1])
 
 
 def _same_plan(a, b) -> bool:

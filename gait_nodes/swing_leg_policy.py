@@ -18,6 +18,10 @@ the time the swing needs, :mod:`gait_nodes.swing.timing`). With ``swing: polynom
 publishes a sixth-order swing with a via point at ``step_height_m`` (Lucy, seed 004) instead.
 Either way the waypoints are ``sample_period_s`` apart (the whole-body IK interpolates them
 linearly, so at its own tick period the foot's velocity changes smoothly).
+
+Restarted mid-walk, the node does not send a swing that has been under way for more than
+``LATE_SWING_S`` without a trajectory: the whole-body IK follows its fallback swing for it, and a
+trajectory arriving mid-air would make the foot jump from one path to the other.
 """
 
 from __future__ import annotations
@@ -47,6 +51,8 @@ SWING_METHODS = ('value_table', 'polynomial')
 NS_PER_S = 1_000_000_000
 #: A lift-off place further than this off the table's grid is reported [m].
 CLAMP_REPORT_M = 0.01
+#: A swing under way for longer than this with no trajectory sent is left to the IK [s].
+LATE_SWING_S = 0.05
 
 
 def shipped_defaults() -> dict[str, object]:
@@ -213,6 +219,8 @@ class SwingLegPolicy(Node):
             sent = self._published.get(key)
             if sent is not None and (sent == signature or lift_ns <= now_ns):
                 continue
+            if sent is None and now_ns - lift_ns > LATE_SWING_S * NS_PER_S:
+                continue  # under way already (a restart): the IK's fallback swing goes on
             self._publish(plan, swing, lift_ns)
             self._published[key] = signature
         self._published = {k: v for k, v in self._published.items()

@@ -9,6 +9,12 @@ reports at once; :meth:`InputWatchdog.status` is the ``(aspect, level, message, 
 of :meth:`gait_nodes.diagnostics.DiagnosticsReporter.publish`: one ``"<node>: inputs"`` status,
 WARN naming each stale topic and its age, OK once every input is fresh again. No ROS import:
 time comes in as integer nanoseconds.
+
+Some inputs are events rather than streams (one /gait/swing_trajectory per planned swing): an
+*event* input is never stale by age; it is stale from :meth:`InputWatchdog.missed` (a message
+that was due did not come) until the next :meth:`InputWatchdog.heard`. A stream input can be
+switched off (:meth:`InputWatchdog.watch`, e.g. an optional /cmd_vel timeout): it is then never
+stale.
 """
 
 from __future__ import annotations
@@ -31,20 +37,24 @@ class InputWatchdog:
         start_ns: The node's start [ns]: an input never heard is as old as the node.
         holding: What the node does while an input is stale, for the WARN message
             (e.g. 'holding the last command').
+        events: Event inputs (see the module docstring), watched after ``topics``.
 
     Raises:
         ParameterError: No topic, or ``timeout_s`` not a finite number > 0.
     """
 
     def __init__(self, topics: Sequence[str], timeout_s: float, start_ns: int,
-                 holding: str = ''):
-        if not topics:
+                 holding: str = '', events: Sequence[str] = ()):
+        if not topics and not events:
             raise ParameterError('a watchdog needs at least one topic')
-        self.topics = tuple(topics)
+        self.topics = tuple(topics) + tuple(events)
+        self.events = tuple(events)
         self.timeout_s = timeout_s
         self.holding = holding
         self._start_ns = int(start_ns)
         self._last_ns: dict[str, int | None] = {topic: None for topic in self.topics}
+        self._missed: dict[str, str] = {}
+        self._off: set[str] = set()
         self._stale: tuple[str, ...] = ()
 
     @property
@@ -65,6 +75,23 @@ class InputWatchdog:
         if topic not in self._last_ns:
             raise KeyError(f'{topic} is not watched; watched: {list(self.topics)}')
         self._last_ns[topic] = int(now_ns)
+        self._missed.pop(topic, None)
+
+    def missed(self, topic: str, what: str) -> None:
+        """An event input did not bring ``what`` (e.g. 'the swing of FL at 3.2 s') in time."""
+        if topic not in self.events:
+            raise KeyError(f'{topic} is not a watched event input; events: {list(self.events)}')
+        self._missed[topic] = what
+
+    def watch(self, topic: str, on: bool) -> None:
+        """Watch the stream ``topic`` (True) or never report it stale (False)."""
+        if topic not in self._last_ns or topic in self.events:
+            raise KeyError(f'{topic} is not a watched stream; streams: '
+                           f'{[t for t in self.topics if t not in self.events]}')
+        if on:
+            self._off.discard(topic)
+        else:
+            self._off.add(topic)
 
     def ever_heard(self, topic: str) -> bool:
         """Whether anything has arrived on ``topic``."""
@@ -76,7 +103,11 @@ class InputWatchdog:
         return (int(now_ns) - (self._start_ns if last is None else last)) * 1e-9
 
     def is_stale(self, topic: str, now_ns: int) -> bool:
-        """Whether ``topic`` is older than the timeout at ``now_ns``."""
+        """Whether ``topic`` is stale at ``now_ns`` (older than the timeout, or event missed)."""
+        if topic in self.events:
+            return topic in self._missed
+        if topic in self._off:
+            return False
         return self.age_s(topic, now_ns) > self._timeout_s + 1e-9
 
     @property
@@ -98,14 +129,19 @@ class InputWatchdog:
             age = self.age_s(topic, now_ns)
             values[f'{topic} age_s'] = age
             values[f'{topic} received'] = 'yes' if self.ever_heard(topic) else 'no'
+            if topic in self._off:
+                values[f'{topic} watched'] = 'no'
         values['stale'] = ','.join(self._stale)
         if self._stale:
             parts = []
             for topic in self._stale:
+                if topic in self.events:
+                    parts.append(f'no {topic} for {self._missed.get(topic, "an expected event")}')
+                    continue
                 age = self.age_s(topic, now_ns)
                 what = 'nothing received on' if not self.ever_heard(topic) else 'no'
-                parts.append(f'{what} {topic} for {age:.3g} s')
-            message = '; '.join(parts) + f' (> {self._timeout_s:g} s)'
+                parts.append(f'{what} {topic} for {age:.3g} s (> {self._timeout_s:g} s)')
+            message = '; '.join(parts)
             if self.holding:
                 message += f': {self.holding}'
             return ASPECT, WARN, message, values

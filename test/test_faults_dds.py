@@ -192,25 +192,50 @@ def _zmp_errors(graph: Graph, start: float, end: float) -> int:
                 if d[0] < end])
 
 
-def _kill_and_restart(graph: Graph, name: str, consumer: str, topic: str) -> dict:
-    """Kill ``name``; the consumer warns about ``topic``; restart; the consumer is OK again."""
+def _kill_and_restart(graph: Graph, name: str, consumer: str, topic: str,
+                      status: str = 'inputs') -> dict:
+    """Kill ``name``; the consumer warns about ``topic``; restart; the consumer is OK again.
+
+    Figures: when the stale input was reported and OK again, the base x before the kill, while
+    the node was away and after, the lowest base x from the restart on (a base swinging back to
+    catch up with a plan that ran on shows here), the ZMP ERROR samples of the monitor from the
+    kill and from the restart, and the walk's resume (``footstep_planner: walk`` OK) if paused.
+    """
+    name_of_status = f'{consumer}: {status}'
     x_before = graph.base_x()
     killed = graph.kill(name)
-    warned = graph.spin_until(lambda: graph.statuses(f'{consumer}: inputs', killed, WARN, topic),
+    warned = graph.spin_until(lambda: graph.statuses(name_of_status, killed, WARN, topic),
                               10.0, f'{consumer} to report {topic} stale')
     graph.spin(1.0)  # stale for a while: the consumer holds
     x_held = graph.base_x()
     graph.start(name)
     graph.wait_ready(name)
     restarted = time.monotonic()
-    ok = graph.spin_until(lambda: graph.statuses(f'{consumer}: inputs', restarted, OK),
-                          15.0, f'{consumer} to report its inputs OK again')
+    x_restart = graph.base_x()
+    ok = graph.spin_until(lambda: graph.statuses(name_of_status, restarted, OK),
+                          15.0, f'{consumer} to report its {status} OK again')
+    plans_before = len(graph.plans)
     graph.spin(RECOVERY_S)
+    paused = graph.statuses('footstep_planner: walk', killed, WARN)
+    resumed = graph.statuses('footstep_planner: walk', killed, OK)
+    end = time.monotonic()
     return {'warn_after_s': warned - killed, 'ok_after_s': ok - restarted,
             'x_before': x_before, 'x_held': x_held, 'x_after': graph.base_x(),
-            'killed': killed, 'restarted': restarted,
+            'killed': killed, 'restarted': restarted, 'end': end,
             'min_x_after': min(x for t, _, x, _ in graph.base if t >= restarted - 1.0),
-            'zmp_errors_per_s': _zmp_errors(graph, restarted, restarted + RECOVERY_S) / RECOVERY_S}
+            'back_after_restart_m': x_restart - min(x for t, _, x, _ in graph.base
+                                                    if t >= restarted),
+            'paused_after_s': paused[0][0] - killed if paused else None,
+            'resumed_after_restart_s': resumed[0][0] - restarted if resumed else None,
+            'new_plans': len(graph.plans) - plans_before,
+            'zmp_errors_while_away': _zmp_errors(graph, killed, restarted),
+            'zmp_errors_after_restart': _zmp_errors(graph, restarted, end),
+            'zmp_errors_per_s': _zmp_errors(graph, restarted, end) / (end - restarted)}
+
+
+def _short(result: dict) -> dict:
+    return {k: (round(v, 4) if isinstance(v, float) else v) for k, v in result.items()
+            if k not in ('killed', 'restarted', 'end')}
 
 
 def test_killed_nodes_are_reported_stale_and_rejoin_the_walk(graph):
@@ -226,7 +251,7 @@ def test_killed_nodes_are_reported_stale_and_rejoin_the_walk(graph):
     ik = _kill_and_restart(graph, 'whole_body_ik', 'kinematic_simulator', '/joint_commands')
     com = _kill_and_restart(graph, 'com_preview_controller', 'whole_body_ik',
                             '/gait/com_reference')
-    print({'baseline_zmp_errors_per_s': baseline, 'ik': ik, 'com': com})
+    print({'baseline_zmp_errors_per_s': baseline, 'ik': _short(ik), 'com': _short(com)})
     for result in (ik, com):
         # Reported within the consumer's stale timeout plus a tick or two.
         assert result['warn_after_s'] < 2.0
@@ -236,6 +261,44 @@ def test_killed_nodes_are_reported_stale_and_rejoin_the_walk(graph):
         # smooth: the plan ran on during the hold; min_x_after and zmp_errors_per_s are
         # printed, not asserted.)
         assert result['x_after'] > result['x_held'] + 0.25 * VELOCITY_M_S * RECOVERY_S
+
+
+def test_killed_planner_and_swing_policy_rejoin_the_walk(graph):
+    for name in NODES:
+        graph.start(name)
+    graph.wait_ready(*NODES)
+    graph.velocity = VELOCITY_M_S
+    walk_start = time.monotonic()
+    graph.spin_until(lambda: graph.base and graph.base_x() > 0.02, 30.0, 'the walk to start')
+    graph.spin(2.0)
+    baseline = _zmp_errors(graph, walk_start, time.monotonic()) / (time.monotonic() - walk_start)
+
+    last_plan = graph.plans[-1]
+    planner = _kill_and_restart(graph, 'footstep_planner', 'com_preview_controller',
+                                '/gait/zmp_reference')
+    # The restarted planner's first plan starts from where the old plan left the feet (the
+    # whole-body IK walked it to its end): not from the nominal stance under the base.
+    new_plans = [p for p in graph.plans if p.start_ns * 1e-9 > 0 and p is not last_plan
+                 and p.start_ns > last_plan.start_ns]
+    assert new_plans, 'no plan from the restarted planner'
+    first = new_plans[0]
+    old_feet = last_plan.positions_in_world[-1]
+    new_feet = first.positions_in_world[0][[first.foot_names.index(n)
+                                            for n in last_plan.foot_names]]
+    foothold_error = float(np.abs(new_feet - old_feet)[:, :2].max())
+    planner['foothold_jump_m'] = foothold_error
+    swing = _kill_and_restart(graph, 'swing_leg_policy', 'footstep_planner',
+                              '/gait/swing_trajectory', status='swing inputs')
+    print({'baseline_zmp_errors_per_s': baseline, 'planner': _short(planner),
+           'swing': _short(swing)})
+    assert foothold_error < 0.01
+    for result in (planner, swing):
+        assert result['warn_after_s'] < 5.0
+        # The walk goes on: at least a quarter of the commanded speed after the restart.
+        assert result['x_after'] > result['x_held'] + 0.25 * VELOCITY_M_S * RECOVERY_S
+        # No swinging back to catch up.
+        assert result['back_after_restart_m'] < 0.02
+        assert result['zmp_errors_after_restart'] <= 5
 
 
 def _walk(graph: Graph, order: tuple[str, ...], delay_s: float) -> tuple[dict, np.ndarray]:

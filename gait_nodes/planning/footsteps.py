@@ -47,6 +47,8 @@ START_HOLD_FRACTION = 0.5
 #: that the later touch-downs (and footholds) it causes still fit; at most MAX_RETIMING times.
 RETIMING_ALLOWANCE = 0.02
 MAX_RETIMING = 4
+#: Time from a measured start with feet in the air to their landing swing's lift-off [s].
+LANDING_LEAD_S = 0.2
 NS_PER_S = 1_000_000_000
 
 
@@ -202,6 +204,7 @@ class _State:
     path_start_s: float = 0.0
     path_pose: np.ndarray | None = None
     path_twist: Twist2D = Twist2D()
+    measured: bool = False  # the feet where a MeasuredStart found them, not walked yet
 
 
 @dataclass(frozen=True)
@@ -250,6 +253,45 @@ class Step:
         return self.slots[-1].yaws_after if self.slots else self.yaws_start
 
 
+@dataclass(frozen=True)
+class MeasuredStart:
+    """The robot's measured state a plan starts from (a planner started into a running walk).
+
+    Attributes:
+        feet_in_world: (F, 3) contact points in odom, in layout order [m]; a foot higher than
+            ``airborne_m`` above the ground is in the air.
+        foot_yaws_rad: (F,) foot yaws [rad].
+        zmp_in_world: (2,) where the ZMP reference starts (the measured COM of a robot at
+            rest) [m].
+        ground_height_m: Height of the ground in odom [m].
+        airborne_m: Height above the ground from which a foot is in the air [m].
+    """
+
+    feet_in_world: np.ndarray
+    foot_yaws_rad: np.ndarray
+    zmp_in_world: np.ndarray
+    ground_height_m: float = 0.0
+    airborne_m: float = 0.005
+
+    def airborne(self) -> np.ndarray:
+        """(F,) booleans: the feet in the air."""
+        heights = np.asarray(self.feet_in_world, dtype=float)[:, 2] - self.ground_height_m
+        return heights > self.airborne_m
+
+    def check(self, count: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(F, 2) footholds, (F,) yaws, (2,) ZMP; raises GaitParameterError if malformed."""
+        feet = np.asarray(self.feet_in_world, dtype=float)
+        yaws = np.asarray(self.foot_yaws_rad, dtype=float)
+        zmp = np.asarray(self.zmp_in_world, dtype=float)
+        if feet.shape != (count, 3) or yaws.shape != (count,) or zmp.shape != (2,):
+            raise GaitParameterError(f'a measured start needs ({count}, 3) feet, ({count},) '
+                                     f'yaws and a (2,) ZMP, got {feet.shape}, {yaws.shape}, '
+                                     f'{zmp.shape}')
+        if not (np.isfinite(feet).all() and np.isfinite(yaws).all() and np.isfinite(zmp).all()):
+            raise GaitParameterError('a measured start must be finite')
+        return feet[:, :2].copy(), yaws.copy(), zmp.copy()
+
+
 class GaitPlanner:
     """Plans footsteps and the ZMP reference online, step by step.
 
@@ -262,14 +304,17 @@ class GaitPlanner:
         swing_timing: Least swing times at the joint velocity limit
             (:class:`gait_nodes.swing.timing.SwingTiming`), used with ``timing: joint_limit``;
             None: every gait keeps the fixed timing of its parameters.
+        start: Where the robot really is (:class:`MeasuredStart`, e.g. a planner restarted
+            mid-walk): the plan starts from these footholds and this ZMP instead of the nominal
+            stance under ``base_pose`` (which stays the pose the walk's path starts from).
 
     Raises:
-        GaitParameterError: ``params`` do not suit the robot.
+        GaitParameterError: ``params`` do not suit the robot, or ``start`` not one foot each.
     """
 
     def __init__(self, robot: RobotDescription, params: GaitParameters | None = None, *,
                  base_pose: Sequence[float] = (0.0, 0.0, 0.0), start_s: float = 0.0,
-                 swing_timing=None):
+                 swing_timing=None, start: MeasuredStart | None = None):
         self.robot = robot
         self.layout = FootLayout.of(robot)
         params = params or GaitParameters.for_robot(robot)
@@ -282,13 +327,18 @@ class GaitPlanner:
         self._twist = Twist2D()
         pose = np.array(base_pose, dtype=float)
         positions = place(pose, self.layout.offsets(params.step_width_m))
+        yaws = np.full(self.layout.count, pose[2])
+        zmp = zmp_reference.stand_point(self.layout, positions)
+        self._airborne: tuple[np.ndarray, float] | None = None
+        if start is not None:
+            positions, yaws, zmp = start.check(self.layout.count)
         self._initial = _State(
-            time_s=float(start_s), positions=positions,
-            yaws=np.full(self.layout.count, pose[2]),
-            zmp=zmp_reference.stand_point(self.layout, positions), mode='standing',
-            next_group=0, rest_pose=pose, last_anchor=pose)
+            time_s=float(start_s), positions=positions, yaws=yaws, zmp=zmp, mode='standing',
+            next_group=0, rest_pose=pose, last_anchor=pose, measured=start is not None)
         self._steps: list[Step] = []
         self._before: tuple[float, np.ndarray, np.ndarray] | None = None
+        if start is not None and start.airborne().any():
+            self._steps.append(self._landing_step(start))
 
     # --- settings ----------------------------------------------------------------------------
 
@@ -492,6 +542,8 @@ class GaitPlanner:
             rest = state.rest_pose
             group_index = ((0 if _leads_left(twist) else 1) if starting
                            else state.next_group % len(groups))
+            if starting and state.measured:
+                group_index = self._lagging_group(state, groups, offsets, params, twist)
             extra = self._start_shift_s(params) if state.mode == 'standing' else 0.0
             first_touch_down = t0 + params.transfer_s(gait) + extra + swing
             if starting:
@@ -521,12 +573,17 @@ class GaitPlanner:
         t1 = t0 + params.transfer_s(gait) + extra
         positions, foot_yaws = state.positions.copy(), state.yaws.copy()
         slots, last_anchor = [], state.last_anchor
+        # From a measured start a foot ahead of its first foothold waits for the next cycle.
+        forward = (_forward(state.rest_pose, offsets, params, twist)
+                   if state.measured and mode == 'walking' else None)
         for j, feet in enumerate(groups[group_index]):
             lift_off, touch_down = t1 + j * swing, t1 + (j + 1) * swing
             moving = []
             after, after_yaws = positions.copy(), foot_yaws.copy()
             for foot in feet:
                 target, yaw, anchor = target_of(foot, touch_down)
+                if forward is not None and (target - positions[foot]) @ forward[foot] < 0.0:
+                    continue
                 target = self._within_reach(positions[foot], target, yaw)
                 if (np.linalg.norm(target - positions[foot]) > ALREADY_THERE
                         or abs(wrap_angle(yaw - foot_yaws[foot])) > ALREADY_THERE):
@@ -588,6 +645,52 @@ class GaitPlanner:
             needed = max(needed, self._timing.step_s(swings, feet, yaws, body_yaw, com))
             positions, yaws = slot.positions_after, slot.yaws_after
         return needed
+
+    @staticmethod
+    def _lagging_group(state: _State, groups, offsets: np.ndarray, params: GaitParameters,
+                       twist: Twist2D) -> int:
+        """The swing group to start a measured start's walk with: the feet furthest behind.
+
+        A robot stopped mid-walk has feet ahead of their nominal places and feet behind; the
+        walk goes on with the feet that lag most along the way their footholds move (starting
+        with a foot that is ahead would step it back and swing the body back with it).
+        """
+        rest = state.rest_pose
+        now = place(integrate_pose(rest, twist, 0.5 * params.cycle_s), offsets)
+        lag = ((now - state.positions) * _forward(rest, offsets, params, twist)).sum(axis=1)
+        scores = [float(np.mean([lag[f] for f in group[0]])) for group in groups]
+        return int(np.argmax(scores))
+
+    def _landing_step(self, start: MeasuredStart) -> Step:
+        """First step of a plan started with feet in the air: each is put down straight below.
+
+        The feet in the air swing from where they are to the ground under them (lifting off
+        :data:`LANDING_LEAD_S` after the start, so that the swing-leg policy has its lead time),
+        for as long as a swing of the walk's rhythm; the ZMP holds where the start puts it, inside
+        the feet on the ground. The walk then starts from standstill.
+        """
+        state = self._initial
+        try:
+            params = self.timed(self._params, self._twist)
+        except GaitParameterError:
+            params = self._params
+        gait = params.resolved_gait(self.robot)
+        feet = tuple(int(f) for f in np.flatnonzero(start.airborne()))
+        t0 = state.time_s
+        lift_off = t0 + LANDING_LEAD_S
+        touch_down = lift_off + params.swing_s
+        slot = SwingSlot(lift_off, touch_down, feet, state.positions.copy(), state.yaws.copy())
+        grounded = np.delete(state.positions, feet, axis=0)
+        points = np.array([state.zmp, state.zmp])
+        kept = (self._all_down_margin(points, grounded) if len(grounded)
+                else -math.inf)
+        heights = np.asarray(start.feet_in_world, dtype=float)[:, 2].copy()
+        heights[list(feet)] -= start.ground_height_m
+        heights[[f for f in range(self.layout.count) if f not in feet]] = 0.0
+        self._airborne = (heights, touch_down)
+        after = dataclasses.replace(state, time_s=touch_down)
+        return Step(gait, 'walk', t0, touch_down, state.positions, state.yaws, (slot,),
+                    np.array([t0, touch_down]), points, kept, self._params, self._twist, after)
 
     @staticmethod
     def _start_shift_s(params: GaitParameters) -> float:
@@ -714,8 +817,21 @@ class GaitPlanner:
         start_ns = origin_ns + int(round(start_s * NS_PER_S))
         times = np.array([t for t, _, _ in events]) - start_s
         positions = np.array([np.column_stack([p, np.zeros(len(p))]) for _, p, _ in events])
+        if self._airborne is not None:
+            # A measured start with feet in the air: they are up there until the landing.
+            heights, landed_s = self._airborne
+            for k, (t_s, _, _) in enumerate(events):
+                if t_s < landed_s - 1e-12:
+                    positions[k, :, 2] += heights
         yaws = wrap_angle(np.array([y for _, _, y in events]))
         return FootstepPlan(start_ns, self.layout.names, times, positions, yaws)
+
+
+def _forward(pose: np.ndarray, offsets: np.ndarray, params: GaitParameters,
+             twist: Twist2D) -> np.ndarray:
+    """(F, 2) unit directions in which the footholds move when the body walks ``twist``."""
+    motion = place(integrate_pose(pose, twist, params.cycle_s), offsets) - place(pose, offsets)
+    return motion / np.maximum(np.linalg.norm(motion, axis=1), 1e-12)[:, None]
 
 
 def _leads_left(twist: Twist2D) -> bool:

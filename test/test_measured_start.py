@@ -1,0 +1,174 @@
+"""Plans that start from the robot's measured state (a planner restarted mid-walk).
+
+The first steps start from the measured footholds (no foot is teleported), the ZMP reference from
+the measured COM; a foot found in the air is put down first while the ZMP stays inside the feet
+on the ground; the walk then goes on with the feet that lag, so no foot steps backwards.
+The planner node's pieces: the forward kinematics of /tf + /joint_states, the snap of a robot
+standing at its nominal stance, and the swing-trajectory watchdog.
+"""
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from planning_helpers import robot
+
+from gait_nodes.diagnostics import OK, WARN
+from gait_nodes.footstep_planner import MeasuredState, measured_start
+from gait_nodes.planning import support
+from gait_nodes.planning.footsteps import (
+    GaitPlanner,
+    MeasuredStart,
+    Twist2D,
+    integrate_pose,
+    place,
+)
+from gait_nodes.planning.gait_params import GaitParameters
+from gait_nodes.planning.zmp_reference import stand_point
+from gait_nodes.watchdog import InputWatchdog
+
+QUADRUPED = robot('quadruped')
+PARAMS = GaitParameters.for_robot(QUADRUPED, gait='crawl', duty_factor=0.85, step_period_s=1.0,
+                                  max_vx_m_s=1.0, max_vy_m_s=1.0, max_wz_rad_s=1.0)
+
+
+def _mid_walk(stop_s: float):
+    """Footholds, yaws, ZMP and body pose of a crawl at 0.1 m/s at ``stop_s``."""
+    planner = GaitPlanner(QUADRUPED, PARAMS)
+    planner.set_velocity(Twist2D(0.1), 0.0)
+    planner.advance(stop_s + 10.0)
+    plan = planner.footstep_plan()
+    k = plan.index_at(stop_s)
+    feet = plan.positions_in_world[k].copy()
+    zmp = planner.zmp(np.array([stop_s]))[0]
+    path = [step for step in planner.steps if step.start_s <= stop_s][-1].state_after
+    body = integrate_pose(path.path_pose, path.path_twist, max(stop_s - path.path_start_s, 0.0))
+    return feet, plan.yaws_rad[k].copy(), zmp, body
+
+
+def _plan_from(start: MeasuredStart, twist: Twist2D, pose):
+    planner = GaitPlanner(QUADRUPED, PARAMS, base_pose=pose, start=start)
+    planner.set_velocity(twist, 0.0)
+    planner.advance(20.0)
+    return planner, planner.footstep_plan()
+
+
+@settings(max_examples=15, deadline=None)
+@given(stop_s=st.floats(3.0, 9.0))
+def test_the_plan_starts_from_the_measured_footholds_and_no_foot_steps_back(stop_s):
+    feet, yaws, zmp, body = _mid_walk(stop_s)
+    start = MeasuredStart(feet, yaws, zmp)
+    planner, plan = _plan_from(start, Twist2D(0.1), body)
+    np.testing.assert_allclose(plan.positions_in_world[0], feet, atol=1e-12)
+    np.testing.assert_allclose(planner.zmp(np.array([0.0]))[0], zmp, atol=1e-12)
+    # Every swing starts where the foot is: the plan is continuous from the measured state.
+    where = {name: feet[k] for k, name in enumerate(plan.foot_names)}
+    for swing in plan.swings():
+        np.testing.assert_allclose(swing.start_in_world, where[swing.foot], atol=1e-12)
+        # Walking on forwards: no foot is put down behind where it stood.
+        assert swing.end_in_world[0] >= swing.start_in_world[0] - 1e-9
+        where[swing.foot] = swing.end_in_world
+    # The walk goes on at the commanded speed.
+    assert plan.positions_in_world[-1][:, 0].mean() > feet[:, 0].mean() + 0.1 * 10.0
+
+
+@pytest.mark.parametrize('height', [0.03, 0.1])
+def test_a_foot_in_the_air_is_put_down_first_inside_the_support(height):
+    feet, yaws, zmp, body = _mid_walk(4.0)
+    feet[1, 2] = height
+    start = MeasuredStart(feet, yaws, zmp)
+    planner, plan = _plan_from(start, Twist2D(0.1), body)
+    swings = plan.swings()
+    first = swings[0]
+    assert first.foot == plan.foot_names[1]
+    np.testing.assert_allclose(first.start_in_world, feet[1], atol=1e-12)
+    np.testing.assert_allclose(first.end_in_world, [*feet[1, :2], 0.0], atol=1e-12)
+    assert first.lift_off_s > 0.0  # a lead time for the swing-leg policy
+    # Held where it is until it lifts off, nothing else moves before it lands.
+    assert all(s.lift_off_s >= first.touch_down_s - 1e-9 for s in swings[1:])
+    grounded = np.delete(feet[:, :2], 1, axis=0)
+    for t in np.linspace(0.0, first.touch_down_s, 20):
+        point = planner.zmp(np.array([t]))[0]
+        assert support.support_margin(point, grounded, QUADRUPED.foot_radius_m) > 0.0
+    # After the landing every foothold is on the ground.
+    assert np.all(plan.positions_in_world[plan.index_at(first.touch_down_s):, :, 2] == 0.0)
+
+
+def test_standing_still_mid_walk_with_a_zero_twist_closes_the_stance():
+    feet, yaws, zmp, pose = _mid_walk(5.0)
+    planner, plan = _plan_from(MeasuredStart(feet, yaws, zmp), Twist2D(), pose)
+    nominal = place(pose, planner.layout.offsets(PARAMS.step_width_m))
+    np.testing.assert_allclose(plan.positions_in_world[-1][:, :2], nominal, atol=1e-9)
+
+
+def test_a_malformed_start_is_refused():
+    from gait_nodes.errors import GaitParameterError
+
+    with pytest.raises(GaitParameterError, match='measured start'):
+        GaitPlanner(QUADRUPED, PARAMS, start=MeasuredStart(np.zeros((3, 3)), np.zeros(3),
+                                                           np.zeros(2)))
+    with pytest.raises(GaitParameterError, match='finite'):
+        GaitPlanner(QUADRUPED, PARAMS, start=MeasuredStart(np.full((4, 3), np.nan), np.zeros(4),
+                                                           np.zeros(2)))
+
+
+def test_measured_start_snaps_a_nominal_stance_and_keeps_the_rest():
+    layout_offsets = GaitPlanner(QUADRUPED, PARAMS).layout
+    nominal = place(np.array([0.2, 0.1, 0.3]), layout_offsets.offsets(PARAMS.step_width_m))
+    yaws = np.full(4, 0.3)
+    zmp = stand_point(layout_offsets, nominal)
+    feet = np.column_stack([nominal + 2e-4, np.full(4, 1e-4)])
+    assert measured_start(feet, yaws + 1e-5, [*zmp, 0.5], nominal, yaws, zmp) is None
+    feet[2, :2] += 0.05
+    start = measured_start(feet, yaws + 1e-5, [*zmp, 0.5], nominal, yaws, zmp)
+    np.testing.assert_array_equal(start.feet_in_world[[0, 1, 3], :2], nominal[[0, 1, 3]])
+    np.testing.assert_array_equal(start.feet_in_world[2], feet[2])
+    assert not start.airborne().any()
+    feet[3, 2] = 0.04
+    assert measured_start(feet, yaws, [*zmp, 0.5], nominal, yaws, zmp).airborne()[3]
+
+
+def test_measured_state_is_the_forward_kinematics_of_the_robot():
+    from gait_nodes.robot.model import load_robot_model
+
+    model = load_robot_model('robosimian')
+    state = MeasuredState(model)
+    joints = model.joint_positions(model.configuration((0, 0, 0), 0.0)) + 0.05
+    q = model.configuration((0.3, -0.1, 0.5), 0.4, joints)
+    state.on_joints(model.joint_names, joints, 10)
+    assert not state.since(0)
+    for k in range(30):
+        state.on_base(np.array(q[:7]), 10 + k * 10_000_000)
+    assert state.since(10) and state.still(10 + 29 * 10_000_000)
+    feet, yaws, com = state.measure()
+    expected_feet, expected_yaws = model.foot_poses(q)
+    np.testing.assert_allclose(feet, expected_feet, atol=1e-12)
+    np.testing.assert_allclose(yaws, expected_yaws, atol=1e-12)
+    np.testing.assert_allclose(com, model.com(q), atol=1e-12)
+    x, y, yaw = state.base_pose()
+    assert (x, y) == pytest.approx((0.3, -0.1)) and math.isclose(yaw, 0.4)
+    moved = np.array(q[:7])
+    moved[0] += 0.01
+    state.on_base(moved, 10 + 30 * 10_000_000)
+    assert not state.still(10 + 30 * 10_000_000)
+
+
+def test_event_inputs_are_stale_from_a_miss_to_the_next_message():
+    dog = InputWatchdog(['/a'], 0.5, 0, events=['/e'])
+    dog.watch('/a', False)
+    assert not dog.update(10 ** 10)  # /a is off: never stale, /e not missed
+    dog.missed('/e', 'the swing of FL at 1.0 s')
+    assert dog.update(10 ** 10) and dog.stale == ('/e',)
+    aspect, level, message, values = dog.status(10 ** 10)
+    assert level == WARN and 'no /e for the swing of FL at 1.0 s' in message
+    assert values['/a watched'] == 'no'
+    dog.heard('/e', 2 * 10 ** 10)
+    assert dog.update(2 * 10 ** 10) and dog.status(2 * 10 ** 10)[1] == OK
+    dog.watch('/a', True)
+    assert dog.update(2 * 10 ** 10) and dog.stale == ('/a',)
+    with pytest.raises(KeyError):
+        dog.missed('/a', 'x')
+    with pytest.raises(KeyError):
+        dog.watch('/e', True)
