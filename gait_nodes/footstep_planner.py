@@ -256,6 +256,7 @@ class FootstepPlanner(Node):
         self._measured: MeasuredState | None = None
         self._measured_subscriptions: list = []
         self._dependencies: dict[str, bool] = {}
+        self._dependencies_fresh: set[str] = set()  # reported their inputs fresh at least once
         self._pause: dict | None = None
         self._join_start_ns: int | None = None
         self._swings_heard: set[tuple[str, int]] = set()
@@ -515,8 +516,13 @@ class FootstepPlanner(Node):
             if topic is None:
                 continue
             stale = next((v.value for v in status.values if v.key == 'stale'), '')
-            self._dependencies[status.name] = (level_value(status.level) >= WARN
-                                               and topic in stale.split(','))
+            is_stale = level_value(status.level) >= WARN and topic in stale.split(',')
+            if not is_stale:
+                self._dependencies_fresh.add(status.name)
+            # A node still waiting for its first input (the graph starting: the IK has no COM
+            # reference before this planner's first plan) holds nothing that a pause would save.
+            self._dependencies[status.name] = is_stale and \
+                status.name in self._dependencies_fresh
 
     def _in_motion(self, now_s: float) -> bool:
         return not self.planner.twist.is_zero() or any(
@@ -747,12 +753,15 @@ def _within(plan: FootstepPlan, now_ns: int, until_ns: int) -> FootstepPlan:
     The published footsteps reach no further than the ZMP reference: if the planner stops, the
     whole-body IK ends the walk with the feet down where the COM controller, which holds the
     reference's end, keeps the robot balanced (not with steps the ZMP reference never covered).
-    A swing that has lifted off by ``now_ns`` is always kept to its landing.
+    A swing that lifts off by ``until_ns`` is always kept to its landing.
     """
     times_ns = plan.start_ns + np.round(plan.times_s * NS_PER_S).astype(np.int64)
     swings = [(s.lift_off_s, s.touch_down_s) for s in plan.swings()]
     now_s = (now_ns - plan.start_ns) * 1e-9
-    landing_s = max((touch for lift, touch in swings if lift <= now_s), default=0.0)
+    until_s = max(now_s, (until_ns - plan.start_ns) * 1e-9)
+    # Every swing lifting off within the horizon goes out whole: a swing longer than the
+    # horizon (the crawl's value-table swings) must reach the IK before its lift-off.
+    landing_s = max((touch for lift, touch in swings if lift <= until_s), default=0.0)
     until_ns = max(until_ns, plan.start_ns + int(round(landing_s * NS_PER_S)))
     last = 0
     for k, t_s in enumerate(plan.times_s):

@@ -280,3 +280,27 @@ def test_ros_parameters_go_through_the_same_checks(quadruped):
     count = len(quadruped.zmp)
     quadruped.spin(1.0)
     assert 19 <= len(quadruped.zmp) - count <= 21
+
+
+def test_published_footsteps_carry_every_swing_that_lifts_off_within_the_horizon():
+    # A swing longer than the ZMP horizon (the crawl's value-table swings, 2.1 s > 2 s) must
+    # reach the IK before its foot lifts off, not when its landing enters the horizon.
+    from gait_nodes.contract import FootstepPlan
+    from gait_nodes.footstep_planner import _within
+
+    names = ('a', 'b')
+    times = np.array([0.0, 0.5, 2.6, 3.0, 5.1])
+    feet = np.zeros((5, 2, 3))
+    feet[2:, 0, 0] = 0.3   # a swings 0.5 -> 2.6 s
+    feet[4:, 1, 0] = 0.3   # b swings 3.0 -> 5.1 s
+    plan = FootstepPlan(0, names, times, feet, np.zeros((5, 2)))
+    ns = 1_000_000_000
+    before_a = _within(plan, int(0.1 * ns), int(2.1 * ns))
+    assert [s.foot for s in before_a.swings()] == ['a']
+    assert before_a.times_s[-1] == pytest.approx(2.6)
+    # Nothing lifts off within the horizon after a's landing: the plan ends with all feet down.
+    assert _within(plan, int(0.1 * ns), int(0.4 * ns)).times_s[-1] == pytest.approx(0.0)
+    # A swing lifting off inside the horizon is kept whole even when it lands far beyond it.
+    late = _within(plan, int(1.0 * ns), int(3.0 * ns))
+    assert [s.foot for s in late.swings()] == ['a', 'b']
+    assert late.times_s[-1] == pytest.approx(5.1)
