@@ -16,6 +16,13 @@ standing), reports the stale input (WARN, ``footstep_planner: inputs``) and walk
 next /cmd_vel. 0 (the default) keeps the last /cmd_vel until the next one, as
 ``python -m gait_nodes.command --vel`` expects; a launcher that streams /cmd_vel sets it.
 
+Terrain: a staircase ahead in odom (Lucy's stairway), parameters ``stairs_start_x_m`` (x of the
+first riser), ``stairs_rise_m`` (per stair, negative down), ``stairs_tread_m`` and
+``stairs_count`` (0, the default: flat ground); see :mod:`gait_nodes.planning.terrain`. The
+footholds on /gait/footsteps carry the ground's height and lie on one tread each. A change is
+checked like a gait setting (ranges, a tread long enough for the foot and its swing, the
+polynomial swing) and may move the stairs ahead of the feet, never under them.
+
 Rejoin: started into a running graph (dds, rclpy), the planner waits up to ``JOIN_WAIT_S`` for
 the robot's base pose (/tf odom -> base_link) and plans from there (feet at their nominal places
 under that pose) instead of from the origin.
@@ -49,6 +56,7 @@ from gait_nodes.planning.gait_params import (
     parameters_from_mapping,
     parse_command,
 )
+from gait_nodes.planning.terrain import STAIRS_DEFAULTS, Staircase, check_walkable
 from gait_nodes.robot.description import load_robot_description
 from gait_nodes.runtime import Node, Parameter, SetParametersResult, qos_profile_latched
 from gait_nodes.watchdog import InputWatchdog
@@ -107,17 +115,24 @@ class FootstepPlanner(Node):
             if name in NUMERIC_RANGES:
                 default = float(default)
             values[name] = self.declare_parameter(name, default).value
+        for name, default in STAIRS_DEFAULTS.items():
+            default = defaults.get(name, default)
+            values[name] = self.declare_parameter(
+                name, int(default) if name == 'stairs_count' else float(default)).value
         check_node_settings(values)
         self.settings = {name: values[name] for name in NODE_SETTINGS}
         params = GaitParameters(**{name: values[name] for name in GAIT_FIELDS})
         params.check_robot(self.robot)
+        terrain = Staircase.from_parameters(values)
+        check_walkable(terrain, self.robot, params)
 
         self.origin_ns = self.get_clock().now().nanoseconds
         self.diagnostics = DiagnosticsReporter(self, self.robot.name)
         self._robot_model = None
         self._timing_key, self._timing_model, self._timing_final = None, None, True
         self._timing_reason = 'fixed timing'
-        self.planner = GaitPlanner(self.robot, params, swing_timing=self._swing_timing(params))
+        self.planner = GaitPlanner(self.robot, params, swing_timing=self._swing_timing(params),
+                                   terrain=terrain)
         self.inputs = InputWatchdog(['/cmd_vel'], self.settings['cmd_vel_timeout_s'] or 1.0,
                                     self.origin_ns, holding='stopping (zero velocity from the '
                                     'next step boundary)')
@@ -125,7 +140,7 @@ class FootstepPlanner(Node):
         self._joined = self.context.runtime == 'inproc'
         self._base_pose: tuple[float, float, float] | None = None
         self._last_now_s = 0.0
-        self._pending: tuple[GaitParameters, dict] | None = None
+        self._pending: tuple[GaitParameters, dict, Staircase] | None = None
         self._last_plan = None
         self._zmp_messages = ZmpReferenceMessages()
         self._last_velocity_notes: list[str] = []
@@ -217,7 +232,8 @@ class FootstepPlanner(Node):
         twist = self.planner.requested_twist
         self.origin_ns = now_ns
         self.planner = GaitPlanner(self.robot, self.planner.params, base_pose=pose,
-                                   swing_timing=self.planner.swing_timing)
+                                   swing_timing=self.planner.swing_timing,
+                                   terrain=self.planner.terrain)
         self.planner.set_velocity(twist, 0.0)
         self._last_now_s = 0.0
         return 0.0
@@ -262,7 +278,8 @@ class FootstepPlanner(Node):
         if self._base_pose is not None:
             twist = self.planner.requested_twist
             self.planner = GaitPlanner(self.robot, self.planner.params, base_pose=self._base_pose,
-                                       swing_timing=self.planner.swing_timing)
+                                       swing_timing=self.planner.swing_timing,
+                                       terrain=self.planner.terrain)
             self.origin_ns, self._last_now_s = now_ns, 0.0
             self.planner.set_velocity(twist, 0.0)
             self.get_logger().info(f'planning from the robot\'s pose {self._base_pose}')
@@ -318,6 +335,7 @@ class FootstepPlanner(Node):
         """Check a parameter change as a /gait/command is checked; keep it for the post step."""
         settings = dict(self.settings)
         gait_changes = {}
+        stairs = {name: self.get_parameter(name).value for name in STAIRS_DEFAULTS}
         for parameter in parameters:
             if parameter.name == 'robot':
                 if parameter.value != self.get_parameter('robot').value:
@@ -327,22 +345,32 @@ class FootstepPlanner(Node):
                 settings[parameter.name] = parameter.value
             elif parameter.name in GAIT_FIELDS:
                 gait_changes[parameter.name] = parameter.value
+            elif parameter.name in STAIRS_DEFAULTS:
+                stairs[parameter.name] = parameter.value
         try:
             check_node_settings(settings)
             params = parameters_from_mapping(self.planner.params, gait_changes, self.robot)
+            terrain = Staircase.from_parameters(stairs)
+            if terrain != self.planner.terrain:
+                self.planner.check_terrain(terrain, self.now_s()[1], params)
+            else:
+                check_walkable(terrain, self.robot, params)
         except ParameterError as exc:
             return SetParametersResult(successful=False, reason=str(exc))
-        self._pending = (params, settings)
+        self._pending = (params, settings, terrain)
         return SetParametersResult(successful=True)
 
     def on_parameters_set(self, parameters) -> None:
         """Apply what :meth:`on_set_parameters` accepted."""
         if self._pending is None:
             return
-        params, settings = self._pending
+        params, settings, terrain = self._pending
         self._pending = None
         _, now_s = self.now_s()
-        if params != self.planner.params:
+        if terrain != self.planner.terrain:
+            self.planner.set_terrain(terrain, now_s, params)
+            self._refresh_timing(now_s)
+        elif params != self.planner.params:
             self.planner.set_parameters(params, now_s)
             self._refresh_timing(now_s)
         if settings['rate_hz'] != self.settings['rate_hz']:
@@ -387,6 +415,8 @@ class FootstepPlanner(Node):
             'applied_twist': self.planner.twist.as_tuple(),
             'zmp_margin_kept_m': kept, 'zmp_margin_m': params.zmp_margin_m,
             'planned_steps': len(steps), 'timing': params.timing,
+            'stairs_count': self.planner.terrain.count,
+            'stairs_total_rise_m': self.planner.terrain.total_rise_m,
             'timing_source': self._timing_reason, **self._rhythm_values()})
 
     def _rhythm_values(self) -> dict:
