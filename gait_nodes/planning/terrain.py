@@ -116,10 +116,10 @@ class Staircase:
         if self.flat:
             return np.zeros_like(x)
         stair = np.clip(np.floor((x - self.start_x_m) / self.tread_m) + 1.0, 0.0, self.count)
-        return stair * self.rise_m
+        return stair * self.rise_m + 0.0  # no -0.0 before a staircase down
 
     def highest_under(self, x_m, radius_m: float) -> np.ndarray:
-        """Highest ground [m] under a disc of ``radius_m`` centred at ``x_m`` (monotonic stairs)."""
+        """Highest ground [m] under a disc of ``radius_m`` [m] centred at ``x_m``."""
         return np.maximum(self.height_at(np.asarray(x_m) - radius_m),
                           self.height_at(np.asarray(x_m) + radius_m))
 
