@@ -268,3 +268,64 @@ def test_the_zmp_plane_is_the_lowest_contact():
     force = data.dhg.linear - monitor.mass_kg * monitor.gravity
     assert np.allclose(state.zmp_in_world[:2], on_ground[:2] + 0.05 * force[:2] / fz)
     assert monitor.evaluate(q, v, a, np.zeros((0, 3))).zmp_in_world[2] == -0.3
+
+
+# --- footstep_planner node --------------------------------------------------------------------
+
+
+def test_the_planner_node_refuses_bad_stairs_with_the_range_and_walks_on_unchanged():
+    import json
+
+    from gait_nodes import runtime
+    from gait_nodes.contract import footsteps_from_msg
+    from gait_nodes.interfaces import get_message
+    from gait_nodes.runtime import Parameter, qos_profile_latched
+
+    args = ['test', '--ros-args', '-p', 'robot:=biped', '-p', 'gait:=biped',
+            '-p', f'step_height_m:={STEP_HEIGHT_M}', '-p', 'step_period_s:=1.5',
+            '-p', 'duty_factor:=0.72', '-p', 'stairs_start_x_m:=0.4',
+            '-p', 'stairs_rise_m:=0.05', '-p', 'stairs_count:=3']
+    runtime.init(args=args, runtime='inproc', signal_handlers=False)
+    try:
+        from gait_nodes.footstep_planner import FootstepPlanner
+
+        node = FootstepPlanner()
+        user = runtime.Node('user', use_global_arguments=False)
+        plans, statuses = [], []
+        user.create_subscription(get_message('trajectory_msgs/msg/MultiDOFJointTrajectory'),
+                                 '/gait/footsteps', plans.append, qos_profile_latched)
+        user.create_subscription(get_message('std_msgs/msg/String'), '/gait/command_status',
+                                 lambda msg: statuses.append(json.loads(msg.data)), 10)
+        command = user.create_publisher(get_message('std_msgs/msg/String'), '/gait/command', 10)
+        twist = get_message('geometry_msgs/msg/Twist')()
+        twist.linear.x = 0.1
+        user.create_publisher(get_message('geometry_msgs/msg/Twist'), '/cmd_vel',
+                              10).publish(twist)
+        executor = runtime.SingleThreadedExecutor()
+        executor.add_node(node)
+        executor.add_node(user)
+        executor.spin_for(9.0)
+        terrain, params = node.planner.terrain, node.planner.params
+        assert terrain == Staircase(0.4, 0.05, 0.3, 3)
+        refused = [
+            ([Parameter('stairs_rise_m', value=0.5)], 'must be in [-0.3, 0.3] m'),
+            ([Parameter('stairs_count', value=99)], 'must be in [0, 50]'),
+            ([Parameter('stairs_tread_m', value=0.1)], 'tread must be >='),
+            ([Parameter('stairs_start_x_m', value=-2.0)], 'would move the ground under'),
+        ]
+        for parameters, text in refused:
+            result = node.set_parameters(parameters)[0]
+            assert not result.successful and text in result.reason, result.reason
+        command.publish(get_message('std_msgs/msg/String')(data='{"swing": "value_table"}'))
+        executor.spin_for(0.5)
+        assert not statuses[-1]['accepted'] and 'flat ground' in statuses[-1]['reason']
+        assert node.planner.terrain is terrain and node.planner.params is params
+        assert node.get_parameter('stairs_rise_m').value == 0.05
+        executor.spin_for(8.0)
+        # The walk went on up the stairs, every foothold at its tread's height.
+        plan = footsteps_from_msg(plans[-1])
+        feet = plan.positions_in_world.reshape(-1, 3)
+        assert np.allclose(feet[:, 2], terrain.height_at(feet[:, 0]))
+        assert feet[:, 2].max() >= 0.1
+    finally:
+        runtime.shutdown()
