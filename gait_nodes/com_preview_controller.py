@@ -7,7 +7,10 @@ sway compensation on the reference's path), ``polynomial`` (fifth-order pieces, 
 height is ``com_height_m``, or the robot YAML's when 0. Switching method or changing a parameter
 re-initializes the generator from the current COM state, so the COM does not jump. The body yaw
 comes from /gait/footsteps (mean of the planned foot yaws, linear between contact changes);
-without a plan it is 0.
+without a plan it is 0. So does the COM height, with every method: ``com_height_m`` above the
+support height of the plan's 3D footholds (:mod:`gait_nodes.com.support_height`: on stairs the
+COM climbs with the feet, with continuous velocity and acceleration; on flat ground it is
+``com_height_m``); without a plan it is ``com_height_m``.
 
 /gait/zmp_reference is a stream: silent for more than ``stale_after_s`` it is reported stale
 (WARN, ``com_preview_controller: inputs``) and the controller keeps running on the last good
@@ -35,6 +38,7 @@ from gait_nodes import contract
 from gait_nodes.cli import run_node
 from gait_nodes.com.online import GeneratorSettings, make_generator
 from gait_nodes.com.preview import PreviewSettings, preview_gains
+from gait_nodes.com.support_height import SupportHeight
 from gait_nodes.diagnostics import ERROR, OK, WARN, DiagnosticsReporter
 from gait_nodes.errors import ComPlanningError, GaitNodesError
 from gait_nodes.interfaces import get_message
@@ -118,6 +122,7 @@ class ComPreviewController(Node):
         self._reference = None
         self._plan = None
         self._plan_yaws = None
+        self._support = None
         self._generator = None
         self._last_published = None
         self._timer = self.create_timer(self._settings.preview.dt_s, self._tick)
@@ -214,6 +219,7 @@ class ComPreviewController(Node):
             self.diagnostics.drop(FOOTSTEPS_TOPIC, str(exc))
             return
         self._plan, self._plan_yaws = plan, plan_yaw_means(plan)
+        self._support = SupportHeight(plan)
 
     def _on_measured_com(self, msg) -> None:
         xy = (msg.point.x, msg.point.y)
@@ -293,12 +299,14 @@ class ComPreviewController(Node):
             yaw, yaw_rate = plan_yaw(self._plan, (sample.stamp_ns - self._plan.start_ns) * 1e-9,
                                      self._plan_yaws)
             yaw = math.remainder(yaw, 2 * math.pi)
-        height = self._settings.preview.com_height_m
+        support = (0.0, 0.0, 0.0) if self._support is None \
+            else self._support.at_ns(sample.stamp_ns)
+        height = self._settings.preview.com_height_m + support[0]
         state = contract.ComState(
             stamp_ns=sample.stamp_ns,
             position_in_world=[*sample.position_in_world, height],
-            velocity_in_world=[*sample.velocity_in_world, 0.0],
-            acceleration_in_world=[*sample.acceleration_in_world, 0.0],
+            velocity_in_world=[*sample.velocity_in_world, support[1]],
+            acceleration_in_world=[*sample.acceleration_in_world, support[2]],
             yaw_rad=yaw, yaw_rate_rad_s=yaw_rate)
         self._publisher.publish(contract.com_reference_to_msg([state]))
         self._last_published = sample

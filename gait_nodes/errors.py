@@ -66,3 +66,11 @@ class SwingTableError(GaitNodesError):
 
 class SwingPolicyError(GaitNodesError):
     """The swing-leg policy found no feasible swing (start or goal outside the table's region)."""
+
+
+class TerrainError(ParameterError):
+    """The footstep planner's terrain (a staircase) is invalid or does not suit the walk.
+
+    Out of range, too short a tread for the foot and its swing, a swing method or COM method
+    that cannot walk it, or ground moved under the feet; the message says which and the range.
+    """

@@ -16,6 +16,13 @@ standing), reports the stale input (WARN, ``footstep_planner: inputs``) and walk
 next /cmd_vel. 0 (the default) keeps the last /cmd_vel until the next one, as
 ``python -m gait_nodes.command --vel`` expects; a launcher that streams /cmd_vel sets it.
 
+Terrain: a staircase ahead in odom (Lucy's stairway), parameters ``stairs_start_x_m`` (x of the
+first riser), ``stairs_rise_m`` (per stair, negative down), ``stairs_tread_m`` and
+``stairs_count`` (0, the default: flat ground); see :mod:`gait_nodes.planning.terrain`. The
+footholds on /gait/footsteps carry the ground's height and lie on one tread each. A change is
+checked like a gait setting (ranges, a tread long enough for the foot and its swing, the
+polynomial swing) and may move the stairs ahead of the feet, never under them.
+
 Rejoin: started into a running graph (dds, rclpy), the planner waits up to ``JOIN_WAIT_S`` for
 the robot's measured state (/tf odom -> base_link and /joint_states, forward kinematics of the
 robot model: footholds, foot yaws, COM) and plans from there: the first steps start from the
@@ -75,6 +82,7 @@ from gait_nodes.planning.gait_params import (
     parameters_from_mapping,
     parse_command,
 )
+from gait_nodes.planning.terrain import STAIRS_DEFAULTS, Staircase, check_walkable
 from gait_nodes.robot.description import load_robot_description
 from gait_nodes.runtime import Node, Parameter, SetParametersResult, qos_profile_latched
 from gait_nodes.watchdog import InputWatchdog
@@ -188,7 +196,7 @@ class MeasuredState:
 
 def measured_start(feet: np.ndarray, yaws: np.ndarray, com: np.ndarray,
                    nominal: np.ndarray, nominal_yaws: np.ndarray, stand_zmp: np.ndarray,
-                   ground_height_m: float = 0.0) -> MeasuredStart | None:
+                   ground_height_m: float | np.ndarray = 0.0) -> MeasuredStart | None:
     """The start of a plan from measured feet and COM (None: standing at the nominal stance).
 
     A foot on the ground within NOMINAL_SNAP_M of its nominal foothold is planned from that
@@ -202,7 +210,7 @@ def measured_start(feet: np.ndarray, yaws: np.ndarray, com: np.ndarray,
         nominal: (F, 2) nominal footholds under the base [m].
         nominal_yaws: (F,) their yaws [rad].
         stand_zmp: (2,) ZMP of the nominal stance [m].
-        ground_height_m: Ground height in odom [m].
+        ground_height_m: Ground height in odom under each foot [m]: one number, or (F,).
     """
     feet = np.array(feet, dtype=float)
     yaws = np.array(yaws, dtype=float)
@@ -212,7 +220,8 @@ def measured_start(feet: np.ndarray, yaws: np.ndarray, com: np.ndarray,
     if close.all() and np.linalg.norm(zmp - stand_zmp) < NOMINAL_SNAP_M:
         return None
     feet[close, :2] = nominal[close]
-    feet[close, 2] = ground_height_m
+    ground = np.broadcast_to(np.asarray(ground_height_m, dtype=float), on_ground.shape)
+    feet[close, 2] = ground[close]
     yaws[close] = nominal_yaws[close]
     return MeasuredStart(feet, yaws, zmp, ground_height_m, AIRBORNE_M)
 
@@ -236,17 +245,24 @@ class FootstepPlanner(Node):
             if name in NUMERIC_RANGES:
                 default = float(default)
             values[name] = self.declare_parameter(name, default).value
+        for name, default in STAIRS_DEFAULTS.items():
+            default = defaults.get(name, default)
+            values[name] = self.declare_parameter(
+                name, int(default) if name == 'stairs_count' else float(default)).value
         check_node_settings(values)
         self.settings = {name: values[name] for name in NODE_SETTINGS}
         params = GaitParameters(**{name: values[name] for name in GAIT_FIELDS})
         params.check_robot(self.robot)
+        terrain = Staircase.from_parameters(values)
+        check_walkable(terrain, self.robot, params)
 
         self.origin_ns = self.get_clock().now().nanoseconds
         self.diagnostics = DiagnosticsReporter(self, self.robot.name)
         self._robot_model = None
         self._timing_key, self._timing_model, self._timing_final = None, None, True
         self._timing_reason = 'fixed timing'
-        self.planner = GaitPlanner(self.robot, params, swing_timing=self._swing_timing(params))
+        self.planner = GaitPlanner(self.robot, params, swing_timing=self._swing_timing(params),
+                                   terrain=terrain)
         self.inputs = InputWatchdog(['/cmd_vel'], self.settings['cmd_vel_timeout_s'] or 1.0,
                                     self.origin_ns, holding='stopping (zero velocity from the '
                                     'next step boundary)')
@@ -264,7 +280,7 @@ class FootstepPlanner(Node):
         self.swing_inputs = InputWatchdog([], 1.0, self.origin_ns, events=[SWING_TOPIC],
                                           holding='the whole-body IK follows its fallback swing')
         self._last_now_s = 0.0
-        self._pending: tuple[GaitParameters, dict] | None = None
+        self._pending: tuple[GaitParameters, dict, Staircase] | None = None
         self._last_plan = None
         self._zmp_messages = ZmpReferenceMessages()
         self._last_velocity_notes: list[str] = []
@@ -360,7 +376,8 @@ class FootstepPlanner(Node):
         twist = self.planner.requested_twist
         self.origin_ns = now_ns
         self.planner = GaitPlanner(self.robot, self.planner.params, base_pose=pose,
-                                   swing_timing=self.planner.swing_timing)
+                                   swing_timing=self.planner.swing_timing,
+                                   terrain=self.planner.terrain)
         self.planner.set_velocity(twist, 0.0)
         self._last_now_s = 0.0
         return 0.0
@@ -457,7 +474,8 @@ class FootstepPlanner(Node):
         from gait_nodes.planning.zmp_reference import stand_point
 
         return measured_start(feet, yaws, com, nominal, np.full(len(nominal), pose[2]),
-                              stand_point(self.planner.layout, nominal))
+                              stand_point(self.planner.layout, nominal),
+                              self.planner.terrain.height_at(feet[:, 0]))
 
     def _plan_from_robot(self, now_ns: int) -> None:
         """Start a new plan at ``now_ns`` from the robot's measured state (or its base pose)."""
@@ -473,7 +491,8 @@ class FootstepPlanner(Node):
                 np.array([0.0, 0.0, pose[2]]), offsets).mean(axis=0)
             pose = (float(centre[0]), float(centre[1]), float(pose[2]))
         self.planner = GaitPlanner(self.robot, self.planner.params, base_pose=pose,
-                                   swing_timing=self.planner.swing_timing, start=start)
+                                   swing_timing=self.planner.swing_timing, start=start,
+                                   terrain=self.planner.terrain)
         self.origin_ns, self._last_now_s = now_ns, 0.0
         self.planner.set_velocity(twist, 0.0)
         where = 'its nominal stance' if start is None else (
@@ -495,7 +514,8 @@ class FootstepPlanner(Node):
         if measured is not None and measured.since(self.origin_ns):
             if waited_s < STAND_WAIT_S:
                 feet, _, _ = measured.measure()
-                if (feet[:, 2] > AIRBORNE_M).any() or not measured.still(now_ns):
+                ground = self.planner.terrain.height_at(feet[:, 0])
+                if (feet[:, 2] - ground > AIRBORNE_M).any() or not measured.still(now_ns):
                     return False
         elif self._base_pose is None and waited_s < JOIN_WAIT_S:
             return False
@@ -655,6 +675,7 @@ class FootstepPlanner(Node):
         """Check a parameter change as a /gait/command is checked; keep it for the post step."""
         settings = dict(self.settings)
         gait_changes = {}
+        stairs = {name: self.get_parameter(name).value for name in STAIRS_DEFAULTS}
         for parameter in parameters:
             if parameter.name == 'robot':
                 if parameter.value != self.get_parameter('robot').value:
@@ -664,22 +685,32 @@ class FootstepPlanner(Node):
                 settings[parameter.name] = parameter.value
             elif parameter.name in GAIT_FIELDS:
                 gait_changes[parameter.name] = parameter.value
+            elif parameter.name in STAIRS_DEFAULTS:
+                stairs[parameter.name] = parameter.value
         try:
             check_node_settings(settings)
             params = parameters_from_mapping(self.planner.params, gait_changes, self.robot)
+            terrain = Staircase.from_parameters(stairs)
+            if terrain != self.planner.terrain:
+                self.planner.check_terrain(terrain, self.now_s()[1], params)
+            else:
+                check_walkable(terrain, self.robot, params)
         except ParameterError as exc:
             return SetParametersResult(successful=False, reason=str(exc))
-        self._pending = (params, settings)
+        self._pending = (params, settings, terrain)
         return SetParametersResult(successful=True)
 
     def on_parameters_set(self, parameters) -> None:
         """Apply what :meth:`on_set_parameters` accepted."""
         if self._pending is None:
             return
-        params, settings = self._pending
+        params, settings, terrain = self._pending
         self._pending = None
         _, now_s = self.now_s()
-        if params != self.planner.params:
+        if terrain != self.planner.terrain:
+            self.planner.set_terrain(terrain, now_s, params)
+            self._refresh_timing(now_s)
+        elif params != self.planner.params:
             self.planner.set_parameters(params, now_s)
             self._refresh_timing(now_s)
         if settings['rate_hz'] != self.settings['rate_hz']:
@@ -729,6 +760,8 @@ class FootstepPlanner(Node):
             'applied_twist': self.planner.twist.as_tuple(),
             'zmp_margin_kept_m': kept, 'zmp_margin_m': params.zmp_margin_m,
             'planned_steps': len(steps), 'timing': params.timing,
+            'stairs_count': self.planner.terrain.count,
+            'stairs_total_rise_m': self.planner.terrain.total_rise_m,
             'timing_source': self._timing_reason, **self._rhythm_values()})
 
     def _rhythm_values(self) -> dict:

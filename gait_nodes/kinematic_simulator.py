@@ -497,16 +497,16 @@ class KinematicSimulator(Node):
             self._zmp.publish(self._point(stamp, state.zmp_in_world))
         self._com.publish(self._point(stamp, state.com_in_world))
         polygon = self.monitor.support_polygon(state.contact_points_in_world)
-        vertices, outline = self._polygon_points(polygon)
+        vertices, outline = self._polygon_points(
+            polygon, self.monitor.plane_height_m(state.contact_points_in_world))
         new = self._new
         self._polygon.publish(new['PolygonStamped'](new['Header'](stamp, WORLD_FRAME),
                                                     new['Polygon'](vertices)))
         if self.params.publish_markers:
             self._markers.publish(self._marker_array(stamp, state, outline))
 
-    def _polygon_points(self, polygon: np.ndarray) -> tuple[list, list]:
-        """Point32 vertices and the closed marker outline, rebuilt only when the hull changes."""
-        z = self.params.ground_height_m
+    def _polygon_points(self, polygon: np.ndarray, z: float) -> tuple[list, list]:
+        """Point32 vertices and closed marker outline at ``z`` [m], rebuilt when they change."""
         key = (polygon.tobytes(), z)
         if key != self._polygon_key:
             point32, point = self._msg['Point32'], self._msg['Point']

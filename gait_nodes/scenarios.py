@@ -64,10 +64,22 @@ SCENARIOS: dict[str, Scenario] = {s.name: s for s in (
                             'timing': 'joint_limit'},
              (_vel(0.0, 0.04),)),
     Scenario('biped_walk',
-             'small humanoid: start, walk with a stair-like swing height (Lucy), stop',
+             'small humanoid on flat ground: start, walk (Lucy\'s sixth-order swing), stop',
              'biped', {'gait': 'biped', 'swing': 'polynomial', 'com_method': 'preview',
                        'step_height_m': 0.1, 'step_period_s': 1.5, 'duty_factor': 0.72},
              (_vel(0.0, 0.1), _vel(10.0, 0.0)), 16.0),
+    # Stride 0.3 m = tread: every other footstep climbs a stair (Lucy's step height delta), and
+    # the footholds fall 0.075 m before and after the risers, outside their keep-out zones
+    # (foot radius + the swing's toe distance, which the 0.18 m via height keeps short). 0.08 m
+    # stairs walk too, but the closing step's swing then puts an ankle on its joint limit.
+    Scenario('biped_stairs',
+             'small humanoid: start, walk up three 0.07 m stairs (Lucy\'s stairway: footholds '
+             'on the treads, the COM climbing with the support), stop on the landing',
+             'biped', {'gait': 'biped', 'swing': 'polynomial', 'com_method': 'preview',
+                       'step_height_m': 0.18, 'step_period_s': 2.0, 'duty_factor': 0.72,
+                       'stairs_start_x_m': 0.25, 'stairs_rise_m': 0.07, 'stairs_tread_m': 0.3,
+                       'stairs_count': 3},
+             (_vel(0.0, 0.075), _vel(12.0, 0.0)), 20.0),
     Scenario('go2_trot',
              'Unitree Go2 (example-robot-data), trot with sway compensation',
              'go2', {'gait': 'trot', 'swing': 'polynomial', 'com_method': 'sway',

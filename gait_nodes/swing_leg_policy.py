@@ -243,6 +243,11 @@ class SwingLegPolicy(Node):
         self.published_count += 1
 
     def _value_table_swing(self, plan, swing, lift_ns: int) -> contract.SwingTrajectory:
+        climb = float(swing.end_in_world[2] - swing.start_in_world[2])
+        if abs(climb) > 1e-9:  # the footstep planner refuses stairs with this swing
+            raise SwingPolicyError(f'the value-table swing is built for flat ground; this '
+                                   f'swing climbs {climb:+.4g} m (stairs need swing: '
+                                   f'polynomial)')
         policy = self._policy
         table = policy.table
         ik = policy.timing.ik

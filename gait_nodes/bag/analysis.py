@@ -68,6 +68,7 @@ class GaitSeries:
     base_poses: list[tuple[int, float, float, float, float, float, float, float]] = field(
         default_factory=list)
     zmp_plane_height_m: float | None = None
+    zmp_plane_heights_m: dict[int, float] = field(default_factory=dict)
     zmp: list[tuple[int, float, float]] = field(default_factory=list)
     com: list[tuple[int, float, float, float]] = field(default_factory=list)
     polygons: list[tuple[int, np.ndarray]] = field(default_factory=list)
@@ -117,8 +118,11 @@ class _Collector:
                 self.series.base_poses.append((stamp, t.x, t.y, t.z, r.x, r.y, r.z, r.w))
 
     def _gait_zmp(self, msg) -> None:
-        self.series.zmp.append((_stamp(msg.header), msg.point.x, msg.point.y))
+        stamp = _stamp(msg.header)
+        self.series.zmp.append((stamp, msg.point.x, msg.point.y))
+        # The plane follows the contacts (stairs): each sample's z is its plane's height.
         self.series.zmp_plane_height_m = msg.point.z
+        self.series.zmp_plane_heights_m[stamp] = msg.point.z
 
     def _gait_com(self, msg) -> None:
         self.series.com.append((_stamp(msg.header), msg.point.x, msg.point.y, msg.point.z))

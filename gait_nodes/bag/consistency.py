@@ -9,7 +9,8 @@ recorded joint angles alone, the way an outside reviewer would:
 - ``zmp``: the ZMP recomputed by inverse dynamics (Pinocchio's RNEA: the free-flyer's wrench is
   the total contact wrench, a different route from the monitor's momentum rate), with
   velocities and accelerations by central differences of the recorded configurations, against
-  ``/gait/zmp``; samples where the ground force is not positive are counted, not compared.
+  ``/gait/zmp``, on the plane each ``/gait/zmp`` sample is on (its z: the lowest contact's
+  height, on stairs); samples where the ground force is not positive are counted, not compared.
 - ``footholds``: each executed swing's landing place in ``/gait/footsteps`` against the foot's
   contact point (forward kinematics) at the first ``/joint_states`` sample at or after its
   planned touch-down.
@@ -122,7 +123,7 @@ def zmp_check(robot: RobotModel, series: GaitSeries, stamps: np.ndarray,
     if len(qs) < 3 or not series.zmp:
         return None
     reported = {stamp: (x, y) for stamp, x, y in series.zmp}
-    plane = series.zmp_plane_height_m if series.zmp_plane_height_m is not None else 0.0
+    default_plane = series.zmp_plane_height_m if series.zmp_plane_height_m is not None else 0.0
     data = robot.new_data()
     errors, no_force = [], 0
     for i in range(1, len(qs) - 1):
@@ -135,6 +136,7 @@ def zmp_check(robot: RobotModel, series: GaitSeries, stamps: np.ndarray,
         d2 = pin.difference(robot.model, qs[i], qs[i + 1])
         v = (d1 * (h2 / h1) + d2 * (h1 / h2)) / (h1 + h2)
         a = 2.0 * (d2 / h2 - d1 / h1) / (h1 + h2)
+        plane = series.zmp_plane_heights_m.get(int(stamps[i]), default_plane)
         zmp, force = inverse_dynamics_zmp(robot.model, data, qs[i], v, a, plane)
         if force <= 1e-6:
             no_force += 1

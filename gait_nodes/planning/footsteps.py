@@ -15,6 +15,11 @@ state it ends in. From standstill the first step starts with an extra weight-shi
 step period; a zero twist ends the walk with closing steps that bring every foot to its nominal
 place under the last landing pose, then the ZMP settles between the feet.
 
+Terrain (:mod:`gait_nodes.planning.terrain`): on a staircase each foothold's height is the
+ground's under it, and a foothold that would lie across a riser (or too close to it for the
+swing to clear it) is moved along x onto one tread, the step shortened or lengthened
+(:meth:`GaitPlanner.set_terrain`, :meth:`Staircase.foothold_candidates`).
+
 All times here are float seconds from the planner's origin (the node maps them to ROS time).
 """
 
@@ -28,12 +33,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from gait_nodes.contract import FootstepPlan, ZmpReference
-from gait_nodes.errors import GaitParameterError
+from gait_nodes.errors import GaitParameterError, TerrainError
 from gait_nodes.planning import rhythm as rhythm_module
 from gait_nodes.planning import support, zmp_reference
 from gait_nodes.planning.gait_params import GaitParameters
 from gait_nodes.planning.layout import FootLayout
 from gait_nodes.planning.rhythm import Rhythm
+from gait_nodes.planning.terrain import FLAT, Staircase, check_walkable
 from gait_nodes.robot.description import RobotDescription
 
 #: A foot closer than this to its target [m, rad] does not step (no zero-length steps).
@@ -263,14 +269,15 @@ class MeasuredStart:
         foot_yaws_rad: (F,) foot yaws [rad].
         zmp_in_world: (2,) where the ZMP reference starts (the measured COM of a robot at
             rest) [m].
-        ground_height_m: Height of the ground in odom [m].
+        ground_height_m: Height of the ground under each foot in odom [m]: one number, or (F,)
+            (stairs: the tread under each foot).
         airborne_m: Height above the ground from which a foot is in the air [m].
     """
 
     feet_in_world: np.ndarray
     foot_yaws_rad: np.ndarray
     zmp_in_world: np.ndarray
-    ground_height_m: float = 0.0
+    ground_height_m: float | np.ndarray = 0.0
     airborne_m: float = 0.005
 
     def airborne(self) -> np.ndarray:
@@ -307,19 +314,24 @@ class GaitPlanner:
         start: Where the robot really is (:class:`MeasuredStart`, e.g. a planner restarted
             mid-walk): the plan starts from these footholds and this ZMP instead of the nominal
             stance under ``base_pose`` (which stays the pose the walk's path starts from).
+        terrain: The ground (default flat); the feet start on it.
 
     Raises:
         GaitParameterError: ``params`` do not suit the robot, or ``start`` not one foot each.
+        TerrainError: ``params`` cannot walk ``terrain``, or a foot starts across a riser.
     """
 
     def __init__(self, robot: RobotDescription, params: GaitParameters | None = None, *,
                  base_pose: Sequence[float] = (0.0, 0.0, 0.0), start_s: float = 0.0,
-                 swing_timing=None, start: MeasuredStart | None = None):
+                 swing_timing=None, start: MeasuredStart | None = None,
+                 terrain: Staircase | None = None):
         self.robot = robot
         self.layout = FootLayout.of(robot)
         params = params or GaitParameters.for_robot(robot)
         params.check_robot(robot)
         self._params = params
+        self._terrain = terrain or FLAT
+        self._keep_out_m = check_walkable(self._terrain, robot, params)
         self._timing = swing_timing
         self._rhythms: dict = {}
         self._clamped: dict = {}
@@ -337,6 +349,7 @@ class GaitPlanner:
             next_group=0, rest_pose=pose, last_anchor=pose, measured=start is not None)
         self._steps: list[Step] = []
         self._before: tuple[float, np.ndarray, np.ndarray] | None = None
+        self._check_footholds(self._terrain, [positions], compare_heights=False)
         if start is not None and start.airborne().any():
             self._steps.append(self._landing_step(start))
 
@@ -421,11 +434,69 @@ class GaitPlanner:
 
         Raises:
             GaitParameterError: ``params`` do not suit the robot (nothing changes).
+            TerrainError: ``params`` cannot walk the terrain (nothing changes).
         """
         params.check_robot(self.robot)
+        self._keep_out_m = check_walkable(self._terrain, self.robot, params)
         twist, _ = self._clamp(self._requested, params)
         self._params, self._twist = params, twist
         self._replan(now_s)
+
+    @property
+    def terrain(self) -> Staircase:
+        """The ground the steps from the next step boundary on are planned on."""
+        return self._terrain
+
+    def check_terrain(self, terrain: Staircase, now_s: float,
+                      params: GaitParameters | None = None) -> None:
+        """Raise :class:`TerrainError` unless :meth:`set_terrain` would accept ``terrain``.
+
+        ``params`` (default the current ones) must walk it, and the feet where the plan kept
+        by ``now_s`` has them (standing, under way, landing) must be on the same ground as now:
+        the terrain may change ahead of the robot, not under its feet.
+        """
+        check_walkable(terrain, self.robot, params or self._params)
+        kept = [step for step in self._steps if step.start_s <= now_s]
+        placed = [self._before[1] if self._before is not None else
+                  kept[0].positions_start if kept else self._state().positions]
+        placed += [slot.positions_after for step in kept for slot in step.slots]
+        self._check_footholds(terrain, placed, compare_heights=True)
+
+    def set_terrain(self, terrain: Staircase, now_s: float,
+                    params: GaitParameters | None = None) -> None:
+        """Plan on ``terrain`` (and with ``params``, if given) from the next step boundary.
+
+        Raises:
+            GaitParameterError: ``params`` do not suit the robot (nothing changes).
+            TerrainError: See :meth:`check_terrain` (nothing changes).
+        """
+        params = params or self._params
+        params.check_robot(self.robot)
+        self.check_terrain(terrain, now_s, params)
+        self._terrain = terrain
+        self._keep_out_m = check_walkable(terrain, self.robot, params)
+        self._params = params
+        self._twist, _ = self._clamp(self._requested, params)
+        self._replan(now_s)
+
+    def _check_footholds(self, terrain: Staircase, placed: Sequence[np.ndarray],
+                         compare_heights: bool) -> None:
+        radius = self.robot.foot_radius_m
+        for positions in placed:
+            for foot, (x, y) in zip(self.layout.names, positions, strict=True):
+                if terrain.distance_to_riser_m(x) < radius:
+                    raise TerrainError(
+                        f'the staircase puts a riser under the {foot} foot (at x = {x:.4g} m, '
+                        f'radius {radius:g} m): stairs_start_x_m = {terrain.start_x_m:g} m '
+                        f'must leave the feet on a tread')
+                if compare_heights:
+                    now_m = float(self._terrain.height_at(x))
+                    then_m = float(terrain.height_at(x))
+                    if abs(now_m - then_m) > 1e-9:
+                        raise TerrainError(
+                            f'the staircase would move the ground under the {foot} foot (at '
+                            f'({x:.4g}, {y:.4g}) m) from {now_m:g} m to {then_m:g} m: the '
+                            f'terrain may change ahead of the feet, not under them')
 
     def set_velocity(self, twist: Twist2D, now_s: float) -> tuple[Twist2D, list[str]]:
         """Walk ``twist`` from the next step boundary after ``now_s``.
@@ -522,6 +593,8 @@ class GaitPlanner:
         if twist.is_zero():
             rest = state.last_anchor if state.mode == 'walking' else state.rest_pose
             targets = place(rest, offsets)
+            targets[:, 0] = [self._terrain.foothold_candidates(x, self._keep_out_m)[0]
+                             for x in targets[:, 0]]
             yaws = np.full(self.layout.count, rest[2])
             pending = self._not_there(state, targets, yaws)
             if not pending:
@@ -584,7 +657,8 @@ class GaitPlanner:
                 target, yaw, anchor = target_of(foot, touch_down)
                 if forward is not None and (target - positions[foot]) @ forward[foot] < 0.0:
                     continue
-                target = self._within_reach(positions[foot], target, yaw)
+                target = self._on_tread(positions[foot],
+                                        self._within_reach(positions[foot], target, yaw), yaw)
                 if (np.linalg.norm(target - positions[foot]) > ALREADY_THERE
                         or abs(wrap_angle(yaw - foot_yaws[foot])) > ALREADY_THERE):
                     after[foot], after_yaws[foot] = target, yaw
@@ -632,14 +706,15 @@ class GaitPlanner:
         from gait_nodes.contract import Swing
 
         centre = zmp_points[1] if gait != 'trot' else 0.5 * (zmp_points[1] + zmp_points[2])
-        com = np.array([centre[0], centre[1], com_height_m])
         needed = 0.0
         positions, yaws = state.positions, state.yaws
         for slot in slots:
             body_yaw = float(np.angle(np.exp(1j * yaws).sum()))
-            feet = np.column_stack([positions, np.zeros(len(positions))])
+            feet = self._with_heights(positions)
+            landing = self._with_heights(slot.positions_after)
+            com = np.array([centre[0], centre[1], com_height_m + feet[:, 2].min()])
             swings = {foot: Swing(self.layout.names[foot], slot.lift_off_s, slot.touch_down_s,
-                                  feet[foot], np.array([*slot.positions_after[foot], 0.0]),
+                                  feet[foot], landing[foot],
                                   float(yaws[foot]), float(slot.yaws_after[foot]))
                       for foot in slot.feet}
             needed = max(needed, self._timing.step_s(swings, feet, yaws, body_yaw, com))
@@ -685,7 +760,8 @@ class GaitPlanner:
         kept = (self._all_down_margin(points, grounded) if len(grounded)
                 else -math.inf)
         heights = np.asarray(start.feet_in_world, dtype=float)[:, 2].copy()
-        heights[list(feet)] -= start.ground_height_m
+        ground = np.broadcast_to(np.asarray(start.ground_height_m, dtype=float), heights.shape)
+        heights[list(feet)] -= ground[list(feet)]
         heights[[f for f in range(self.layout.count) if f not in feet]] = 0.0
         self._airborne = (heights, touch_down)
         after = dataclasses.replace(state, time_s=touch_down)
@@ -736,6 +812,26 @@ class GaitPlanner:
         turn = np.abs(wrap_angle(yaws - state.yaws))
         return {int(f) for f in np.nonzero((distance > ALREADY_THERE)
                                            | (turn > ALREADY_THERE))[0]}
+
+    def _with_heights(self, positions: np.ndarray) -> np.ndarray:
+        """(F, 3) ``positions`` with the ground's height under each."""
+        return np.column_stack([positions, self._terrain.height_at(positions[:, 0])])
+
+    def _on_tread(self, start: np.ndarray, target: np.ndarray, yaw: float) -> np.ndarray:
+        """``target`` moved along x out of the risers' keep-out zones (see the module docstring).
+
+        The nearer end of the zone if the step stays within reach, else the other end, else
+        (neither in reach) the end nearer to ``start``.
+        """
+        if self._terrain.flat:
+            return target
+        candidates = [np.array([x, target[1]]) for x in
+                      self._terrain.foothold_candidates(float(target[0]), self._keep_out_m)]
+        for candidate in candidates:
+            if np.allclose(self._within_reach(start, candidate, yaw), candidate,
+                           rtol=0.0, atol=1e-12):
+                return candidate
+        return min(candidates, key=lambda c: abs(c[0] - start[0]))
 
     def _within_reach(self, start: np.ndarray, target: np.ndarray, yaw: float) -> np.ndarray:
         """``target``, pulled towards ``start`` if the step is longer than the robot reaches."""
@@ -816,7 +912,7 @@ class GaitPlanner:
         start_s = events[0][0]
         start_ns = origin_ns + int(round(start_s * NS_PER_S))
         times = np.array([t for t, _, _ in events]) - start_s
-        positions = np.array([np.column_stack([p, np.zeros(len(p))]) for _, p, _ in events])
+        positions = np.array([self._with_heights(p) for _, p, _ in events])
         if self._airborne is not None:
             # A measured start with feet in the air: they are up there until the landing.
             heights, landed_s = self._airborne

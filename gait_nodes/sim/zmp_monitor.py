@@ -16,6 +16,13 @@ of every body: for point masses ``dL_G + c x f`` reduces to their sum of ``m_i r
 g)``. For a static robot it is the COM's ground projection; for a single point mass it is the
 cart-table ZMP ``c - (c_z - z0) / g c_ddot``.
 
+The ground plane follows the contacts (stairs): it is at the height of the lowest contact point,
+i.e. the stance foot's in single support and, with feet at different heights in double support,
+the lower one's (the plane the COM reference keeps its nominal height above,
+:mod:`gait_nodes.com.support_height`); without contacts it is ``ground_height_m``. The ZMP is
+published with that height as its z. The support polygon is the horizontal projection of the
+contacts.
+
 The support polygon is the convex hull of discs of the robot's foot radius around the contact
 points (:func:`gait_nodes.geometry.foot_discs_polygon` for drawing it); the stability margin is
 the exact signed distance of the ZMP to it (as :func:`gait_nodes.geometry.disc_support_margin`:
@@ -73,8 +80,8 @@ class ZmpState:
 
     Attributes:
         com_in_world: (3,) centre of mass of the full model [m].
-        zmp_in_world: (3,) ZMP on the ground plane (z = ground height) [m]; NaN without
-            ground force.
+        zmp_in_world: (3,) ZMP on the ground plane (z = its height: the lowest contact's) [m];
+            NaN without ground force.
         normal_force_n: Vertical ground force ``m (c_ddot_z + g)`` [N].
         margin_m: Signed stability margin of the ZMP in the support polygon [m] (positive
             inside); -inf without contacts or ground force.
@@ -99,7 +106,8 @@ class ZmpMonitor:
     Args:
         model: Pinocchio model with a free-flyer root.
         foot_radius_m: Radius of each foot's contact disc [m].
-        ground_height_m: Height of the ground plane [m].
+        ground_height_m: Height of the ground plane without contacts [m] (with contacts the
+            plane is at the lowest contact, see the module docstring).
         gravity_m_s2: Gravity acceleration magnitude [m/s^2] (along -z).
     """
 
@@ -115,21 +123,31 @@ class ZmpMonitor:
         self._hull_cache = (np.zeros((0, 2)), np.zeros((0, 2)))
         self._hull_edges = None
 
-    def com_and_zmp(self, q: np.ndarray, v: np.ndarray, a: np.ndarray
+    def plane_height_m(self, contact_points_in_world: np.ndarray) -> float:
+        """Height [m] of the ZMP's plane: the lowest contact, else ``ground_height_m``."""
+        points = np.asarray(contact_points_in_world, dtype=float).reshape(-1, 3)
+        return float(points[:, 2].min()) if len(points) else self.ground_height_m
+
+    def com_and_zmp(self, q: np.ndarray, v: np.ndarray, a: np.ndarray,
+                    plane_height_m: float | None = None
                     ) -> tuple[np.ndarray, np.ndarray, float]:
-        """COM (3,) [m], ZMP (3,) on the ground plane [m] and vertical ground force [N]."""
+        """COM (3,) [m], ZMP (3,) on the plane [m] and vertical ground force [N].
+
+        ``plane_height_m``: height of the plane [m]; None: ``ground_height_m``.
+        """
+        plane = self.ground_height_m if plane_height_m is None else float(plane_height_m)
         data = self.data
         pin.computeCentroidalMomentumTimeVariation(self.model, data, q, v, a)
         com = data.com[0].copy()
         fx, fy, fz = data.dhg.linear - self.mass_kg * self.gravity
         lx, ly, _ = data.dhg.angular
-        cx, cy, cz = com[0], com[1], com[2] - self.ground_height_m
+        cx, cy, cz = com[0], com[1], com[2] - plane
         # tau_O = dL_G + (c - O) x f, x and y components (np.cross costs more than the dynamics).
         tau_x = lx + cy * fz - cz * fy
         tau_y = ly + cz * fx - cx * fz
         if fz <= MIN_NORMAL_FORCE_N:
             return com, np.full(3, np.nan), float(fz)
-        return com, np.array([-tau_y / fz, tau_x / fz, self.ground_height_m]), float(fz)
+        return com, np.array([-tau_y / fz, tau_x / fz, plane]), float(fz)
 
     def _hulls(self, contact_points_in_world: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         points = np.asarray(contact_points_in_world, dtype=float).reshape(-1, 3)
@@ -163,5 +181,5 @@ class ZmpMonitor:
                  contact_points_in_world: np.ndarray) -> ZmpState:
         """COM, ZMP and margin at ``(q, v, a)`` with the feet at ``contact_points_in_world``."""
         points = np.asarray(contact_points_in_world, dtype=float).reshape(-1, 3)
-        com, zmp, fz = self.com_and_zmp(q, v, a)
+        com, zmp, fz = self.com_and_zmp(q, v, a, self.plane_height_m(points))
         return ZmpState(com, zmp, fz, self.margin(zmp, points), points)
