@@ -330,7 +330,10 @@ class KinematicSimulator(Node):
     def _on_joint_commands(self, msg) -> None:
         stamp_ns = time_msg_to_ns(msg.header.stamp) or self._now_ns()
         try:
-            held = self._command_at(stamp_ns)  # the joints it does not name go on as they were
+            # The joints a command does not name go on as they were (a command of every joint's
+            # length names them all, or is refused).
+            held = self._command if len(msg.name) == len(self._command) \
+                else self._command_at(stamp_ns)
             self._command, self._command_velocity = joint_command_from_msg(
                 msg, self.robot, held, self._command_velocity)
         except ContractError as exc:
