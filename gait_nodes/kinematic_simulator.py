@@ -253,6 +253,7 @@ class KinematicSimulator(Node):
             'sensor_msgs/msg/CompressedImage', 'visualization_msgs/msg/MeshFile',
             'builtin_interfaces/msg/Time')}
         self._joint_names = list(self.robot.joint_names)
+        self._marker_parts_cache = self._marker_parts()
         joint_state = self._msg['JointState']
         point = self._msg['PointStamped']
         self._joint_states = self.create_publisher(joint_state, '/joint_states', 10)
@@ -329,7 +330,10 @@ class KinematicSimulator(Node):
     def _on_joint_commands(self, msg) -> None:
         stamp_ns = time_msg_to_ns(msg.header.stamp) or self._now_ns()
         try:
-            held = self._command_at(stamp_ns)  # the joints it does not name go on as they were
+            # The joints a command does not name go on as they were (a command of every joint's
+            # length names them all, or is refused).
+            held = self._command if len(msg.name) == len(self._command) \
+                else self._command_at(stamp_ns)
             self._command, self._command_velocity = joint_command_from_msg(
                 msg, self.robot, held, self._command_velocity)
         except ContractError as exc:
@@ -462,8 +466,10 @@ class KinematicSimulator(Node):
                 name = self.robot.joint_names[k]
                 window.saturated_joints[name] = max(window.saturated_joints.get(name, 0.0),
                                                     float(ratios[k]))
-        for k in np.flatnonzero(step.actuators.clamped_to_limits):
-            window.clamped_joints.add(self.robot.joint_names[k])
+        clamped = step.actuators.clamped_to_limits
+        if clamped.any():
+            for k in np.flatnonzero(clamped):
+                window.clamped_joints.add(self.robot.joint_names[k])
         window.max_slip_m = max(window.max_slip_m, step.slip_m)
         window.touch_downs += len(step.touched_down)
 
@@ -471,8 +477,9 @@ class KinematicSimulator(Node):
 
     # Messages are built in one constructor call each (the per-tick cost of this node is mostly
     # Python objects). Published messages are read-only (ROS 2's intra-process rule, which the
-    # inproc runtime relies on): the stamp, the joint name list and the polygon vertices are
-    # shared between messages rather than copied.
+    # inproc runtime relies on): the stamp, the headers of one instant, the joint name list, the
+    # polygon vertices and the markers' unchanging parts are shared between messages rather than
+    # copied.
 
     def _publish_state(self, now_ns: int, q: np.ndarray, velocities: np.ndarray) -> None:
         new = self._new
@@ -486,24 +493,23 @@ class KinematicSimulator(Node):
             new['Transform'](new['Vector3'](x, y, z), new['Quaternion'](qx, qy, qz, qw)))
         self._tf.publish(new['TFMessage']([transform]))
 
-    def _point(self, stamp, xyz):
-        new = self._new
-        return new['PointStamped'](new['Header'](stamp, WORLD_FRAME),
-                                   new['Point'](*np.asarray(xyz, dtype=float).tolist()))
-
     def _publish_monitor(self, stamp_ns: int, state: ZmpState) -> None:
-        stamp = self._stamp(stamp_ns)
-        if np.isfinite(state.zmp_in_world).all():
-            self._zmp.publish(self._point(stamp, state.zmp_in_world))
-        self._com.publish(self._point(stamp, state.com_in_world))
+        new = self._new
+        header = new['Header'](self._stamp(stamp_ns), WORLD_FRAME)
+        zmp = state.zmp_in_world.tolist()
+        zmp_finite = all(map(math.isfinite, zmp))
+        com = state.com_in_world.tolist()
+        if zmp_finite:
+            self._zmp.publish(new['PointStamped'](header, new['Point'](*zmp)))
+        self._com.publish(new['PointStamped'](header, new['Point'](*com)))
         polygon = self.monitor.support_polygon(state.contact_points_in_world)
         vertices, outline = self._polygon_points(
             polygon, self.monitor.plane_height_m(state.contact_points_in_world))
-        new = self._new
-        self._polygon.publish(new['PolygonStamped'](new['Header'](stamp, WORLD_FRAME),
-                                                    new['Polygon'](vertices)))
+        self._polygon.publish(new['PolygonStamped'](header, new['Polygon'](vertices)))
         if self.params.publish_markers:
-            self._markers.publish(self._marker_array(stamp, state, outline))
+            self._markers.publish(self._marker_array(
+                header, zmp if zmp_finite else None,
+                com if all(map(math.isfinite, com)) else None, outline))
 
     def _polygon_points(self, polygon: np.ndarray, z: float) -> tuple[list, list]:
         """Point32 vertices and closed marker outline at ``z`` [m], rebuilt when they change."""
@@ -516,32 +522,48 @@ class KinematicSimulator(Node):
             self._polygon_key = key
         return self._polygon_cache
 
-    def _marker(self, stamp, marker_id: int, kind: int, action: int, position, scale,
-                rgb, points: list):
+    def _marker_parts(self) -> dict:
+        """The parts of the markers that never change, built once."""
         new = self._new
-        return new['Marker'](
-            new['Header'](stamp, WORLD_FRAME), 'gait', marker_id, kind, action,
-            new['Pose'](new['Point'](*position), new['Quaternion'](0.0, 0.0, 0.0, 1.0)),
-            new['Vector3'](*scale), new['ColorRGBA'](*rgb, 1.0), new['Duration'](0, 0), False,
-            points, [], '', new['CompressedImage'](new['Header'](new['Time'](0, 0), ''), '', b''),
-            [], '', '', new['MeshFile']('', b''), False)
+        return {
+            'orientation': new['Quaternion'](0.0, 0.0, 0.0, 1.0),
+            'origin': new['Pose'](new['Point'](0.0, 0.0, 0.0),
+                                  new['Quaternion'](0.0, 0.0, 0.0, 1.0)),
+            'lifetime': new['Duration'](0, 0),
+            'texture': new['CompressedImage'](new['Header'](new['Time'](0, 0), ''), '', b''),
+            'mesh_file': new['MeshFile']('', b''),
+            'empty': [],
+            # (scale, colour) of the ZMP and COM spheres and of the support polygon outline.
+            0: (new['Vector3'](0.04, 0.04, 0.04), new['ColorRGBA'](1.0, 0.1, 0.1, 1.0)),
+            1: (new['Vector3'](0.05, 0.05, 0.05), new['ColorRGBA'](0.1, 0.8, 0.1, 1.0)),
+            2: (new['Vector3'](0.01, 0.0, 0.0), new['ColorRGBA'](0.2, 0.4, 1.0, 1.0)),
+        }
 
-    def _marker_array(self, stamp, state: ZmpState, outline_points: list):
-        marker_type = self._msg['Marker']
+    def _marker(self, header, marker_id: int, kind: int, action: int, pose, points: list):
+        parts = self._marker_parts_cache
+        scale, color = parts[marker_id]
+        empty = parts['empty']
+        return self._new['Marker'](
+            header, 'gait', marker_id, kind, action, pose, scale, color, parts['lifetime'],
+            False, points, empty, '', parts['texture'], empty, '', '', parts['mesh_file'], False)
+
+    def _marker_array(self, header, zmp: list | None, com: list | None, outline_points: list):
+        """ZMP and COM spheres (deleted when not finite), support polygon outline."""
+        marker_type, new = self._msg['Marker'], self._new
+        parts = self._marker_parts_cache
+        empty = parts['empty']
         markers = []
-        for marker_id, (xyz, rgb, size) in enumerate((
-                (state.zmp_in_world, (1.0, 0.1, 0.1), 0.04),
-                (state.com_in_world, (0.1, 0.8, 0.1), 0.05))):
-            xyz = np.asarray(xyz, dtype=float)
-            finite = bool(np.isfinite(xyz).all())
-            markers.append(self._marker(
-                stamp, marker_id, marker_type.SPHERE,
-                marker_type.ADD if finite else marker_type.DELETE,
-                xyz.tolist() if finite else (0.0, 0.0, 0.0), (size, size, size), rgb, []))
-        markers.append(self._marker(stamp, 2, marker_type.LINE_STRIP, marker_type.ADD,
-                                    (0.0, 0.0, 0.0), (0.01, 0.0, 0.0), (0.2, 0.4, 1.0),
-                                    list(outline_points)))
-        return self._new['MarkerArray'](markers)
+        for marker_id, xyz in enumerate((zmp, com)):
+            if xyz is None:
+                markers.append(self._marker(header, marker_id, marker_type.SPHERE,
+                                            marker_type.DELETE, parts['origin'], empty))
+            else:
+                markers.append(self._marker(
+                    header, marker_id, marker_type.SPHERE, marker_type.ADD,
+                    new['Pose'](new['Point'](*xyz), parts['orientation']), empty))
+        markers.append(self._marker(header, 2, marker_type.LINE_STRIP, marker_type.ADD,
+                                    parts['origin'], outline_points))
+        return new['MarkerArray'](markers)
 
     # -- diagnostics ---------------------------------------------------------------------------
 

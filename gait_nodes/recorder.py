@@ -67,9 +67,13 @@ class Recorder(Node):
 
     def _writer_for(self, topic: str):
         clock = self.get_clock()
+        # The runtime's Clock reads integer nanoseconds without a Time object; rclpy's has no
+        # now_ns.
+        now_ns = getattr(clock, 'now_ns', None) or (lambda: clock.now().nanoseconds)
+        writer = self.writer
 
         def write(data: bytes) -> None:
-            self.writer.write(topic, bytes(data), clock.now().nanoseconds)
+            writer.write(topic, bytes(data), now_ns())
 
         return write
 

@@ -19,7 +19,7 @@ import yaml
 from gait_nodes import runtime
 from gait_nodes.bag.analysis import inspect_bag
 from gait_nodes.bag.reader import BagReader, NotABagError
-from gait_nodes.bag.writer import BagWriter
+from gait_nodes.bag.writer import BagWriter, message_appender
 from gait_nodes.graph import TOPICS
 from gait_nodes.interfaces import get_message, serialize_message, type_hash
 from gait_nodes.replay import Replayer, replay_qos
@@ -459,6 +459,46 @@ def test_writer_refuses_an_existing_directory(tmp_path):
     (tmp_path / 'exists').mkdir()
     with pytest.raises(ConfigError, match='exists already'):
         BagWriter(tmp_path / 'exists')
+
+
+@pytest.mark.parametrize('compression', ['zstd', 'none'])
+def test_fast_message_path_writes_the_bytes_of_mcap_add_message(compression):
+    """The recorder's message appender leaves the file mcap's own add_message would write.
+
+    Small chunks (many chunk ends), out-of-order log times, channels appearing mid-chunk,
+    empty and large messages, explicit flushes in between.
+    """
+    import io
+
+    from mcap.writer import CompressionType, Writer
+
+    kind = {'zstd': CompressionType.ZSTD, 'none': CompressionType.NONE}[compression]
+    messages = written_messages()
+    channels = sorted({topic for topic, _, _ in messages})
+    outputs = []
+    for fast in (False, True):
+        stream = io.BytesIO()
+        writer = Writer(stream, chunk_size=4096, compression=kind)
+        writer.start(profile='ros2', library='test')
+        schema = writer.register_schema(name='s', encoding='ros2msg', data=b'')
+        ids = {t: writer.register_channel(topic=t, message_encoding='cdr', schema_id=schema)
+               for t in channels}
+        append = message_appender(writer) if fast else None
+        assert not fast or append is not None
+        for k, (topic, stamp, data) in enumerate(messages):
+            log_time = stamp - (k % 5) * 1000  # not monotonic
+            data = b'' if k % 97 == 0 else data * (1 + (k % 13 == 0) * 20)
+            if fast:
+                append(ids[topic], log_time, data, stamp, k)
+            else:
+                writer.add_message(channel_id=ids[topic], log_time=log_time, data=data,
+                                   publish_time=stamp, sequence=k)
+            if k % 301 == 0:
+                writer.flush()
+        writer.finish()
+        outputs.append(stream.getvalue())
+    assert len(messages) > 500
+    assert outputs[0] == outputs[1]
 
 
 def test_margin_of_the_fixture_formula_is_consistent():

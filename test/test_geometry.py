@@ -4,7 +4,13 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from gait_nodes.geometry import convex_hull, foot_discs_polygon, signed_distance
+from gait_nodes.geometry import (
+    convex_hull,
+    foot_discs_polygon,
+    point_signed_distance,
+    polygon_edge_list,
+    signed_distance,
+)
 
 SQUARE = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
 
@@ -68,3 +74,20 @@ def test_exact_disc_margin_agrees_with_a_fine_disc_polygon():
     points = np.random.default_rng(3).uniform(-0.5, 1.0, size=(200, 2))
     fine = signed_distance(points, foot_discs_polygon(centres, 0.055, segments=720))
     np.testing.assert_allclose(disc_support_margin(points, centres, 0.055), fine, atol=1e-5)
+
+
+@given(st.lists(st.tuples(st.floats(-1, 1), st.floats(-1, 1)), min_size=1, max_size=6),
+       st.lists(st.tuples(st.floats(-2, 2), st.floats(-2, 2)), min_size=1, max_size=8),
+       st.booleans())
+@settings(max_examples=200, deadline=None)
+def test_one_point_margin_is_the_array_margin_bit_for_bit(centres, points, discs):
+    """The monitor's scalar margin of one point is signed_distance's, exactly.
+
+    Hull vertices, edge midpoints and inner points included, for hulls of 1, 2 or more vertices.
+    """
+    centres = np.array(centres)
+    hull = foot_discs_polygon(centres, 0.055) if discs else convex_hull(centres)
+    points = np.concatenate([np.array(points), hull, 0.5 * (hull + np.roll(hull, 1, axis=0))])
+    edge_list = polygon_edge_list(hull)
+    scalar = [point_signed_distance(x, y, edge_list) for x, y in points.tolist()]
+    assert scalar == signed_distance(points, hull).tolist()

@@ -660,6 +660,28 @@ def test_malformed_content_raises():
         image.deserialize(bytes(data))
 
 
+def test_string_sequences_sent_again_or_changed_match_rosbags():
+    """Sequences of strings are encoded once per content, and stay right.
+
+    A name list sent again (the same or an equal list), edited in place, or at another
+    alignment still gives rosbags' bytes.
+    """
+    joint_state = generated_class('sensor_msgs/msg/JointState')
+    names = [f'joint_{k}' * (1 + k % 3) for k in range(7)]
+    first = assert_conforms(SHIPPED, 'sensor_msgs/msg/JointState',
+                            joint_state(name=names, position=[0.5] * 7))
+    assert joint_state(name=list(names), position=[0.5] * 7).serialize() == first
+    for edit in (lambda: names.append('x'), lambda: names.__setitem__(0, 'other_joint'),
+                 lambda: names.__setitem__(slice(None), []), lambda: names.append('é\u00fc')):
+        edit()
+        for frame_id in ('', 'a', 'ab', 'abc'):  # every alignment of the sequence's count
+            message = joint_state(name=names, position=[1.5] * len(names))
+            message.header.frame_id = frame_id
+            assert_conforms(SHIPPED, 'sensor_msgs/msg/JointState', message)
+    with pytest.raises(SerializationError, match='JointState'):
+        joint_state(name=['a', 3]).serialize()
+
+
 EVERYTHING = 'cdr_test_msgs/msg/Everything'
 
 

@@ -254,6 +254,18 @@ class _SerializerBuilder:
             if flat is not None:
                 self._flat_run(indent, var, count, *flat, state)
                 return
+        elif count is None and field.base_type == 'string' and not field.string_bound:
+            # After its count a sequence of strings starts 4-aligned and holds 4-aligned
+            # items only: its bytes depend on its content alone, and a name list sent again
+            # and again (JointState.name) is encoded once.
+            self.flush()
+            key, data = self.w.unique('k'), self.w.unique('c')
+            self.w.emit(indent, f'{key} = tuple({var})')
+            self.w.emit(indent, f'{data} = STRINGS.get({key})')
+            self.w.emit(indent, f'if {data} is None: {data} = string_sequence({key})')
+            self.w.emit(indent, f'b += {data}')
+            state.reset(1)
+            return
         self.flush()
         self.w.emit(indent, f'for {loop_var} in {var}:')
         self.single(indent + 1, single, loop_var, _Alignment(1))
@@ -410,12 +422,35 @@ class _DeserializerBuilder:
         state.reset(1)
 
 
+#: Encoded sequences of strings by content (see :func:`_string_sequence`), for all types.
+_STRING_SEQUENCES: dict[tuple, bytes] = {}
+_STRING_SEQUENCES_KEPT = 256
+_U32_LE = struct.Struct('<I')
+
+
+def _string_sequence(strings: tuple) -> bytes:
+    """CDR of the items of a sequence of unbounded strings that starts 4-aligned, remembered."""
+    out = bytearray()
+    for string in strings:
+        out += bytes((-len(out)) % 4)
+        encoded = string.encode()
+        out += _U32_LE.pack(len(encoded) + 1)
+        out += encoded
+        out += b'\x00'
+    out = bytes(out)
+    if len(_STRING_SEQUENCES) >= _STRING_SEQUENCES_KEPT:
+        _STRING_SEQUENCES.clear()
+    _STRING_SEQUENCES[strings] = out
+    return out
+
+
 def _compile(writer: _CodeWriter, name: str, args: str, result: str) -> Callable:
     source = '\n'.join([f'def {name}({args}):', *writer.lines, f'    return {result}'])
     namespace = dict(writer.constants)
     namespace.update(
         PAD=[bytes(i) for i in range(8)], U32=struct.Struct('<I'),
         pack=struct.pack, unpack_from=struct.unpack_from,
+        STRINGS=_STRING_SEQUENCES, string_sequence=_string_sequence,
     )
     exec(compile(source, f'<cdr {name}>', 'exec'), namespace)  # noqa: S102 - generated above
     function = namespace[name]

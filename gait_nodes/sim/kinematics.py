@@ -95,9 +95,12 @@ class PositionActuators:
         model = robot.model
         self.continuous = np.array([model.joints[model.getJointId(name)].nq == 2
                                     for name in robot.joint_names])
+        self._any_continuous = bool(self.continuous.any())
         self.lower = np.array(robot.lower_limits)
         self.upper = np.array(robot.upper_limits)
         self.velocity_limits_rad_s = np.array(robot.velocity_limits_rad_s)
+        # (dt [s], allowed step, its negative) of the last step: the step is nearly always fixed.
+        self._allowed: tuple[float, np.ndarray, np.ndarray] = (math.nan, self.lower, self.lower)
 
     def step(self, positions_rad: np.ndarray, commanded_rad: np.ndarray,
              dt_s: float) -> ActuatorStep:
@@ -111,12 +114,16 @@ class PositionActuators:
         target = np.minimum(np.maximum(commanded_rad, self.lower), self.upper)
         clamped = np.abs(target - commanded_rad) > 1e-12
         delta = target - positions_rad
-        if self.continuous.any():
+        if self._any_continuous:
             wrapped = (delta + math.pi) % (2.0 * math.pi) - math.pi
             delta = np.where(self.continuous, wrapped, delta)
-        allowed = self.velocity_limits_rad_s * dt_s
+        cached_dt, allowed, minus_allowed = self._allowed
+        if dt_s != cached_dt:
+            allowed = self.velocity_limits_rad_s * dt_s
+            minus_allowed = -allowed
+            self._allowed = (dt_s, allowed, minus_allowed)
         ratio = np.abs(delta) / allowed
-        moved = np.minimum(np.maximum(delta, -allowed), allowed)
+        moved = np.minimum(np.maximum(delta, minus_allowed), allowed)
         positions = np.minimum(np.maximum(positions_rad + moved, self.lower), self.upper)
         velocities = (positions - positions_rad) / dt_s
         return ActuatorStep(positions, velocities, ratio, clamped)
@@ -130,17 +137,20 @@ def kabsch(points_in_base: np.ndarray, points_in_world: np.ndarray) -> pin.SE3 |
     count = len(points_in_base)
     if count < 3:
         return None
-    centre_base = points_in_base.sum(axis=0) / count
-    centre_world = points_in_world.sum(axis=0) / count
-    u, singular, vt = np.linalg.svd((points_in_base - centre_base).T
-                                    @ (points_in_world - centre_world))
-    if singular[1] <= COLLINEAR_TOLERANCE * max(singular[0], 1e-300):
+    centre_base = np.add.reduce(points_in_base, 0) / count
+    centre_world = np.add.reduce(points_in_world, 0) / count
+    # ndarray.dot: the products of matmul (@) with less overhead per call on 3x3 matrices.
+    u, singular, vt = np.linalg.svd((points_in_base - centre_base).T.dot(
+        points_in_world - centre_world))
+    largest, second, _ = singular.tolist()
+    if second <= COLLINEAR_TOLERANCE * max(largest, 1e-300):
         return None
     # Kabsch: R = V diag(1, 1, d) U^T with d = det(V U^T) = +-1 (no reflection).
-    rotation = vt.T @ u.T
+    v = vt.T
+    rotation = v.dot(u.T)
     if _det3(rotation) < 0.0:
-        rotation = vt.T @ (u * [1.0, 1.0, -1.0]).T
-    return pin.SE3(rotation, centre_world - rotation @ centre_base)
+        rotation = v.dot((u * [1.0, 1.0, -1.0]).T)
+    return pin.SE3(rotation, centre_world - rotation.dot(centre_base))
 
 
 def _det3(m: np.ndarray) -> float:
@@ -278,6 +288,7 @@ class KinematicSimulation:
         feet = self._feet_in_base(self.joints)
         self.latched: list[pin.SE3 | None] = [self.base * foot for foot in feet]
         self._heights: np.ndarray | None = None
+        self._points: np.ndarray | None = None  # contact_points() until a foot lands or lifts
 
     @property
     def contacts(self) -> np.ndarray:
@@ -309,12 +320,14 @@ class KinematicSimulation:
 
     def contact_points(self) -> np.ndarray:
         """(F, 3) contact points of the latched feet; NaN rows for feet in the air [m]."""
-        points = np.full((len(self.latched), 3), np.nan)
-        for k, foot in enumerate(self.latched):
-            if foot is not None:
-                points[k] = foot.translation
-                points[k, 2] -= self.robot.foot_frame_height_m
-        return points
+        if self._points is None:
+            points = np.full((len(self.latched), 3), np.nan)
+            for k, foot in enumerate(self.latched):
+                if foot is not None:
+                    points[k] = foot.translation
+                    points[k, 2] -= self.robot.foot_frame_height_m
+            self._points = points
+        return self._points.copy()
 
     def step(self, commanded_joints: np.ndarray, dt_s: float,
              contacts: np.ndarray | None = None) -> SimulationStep:
@@ -331,22 +344,28 @@ class KinematicSimulation:
         if contacts is None:
             contacts = self._contacts_by_height(feet)
         contacts = np.asarray(contacts, dtype=bool)
-        kept = [k for k, down in enumerate(contacts) if down and self.latched[k] is not None]
+        down = contacts.tolist()
+        latched = self.latched
+        kept = [k for k, d in enumerate(down) if d and latched[k] is not None]
         base = self.base
         slip = 0.0
         if kept:
-            base = fit_base_pose(self.base, [feet[k] for k in kept],
-                                 [self.latched[k] for k in kept],
+            base = fit_base_pose(self.base, [feet[k] for k in kept], [latched[k] for k in kept],
                                  self.settings.rotation_weight_m if self._flat_feet else 0.0)
-            placed = np.array([(base * feet[k]).translation - self.latched[k].translation
-                               for k in kept])
-            slip = float(np.sqrt((placed * placed).sum(axis=1).max()))
+            squared = []
+            for k in kept:
+                dx, dy, dz = (base.act(feet[k].translation) - latched[k].translation).tolist()
+                squared.append(dx * dx + dy * dy + dz * dz)
+            slip = math.sqrt(max(squared))
         touched = []
-        for k, down in enumerate(contacts):
-            if not down:
-                self.latched[k] = None
-            elif self.latched[k] is None:
-                self.latched[k] = base * feet[k]
+        for k, d in enumerate(down):
+            if not d:
+                if latched[k] is not None:
+                    latched[k] = None
+                    self._points = None
+            elif latched[k] is None:
+                latched[k] = base * feet[k]
+                self._points = None
                 touched.append(self.robot.foot_names[k])
         self.base = base
         self.joints = actuators.positions_rad

@@ -34,13 +34,19 @@ configurations by central differences on the configuration manifold
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 import pinocchio as pin
 
 from gait_nodes.com.trajectory import GRAVITY_M_S2
-from gait_nodes.geometry import convex_hull, foot_discs_polygon, polygon_edges, signed_distance
+from gait_nodes.geometry import (
+    convex_hull,
+    foot_discs_polygon,
+    point_signed_distance,
+    polygon_edge_list,
+)
 
 #: The project's one gravity (the cart-table planners' and Pinocchio's default model gravity),
 #: so that the monitor judges the planned motion with the planners' physics.
@@ -119,9 +125,10 @@ class ZmpMonitor:
         self.foot_radius_m = float(foot_radius_m)
         self.ground_height_m = float(ground_height_m)
         self.gravity = np.array([0.0, 0.0, -gravity_m_s2])
+        self._weight = (self.mass_kg * self.gravity).tolist()
         self._hull_key = None
         self._hull_cache = (np.zeros((0, 2)), np.zeros((0, 2)))
-        self._hull_edges = None
+        self._hull_edges: list = []
 
     def plane_height_m(self, contact_points_in_world: np.ndarray) -> float:
         """Height [m] of the ZMP's plane: the lowest contact, else ``ground_height_m``."""
@@ -139,15 +146,18 @@ class ZmpMonitor:
         data = self.data
         pin.computeCentroidalMomentumTimeVariation(self.model, data, q, v, a)
         com = data.com[0].copy()
-        fx, fy, fz = data.dhg.linear - self.mass_kg * self.gravity
-        lx, ly, _ = data.dhg.angular
-        cx, cy, cz = com[0], com[1], com[2] - plane
-        # tau_O = dL_G + (c - O) x f, x and y components (np.cross costs more than the dynamics).
+        # Scalars: numpy's per-call cost exceeds the arithmetic of three components.
+        weight_x, weight_y, weight_z = self._weight
+        linear_x, linear_y, linear_z, lx, ly, _ = data.dhg.vector.tolist()
+        fx, fy, fz = linear_x - weight_x, linear_y - weight_y, linear_z - weight_z
+        cx, cy, cz = com.tolist()
+        cz -= plane
+        # tau_O = dL_G + (c - O) x f, x and y components.
         tau_x = lx + cy * fz - cz * fy
         tau_y = ly + cz * fx - cx * fz
         if fz <= MIN_NORMAL_FORCE_N:
-            return com, np.full(3, np.nan), float(fz)
-        return com, np.array([-tau_y / fz, tau_x / fz, plane]), float(fz)
+            return com, np.full(3, np.nan), fz
+        return com, np.array([-tau_y / fz, tau_x / fz, plane]), fz
 
     def _hulls(self, contact_points_in_world: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         points = np.asarray(contact_points_in_world, dtype=float).reshape(-1, 3)
@@ -155,12 +165,12 @@ class ZmpMonitor:
         if key != self._hull_key:
             if len(points) == 0:
                 self._hull_cache = (np.zeros((0, 2)), np.zeros((0, 2)))
-                self._hull_edges = None
+                self._hull_edges = []
             else:
                 self._hull_cache = (convex_hull(points[:, :2]),
                                     foot_discs_polygon(points[:, :2], self.foot_radius_m,
                                                        POLYGON_SEGMENTS_PER_FOOT))
-                self._hull_edges = polygon_edges(self._hull_cache[0])
+                self._hull_edges = polygon_edge_list(self._hull_cache[0])
             self._hull_key = key
         return self._hull_cache
 
@@ -171,11 +181,11 @@ class ZmpMonitor:
     def margin(self, zmp_in_world: np.ndarray, contact_points_in_world: np.ndarray) -> float:
         """Exact signed margin [m] of the ZMP in the hull of the contact discs."""
         centres_hull = self._hulls(contact_points_in_world)[0]
-        if len(centres_hull) == 0 or not np.all(np.isfinite(zmp_in_world[:2])):
-            return -np.inf
+        x, y = zmp_in_world[0], zmp_in_world[1]
+        if len(centres_hull) == 0 or not (math.isfinite(x) and math.isfinite(y)):
+            return -math.inf
         # geometry.disc_support_margin, with the centres' hull kept between calls.
-        return float(signed_distance(np.asarray(zmp_in_world)[None, :2], centres_hull,
-                                     self._hull_edges)[0] + self.foot_radius_m)
+        return point_signed_distance(float(x), float(y), self._hull_edges) + self.foot_radius_m
 
     def evaluate(self, q: np.ndarray, v: np.ndarray, a: np.ndarray,
                  contact_points_in_world: np.ndarray) -> ZmpState:
