@@ -42,6 +42,8 @@ def format_gait(gait: dict | None) -> list[str]:
                       f'ft/min)' if speed is not None else '')
         lines.append(f'  walked:      {base["distance_m"]:.3f} m in {base["time_s"]:.2f} s '
                      f'(net {base["displacement_m"]:.3f} m){speed_text}')
+        if base.get('rise_m') is not None and abs(base['rise_m']) >= 0.005:
+            lines.append(f'  climbed:     {base["rise_m"]:+.3f} m (base height, last minus first)')
     steps = gait.get('steps')
     if steps:
         text = f'  steps:       {steps["count"]}'

@@ -129,6 +129,9 @@ def test_no_error_the_zmp_stays_inside_and_the_ik_is_on_target(inspected):
         assert peak['samples_over_limit'] == 0 and peak['peak_ratio_to_limit'] < 0.9, topic
     # The monitor's ZMP and inverse dynamics agree on the plane the monitor put it on.
     assert report['consistency']['zmp']['max_m'] < 1e-4
+    # The summary's climb: the base ends the total rise above where it started.
+    rise = SCENARIO.settings['stairs_rise_m'] * SCENARIO.settings['stairs_count']
+    assert report['base']['rise_m'] == pytest.approx(rise, abs=2e-3)
 
 
 def test_footholds_are_on_the_treads_at_the_stair_heights(raw):

@@ -7,7 +7,8 @@ independent reader of the bag can check it:
   ``(count - 1) / (last - first log time)`` of that topic.
 - ``distance_m``: path length of ``odom -> base_link`` (from ``/tf``) in the ground plane;
   ``displacement_m``: straight-line distance from its first to its last position;
-  ``mean_speed_m_s``: ``distance_m`` over the time between those two samples (header stamps).
+  ``mean_speed_m_s``: ``distance_m`` over the time between those two samples (header stamps);
+  ``rise_m``: height of the last base position above the first (stairs climbed).
 - ``steps``: each swing executed by the time the bag ends (the latest /gait/footsteps version of
   it, see :class:`gait_nodes.contract.FootstepPlan`); a step's length is the horizontal distance
   from its lift-off place to its landing place.
@@ -194,7 +195,8 @@ def base_metrics(series: GaitSeries) -> dict | None:
             'distance_m': _round(distance),
             'displacement_m': _round(float(np.linalg.norm(xy[-1] - xy[0]))),
             'time_s': _round(elapsed),
-            'mean_speed_m_s': _round(distance / elapsed) if elapsed > 0 else None}
+            'mean_speed_m_s': _round(distance / elapsed) if elapsed > 0 else None,
+            'rise_m': _round(float(base[-1, 3] - base[0, 3]))}
 
 
 def executed_swings(plans: list[contract.FootstepPlan], until_ns: int | None) -> list[dict]:
