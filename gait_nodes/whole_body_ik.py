@@ -157,6 +157,8 @@ class WholeBodyIk(Node):
         self.q_nominal = nominal_configuration(self.robot, self._family)
         self._q_solution = self.q_nominal.copy()
         self._q_command = self.q_nominal.copy()
+        # Solutions of the last consecutive solved ticks (oldest first): the warm start.
+        self._solutions: list[np.ndarray] = []
         self._reseed = False
         self._plan = None
         self._plan_order = None
@@ -267,6 +269,8 @@ class WholeBodyIk(Node):
         self._swings[swing.foot] = swing
 
     def _on_tf(self, msg) -> None:
+        if self._moving:
+            return  # the base pose only seeds the posture held before motion
         for transform in msg.transforms:
             if transform.header.frame_id.lstrip('/') == 'odom' and \
                     transform.child_frame_id.lstrip('/') == 'base_link':
@@ -341,6 +345,7 @@ class WholeBodyIk(Node):
         held = self._moving and self.inputs.stale
         if held:
             target = self._q_command
+            self._solutions.clear()
         elif self._com_states is not None and self._plan is not None:
             self._moving = True
             targets, fallbacks = self._targets_at(now_ns)
@@ -349,8 +354,13 @@ class WholeBodyIk(Node):
                 self._q_solution = seed_configuration(self.robot, targets, self._family,
                                                       self._q_solution[:3])
                 self._reseed = False
-            result = self.solver.solve(targets, self._q_solution)
+                self._solutions.clear()
+            result = self.solver.solve(targets, self.solver.warm_start(self._solutions)
+                                       if self._solutions else self._q_solution)
             self._q_solution = result.q
+            self._solutions.append(result.q)
+            if len(self._solutions) > 3:
+                del self._solutions[0]
             window.max_foot_error_m = max(window.max_foot_error_m,
                                           float(result.foot_position_errors_m.max()))
             window.max_orientation_error_rad = max(
