@@ -155,6 +155,8 @@ class WholeBodyIkSolver:
         vector_idx = robot.indices(self.joint_names)
         self._lower = np.array(robot.lower_limits[vector_idx])
         self._upper = np.array(robot.upper_limits[vector_idx])
+        # A joint this close to a limit is reported on it [rad or m].
+        self._lower_near, self._upper_near = self._lower + 1e-9, self._upper - 1e-9
         self._orient = robot.foot_orientation == 'yaw'
         self._rows_per_foot = 6 if self._orient else 3
         self._frames = tuple(int(f) for f in robot.foot_frame_ids)
@@ -220,45 +222,42 @@ class WholeBodyIkSolver:
         if not free_base:
             q[:3] = targets.base_position_in_world
         work = self._workspace(free_base)
+        if work.settings is not settings:
+            work.weigh(settings)
         frame_targets = targets.feet_in_world + self._frame_offset
         orient = self._orient
         if orient:
             rotation_targets = self._rotation_targets_for(targets.foot_yaws_rad)
         com_target = targets.com_in_world
-        error, per_foot, full, placements = work.error, work.per_foot, work.full, work.placements
-        positions_error = per_foot[:, :3]
-        base_cols, q_idx, lower, upper = work.base_cols, self._q_idx, self._lower, self._upper
+        error, full, placements = work.error, work.full, work.placements
+        positions, positions_error, com_error = work.positions, work.positions_error, \
+            work.com_error
+        rows_per_foot, base_cols = work.rows_per_foot, work.base_cols
+        q_idx, lower, upper = self._q_idx, self._lower, self._upper
         joints = q[q_idx]
-        tolerances = work.tolerances
-        tolerances[:] = (settings.position_tolerance_m, settings.orientation_tolerance_rad)[
-            :len(tolerances)]
-        com_tolerance = settings.com_tolerance_m
         world = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
-        com_error = 0.0
         iteration = 0
         while True:
             pin.forwardKinematics(model, data, q)
             for k, frame in enumerate(frames):
                 placements[k] = pin.updateFramePlacement(model, data, frame).homogeneous
-            np.subtract(frame_targets, work.positions, out=positions_error)
+            np.subtract(frame_targets, positions, out=positions_error)
             if orient:
                 self._orientation_errors(rotation_targets, work)
-            errors = np.sqrt((per_foot * per_foot) @ work.groups)  # (F, 1 or 2) norms
-            converged = bool((errors <= tolerances).all())
             if free_base:
-                com = error[-3:]
                 np.subtract(com_target, pin.centerOfMass(
-                    model, data, pin.KinematicLevel.POSITION, False), out=com)
-                com_error = math.sqrt(com @ com)
-                converged = converged and com_error <= com_tolerance
+                    model, data, pin.KinematicLevel.POSITION, False), out=com_error)
+            squares = error * error
+            # Every foot's and the COM's squared error over its squared tolerance, at most 1.
+            converged = max((squares @ work.weights).tolist()) <= 1.0
             if converged or iteration >= settings.max_iterations:
                 break
             iteration += 1
             pin.computeJointJacobians(model, data)
             for k, frame in enumerate(frames):
-                r = k * work.rows_per_foot
-                full[r:r + work.rows_per_foot, :-3] = \
-                    pin.getFrameJacobian(model, data, frame, world)[:work.rows_per_foot]
+                r = k * rows_per_foot
+                full[r:r + rows_per_foot, :-3] = \
+                    pin.getFrameJacobian(model, data, frame, world)[:rows_per_foot]
             if free_base:
                 full[-3:, :-3] = pin.jacobianCenterOfMass(model, data, False)
             jacobian = full[:, work.columns]
@@ -270,7 +269,7 @@ class WholeBodyIkSolver:
             if info != 0:  # not reached with lambda > 0; keep the iteration defined anyway
                 step = np.linalg.lstsq(jacobian, error, rcond=None)[0]
             joint_step = step[base_cols:]
-            largest = np.abs(joint_step).max(initial=0.0)
+            largest = max(map(abs, joint_step.tolist()), default=0.0)
             if largest > MAX_NEWTON_STEP_RAD:
                 step *= MAX_NEWTON_STEP_RAD / largest
             if free_base:
@@ -279,15 +278,14 @@ class WholeBodyIkSolver:
             np.maximum(joints, lower, out=joints)
             np.minimum(joints, upper, out=joints)
             q[q_idx] = joints
-        at_limit = (joints <= lower + 1e-9) | (joints >= upper - 1e-9)
+        norms = np.sqrt(squares @ work.groups)  # feet positions, orientations, COM
+        at_limit = np.flatnonzero((joints <= self._lower_near) | (joints >= self._upper_near))
         return IkResult(q=q, converged=converged, iterations=iteration,
-                        foot_position_errors_m=errors[:, 0],
-                        foot_orientation_errors_rad=errors[:, 1] if orient
+                        foot_position_errors_m=norms[:feet_count],
+                        foot_orientation_errors_rad=norms[feet_count:2 * feet_count] if orient
                         else np.zeros(feet_count),
-                        com_error_m=com_error,
-                        joints_at_limit=tuple(self.joint_names[k]
-                                              for k in np.flatnonzero(at_limit))
-                        if at_limit.any() else ())
+                        com_error_m=float(norms[-1]) if free_base else 0.0,
+                        joints_at_limit=tuple(self.joint_names[k] for k in at_limit.tolist()))
 
     @staticmethod
     def _orientation_errors(rotation_targets: np.ndarray, work: _Workspace) -> None:
@@ -298,7 +296,7 @@ class WholeBodyIkSolver:
         """
         np.matmul(rotation_targets, work.rotations_transposed, out=work.relative)
         np.matmul(work.relative_flat, VEE_AND_TRACE, out=work.vee_and_trace)
-        if work.vee_and_trace[:, 3].min() > SMALL_ANGLE_TRACE:
+        if min(work.vee_and_trace[:, 3].tolist()) > SMALL_ANGLE_TRACE:
             work.per_foot[:, 3:] = work.vee_and_trace[:, :3]
         else:
             for k, relative in enumerate(work.relative):
@@ -339,6 +337,8 @@ class _Workspace:
         self.error = np.zeros(rows)
         self.per_foot = self.error[:feet_count * rows_per_foot].reshape(feet_count,
                                                                         rows_per_foot)
+        self.positions_error = self.per_foot[:, :3]
+        self.com_error = self.error[-3:] if free_base else None
         # Foot frame placements (homogeneous matrices) and views of them.
         self.placements = np.zeros((feet_count, 4, 4))
         self.positions = self.placements[:, :3, 3]
@@ -346,11 +346,28 @@ class _Workspace:
         self.relative = np.zeros((feet_count, 3, 3))
         self.relative_flat = self.relative.reshape(feet_count, 9)
         self.vee_and_trace = np.zeros((feet_count, 4))
-        # Sums squared errors into a norm per foot: position, and orientation (6-row feet).
-        self.groups = np.zeros((rows_per_foot, rows_per_foot // 3))
-        self.groups[:3, 0] = 1.0
-        self.groups[3:, -1] = 1.0
-        self.tolerances = np.zeros(rows_per_foot // 3)
+        # Sums the squared errors into norms: each foot's position, each foot's orientation
+        # (6-row feet), the COM (free base); ``weights`` divides them by their tolerances.
+        orientation = rows_per_foot == 6
+        self.groups = np.zeros((rows, (2 if orientation else 1) * feet_count + 1))
+        for k in range(feet_count):
+            r = k * rows_per_foot
+            self.groups[r:r + 3, k] = 1.0
+            if orientation:
+                self.groups[r + 3:r + 6, feet_count + k] = 1.0
+        if free_base:
+            self.groups[-3:, -1] = 1.0
+        self.weights = self.groups.copy()
+        self.settings = None
+
+    def weigh(self, settings: IkSettings) -> None:
+        """Scale :attr:`weights` to ``settings``' tolerances."""
+        feet_count = len(self.per_foot)
+        scale = np.full(self.groups.shape[1], settings.position_tolerance_m ** -2)
+        scale[feet_count:-1] = settings.orientation_tolerance_rad ** -2
+        scale[-1] = settings.com_tolerance_m ** -2
+        self.weights = self.groups * scale
+        self.settings = settings
 
 
 # -- seeds and the nominal stance -------------------------------------------------------------
@@ -484,7 +501,7 @@ def limit_joint_velocity(robot: RobotModel, q_previous: np.ndarray, q_target: np
     step = robot.joint_positions(q_target) - previous
     limits = robot.velocity_limits_rad_s
     demanded = np.abs(step) / (limits * dt_s)
-    ratio = float(demanded.max(initial=0.0))
+    ratio = max(demanded.tolist(), default=0.0)
     if ratio <= 1.0:
         return np.array(q_target, dtype=float), step / dt_s, VelocitySaturation(ratio)
     # Scale a hair more than needed so that rounding never leaves a joint above its limit.
@@ -589,3 +606,9 @@ def current_swing(plan: FootstepPlan, foot: str, t_s: float) -> Swing | None:
         if swing.foot == foot and swing.lift_off_s < t_s < swing.touch_down_s:
             return swing
     return None
+
+
+def swings_under_way(plan: FootstepPlan, t_s: float) -> dict[str, Swing]:
+    """Foot name -> its swing under way at ``t_s`` from the plan start (feet in the air)."""
+    return {swing.foot: swing for swing in plan.swings()
+            if swing.lift_off_s < t_s < swing.touch_down_s}
