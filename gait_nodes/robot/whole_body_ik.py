@@ -155,8 +155,6 @@ class WholeBodyIkSolver:
         vector_idx = robot.indices(self.joint_names)
         self._lower = np.array(robot.lower_limits[vector_idx])
         self._upper = np.array(robot.upper_limits[vector_idx])
-        # A joint this close to a limit is reported on it [rad or m].
-        self._lower_near, self._upper_near = self._lower + 1e-9, self._upper - 1e-9
         self._orient = robot.foot_orientation == 'yaw'
         self._rows_per_foot = 6 if self._orient else 3
         self._frames = tuple(int(f) for f in robot.foot_frame_ids)
@@ -214,7 +212,7 @@ class WholeBodyIkSolver:
                              f'{len(targets.feet_in_world)}')
         settings = self.settings
         q = np.array(q_start, dtype=float)
-        if not np.isfinite(q).all():
+        if not math.isfinite(q @ q) and not np.isfinite(q).all():  # (q @ q: one cheap test)
             raise ValueError('q_start holds a NaN or infinite value')
         half = 0.5 * targets.base_yaw_rad
         q[3:7] = (0.0, 0.0, math.sin(half), math.cos(half))
@@ -279,13 +277,16 @@ class WholeBodyIkSolver:
             np.minimum(joints, upper, out=joints)
             q[q_idx] = joints
         norms = np.sqrt(squares @ work.groups)  # feet positions, orientations, COM
-        at_limit = np.flatnonzero((joints <= self._lower_near) | (joints >= self._upper_near))
+        margins = np.minimum(joints - lower, upper - joints).tolist()
+        at_limit = () if min(margins, default=1.0) > 1e-9 else tuple(
+            name for name, margin in zip(self.joint_names, margins, strict=True)
+            if margin <= 1e-9)
         return IkResult(q=q, converged=converged, iterations=iteration,
                         foot_position_errors_m=norms[:feet_count],
                         foot_orientation_errors_rad=norms[feet_count:2 * feet_count] if orient
                         else np.zeros(feet_count),
                         com_error_m=float(norms[-1]) if free_base else 0.0,
-                        joints_at_limit=tuple(self.joint_names[k] for k in at_limit.tolist()))
+                        joints_at_limit=at_limit)
 
     @staticmethod
     def _orientation_errors(rotation_targets: np.ndarray, work: _Workspace) -> None:
