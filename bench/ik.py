@@ -7,7 +7,8 @@
 For each robot a 200 Hz walking-like sequence of targets is built: the COM sways sideways and
 drifts forward, the body yaw turns slowly, and one foot at a time follows a fallback swing (lift
 and forward step) while the others stand. Every tick is solved warm-started from the previous
-tick's solution, as the whole_body_ik node does:
+ticks' solutions, as the whole_body_ik node does (gait_nodes: extrapolated from the last three by
+``WholeBodyIkSolver.warm_start``; pink: from the last one):
 
 * gait_nodes: :class:`gait_nodes.robot.whole_body_ik.WholeBodyIkSolver` (full model; joints the
   IK does not move held at the posture).
@@ -103,13 +104,14 @@ def run_ours(robot, q0, sequence, tolerance):
     solver = WholeBodyIkSolver(robot, IkSettings(
         max_iterations=50, position_tolerance_m=tolerance, orientation_tolerance_rad=tolerance,
         com_tolerance_m=tolerance))
-    q = q0
+    solutions = [q0]
     times, iterations, converged, worst = [], [], 0, [0.0, 0.0]
     for targets in sequence:
         start = time.perf_counter_ns()
-        result = solver.solve(targets, q)
+        result = solver.solve(targets, solver.warm_start(solutions))
         times.append((time.perf_counter_ns() - start) * 1e-6)
         q = result.q
+        solutions = [*solutions[-2:], q]
         iterations.append(result.iterations)
         converged += result.converged
         errors = independent_errors(robot, q, targets)

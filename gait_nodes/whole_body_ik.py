@@ -50,7 +50,6 @@ from gait_nodes.robot.whole_body_ik import (
     IkTargets,
     WholeBodyIkSolver,
     com_state_at,
-    current_swing,
     fallback_swing_pose,
     limb_ik_family,
     limit_joint_velocity,
@@ -58,6 +57,7 @@ from gait_nodes.robot.whole_body_ik import (
     robosimian_limb_ik,
     seed_configuration,
     swing_pose_at,
+    swings_under_way,
 )
 from gait_nodes.runtime import Node, QoSProfile, SetParametersResult, qos_profile_latched
 from gait_nodes.settings import checked_number as _number
@@ -157,6 +157,8 @@ class WholeBodyIk(Node):
         self.q_nominal = nominal_configuration(self.robot, self._family)
         self._q_solution = self.q_nominal.copy()
         self._q_command = self.q_nominal.copy()
+        # Solutions of the last consecutive solved ticks (oldest first): the warm start.
+        self._solutions: list[np.ndarray] = []
         self._reseed = False
         self._plan = None
         self._plan_order = None
@@ -267,6 +269,8 @@ class WholeBodyIk(Node):
         self._swings[swing.foot] = swing
 
     def _on_tf(self, msg) -> None:
+        if self._moving:
+            return  # the base pose only seeds the posture held before motion
         for transform in msg.transforms:
             if transform.header.frame_id.lstrip('/') == 'odom' and \
                     transform.child_frame_id.lstrip('/') == 'base_link':
@@ -308,8 +312,9 @@ class WholeBodyIk(Node):
         feet = plan.positions_in_world[index][order]
         yaws = plan.yaws_rad[index][order]
         fallbacks = 0
+        swings = swings_under_way(plan, t_plan)
         for k, name in enumerate(self.robot.foot_names):
-            swing = current_swing(plan, name, t_plan)
+            swing = swings.get(name)
             if swing is None:
                 continue
             trajectory = self._swings.get(name)
@@ -341,6 +346,7 @@ class WholeBodyIk(Node):
         held = self._moving and self.inputs.stale
         if held:
             target = self._q_command
+            self._solutions.clear()
         elif self._com_states is not None and self._plan is not None:
             self._moving = True
             targets, fallbacks = self._targets_at(now_ns)
@@ -349,15 +355,21 @@ class WholeBodyIk(Node):
                 self._q_solution = seed_configuration(self.robot, targets, self._family,
                                                       self._q_solution[:3])
                 self._reseed = False
-            result = self.solver.solve(targets, self._q_solution)
+                self._solutions.clear()
+            result = self.solver.solve(targets, self.solver.warm_start(self._solutions)
+                                       if self._solutions else self._q_solution)
             self._q_solution = result.q
+            self._solutions.append(result.q)
+            if len(self._solutions) > 3:
+                del self._solutions[0]
             window.max_foot_error_m = max(window.max_foot_error_m,
-                                          float(result.foot_position_errors_m.max()))
-            window.max_orientation_error_rad = max(
-                window.max_orientation_error_rad, float(result.foot_orientation_errors_rad.max()))
+                                          *result.foot_position_errors_m.tolist())
+            window.max_orientation_error_rad = max(window.max_orientation_error_rad,
+                                                   *result.foot_orientation_errors_rad.tolist())
             window.max_com_error_m = max(window.max_com_error_m, result.com_error_m)
             window.unconverged_ticks += not result.converged
-            window.joints_at_limit.update(result.joints_at_limit)
+            if result.joints_at_limit:
+                window.joints_at_limit.update(result.joints_at_limit)
             target = result.q
         else:
             target = self._q_command  # the current posture (the nominal stance before any)
@@ -440,7 +452,8 @@ class WholeBodyIk(Node):
         families = {}
         for foot in self.robot.description.feet:
             angles = joints[self.robot.indices(foot.joints)]
-            families[foot.name] = int(limb_ik.family_of(angles[None], foot.name, 1e-4)[0])
+            families[foot.name] = int(limb_ik.family_of(angles[None], foot.name, 1e-4,
+                                                          self._family)[0])
         off = [name for name, family in families.items() if family != self._family]
         return ('ik family', WARN if off else OK,
                 f'limbs {off} left family {self._family}' if off

@@ -92,6 +92,9 @@ def test_eight_families_give_eight_distinct_solutions_for_one_pose(robot, limb_i
         np.testing.assert_allclose(rotation, pin.rpy.rpyToMatrix(0, 0, target_yaw[0]),
                                    atol=1e-9)
         assert limb_ik.family_of(q, foot)[0] == family
+        # Trying a likely family first changes the cost, not the answer.
+        for likely in (family, (family + 3) % 8):
+            assert limb_ik.family_of(q, foot, likely=likely)[0] == family
         solutions.append(q[0])
     solutions = np.array(solutions)
     gaps = np.abs(np.angle(np.exp(1j * (solutions[:, None, :6] - solutions[None, :, :6]))))

@@ -127,6 +127,64 @@ def test_unreachable_targets_give_best_effort_without_nan(setup):
     assert com == pytest.approx(result.com_error_m, abs=1e-9)
 
 
+def test_large_sole_rotations_are_measured_like_an_independent_log3(setup):
+    """Sole errors beyond the small-angle shortcut (up to a half turn) are the true angles."""
+    robot, solver, q0 = setup
+    if robot.foot_orientation != 'yaw':
+        pytest.skip('point feet: no sole orientation')
+    feet, yaws = robot.foot_poses(q0)
+    com = robot.com(q0)
+    one_step = WholeBodyIkSolver(robot, IkSettings(max_iterations=1))
+    for turn in (3e-5, 2e-4, 0.3, 1.5, 3.0, math.pi - 1e-3):
+        targets = IkTargets(feet, yaws + turn * np.array([1, -1] * (len(yaws) // 2)
+                                                         + [1] * (len(yaws) % 2)),
+                            0.0, com_in_world=com)
+        for result in (one_step.solve(targets, q0), solver.solve(targets, q0)):
+            _, orientations, _ = independent_errors(robot, result.q, targets)
+            np.testing.assert_allclose(result.foot_orientation_errors_rad, orientations,
+                                       rtol=1e-8, atol=1e-12)
+
+
+def test_warm_start_reaches_a_smooth_walk_in_one_newton_step(setup):
+    """Extrapolating the last solutions lands within one step of 1e-9 on a smooth walk."""
+    robot, _, q0 = setup
+    tight = IkSettings(position_tolerance_m=1e-9, orientation_tolerance_rad=1e-9,
+                       com_tolerance_m=1e-9)
+    solver = WholeBodyIkSolver(robot, tight)
+    feet, yaws = robot.foot_poses(q0)
+    com0 = robot.com(q0)
+    size = robot.description.body_height_m
+    solutions, iterations = [q0], []
+    for k in range(120):  # 0.6 s at 200 Hz
+        t = k / 200.0
+        targets = IkTargets(feet, yaws, 0.0, com_in_world=com0 + 0.05 * size * np.array(
+            [math.sin(2.0 * t), math.sin(3.0 * t), 0.2 * math.sin(2.5 * t)]))
+        result = solver.solve(targets, solver.warm_start(solutions[-3:]))
+        assert result.converged
+        feet_errors, _, com_error = independent_errors(robot, result.q, targets)
+        assert feet_errors.max() <= 2e-9 and com_error <= 2e-9
+        solutions.append(result.q)
+        iterations.append(result.iterations)
+    assert max(iterations[3:]) <= 1
+
+
+def test_warm_start_keeps_the_joints_within_their_limits():
+    robot = load_robot_model('robosimian')
+    solver = WholeBodyIkSolver(robot)
+    q = nominal_configuration(robot)
+    index = robot.indices(robot.ik_joint_names[:1])
+    joints = robot.joint_positions(q)
+    upper = robot.upper_limits[index][0]
+    history = []
+    for offset in (0.02, 0.01, 0.0):  # running into the limit at 0.01 per tick
+        joints[index] = upper - offset
+        history.append(robot.configuration(q[:3], 0.0, joints))
+    start = solver.warm_start(history)
+    assert robot.joint_positions(start)[index][0] == upper
+    np.testing.assert_allclose(solver.warm_start(history[:2])[:3], q[:3])
+    np.testing.assert_array_equal(solver.warm_start(history[:1]), history[0])
+
+
 def test_robosimian_stays_in_its_family_while_walking_the_body():
     robot = load_robot_model('robosimian')
     from gait_nodes.robot.limb_ik import RoboSimianLimbIk
@@ -177,7 +235,9 @@ def test_velocity_limit_is_never_exceeded_and_saturation_is_reported(scale, dt, 
     if saturation.saturated:
         # Same direction, scaled: the fastest joint exactly at its limit.
         assert np.abs(moved / limits).max() == pytest.approx(1.0)
-        np.testing.assert_allclose(moved * saturation.ratio, step / dt, rtol=1e-9, atol=1e-12)
+        # (atol: the rounding of two positions, divided by dt and scaled back by the ratio)
+        np.testing.assert_allclose(moved * saturation.ratio, step / dt, rtol=1e-9,
+                                   atol=1e-14 * saturation.ratio / dt)
     else:
         np.testing.assert_allclose(q, q1)
 
@@ -216,6 +276,25 @@ def test_com_reference_and_swing_sampling():
     assert position == pytest.approx([0.1, 0.0, 0.05])
     # Yaw interpolates the short way round (3 -> -3 rad crosses pi).
     assert abs(math.remainder(yaw - math.pi, 2 * math.pi)) < 1e-9
+
+
+@settings(max_examples=60, deadline=None)
+@given(times=st.lists(st.floats(0.0, 2.0), min_size=2, max_size=8),
+       yaws=st.lists(st.floats(-10.0, 10.0), min_size=8, max_size=8),
+       t_s=st.floats(-0.5, 2.5), seed=st.integers(0, 100))
+def test_swing_sampling_is_linear_between_waypoints(times, yaws, t_s, seed):
+    """Positions as np.interp; yaw as np.interp of the unwrapped yaws, modulo a turn."""
+    times = np.sort(np.array(times) - min(times))
+    positions = np.random.default_rng(seed).uniform(-1.0, 1.0, (len(times), 3))
+    swing = SwingTrajectory('front_left', NS, times, positions, np.array(yaws[:len(times)]))
+    position, yaw = swing_pose_at(swing, NS + int(round(t_s * 1e9)))
+    t = int(round(t_s * 1e9)) * 1e-9
+    if np.any((np.diff(times) == 0) & (times[1:] == t)):
+        return  # np.interp picks either side of a zero-length segment
+    expected = [np.interp(t, times, positions[:, i]) for i in range(3)]
+    np.testing.assert_allclose(position, expected, atol=1e-12)
+    wanted = np.interp(t, times, np.unwrap(swing.yaws_rad))
+    assert abs(math.remainder(yaw - wanted, 2 * math.pi)) < 1e-9
 
 
 # -- the node in the inproc runtime ------------------------------------------------------------

@@ -258,16 +258,23 @@ class RoboSimianLimbIk:
                              axis=1))
         return q, feasible
 
-    def family_of(self, joint_angles, foot: str = 'front_right', tolerance_rad: float = 1e-6
-                  ) -> np.ndarray:
-        """(N,) family of each row of limb angles (-1 where none matches within tolerance)."""
+    def family_of(self, joint_angles, foot: str = 'front_right', tolerance_rad: float = 1e-6,
+                  likely: int | None = None) -> np.ndarray:
+        """(N,) family of each row of limb angles (-1 where none matches within tolerance).
+
+        Families are tried in order, ``likely`` first (the one the caller expects: a limb that
+        is in it costs one IK instead of eight), until every row has one.
+        """
         q = np.atleast_2d(np.asarray(joint_angles, dtype=float))
         positions, yaws = self.forward(q, foot)
         result = np.full(len(q), -1)
-        for family in FAMILIES:
+        order = FAMILIES if likely is None else (likely, *(f for f in FAMILIES if f != likely))
+        for family in order:
             candidate, _ = self.solve(positions, yaws, family, foot)
             gap = np.abs(np.angle(np.exp(1j * (candidate[:, :6] - q[:, :6])))).max(axis=1)
             result[(result < 0) & (gap < tolerance_rad)] = family
+            if (result >= 0).all():
+                break
         return result
 
 
