@@ -94,12 +94,14 @@ def _whole_body_peak(timing, step, duration_s) -> float:
     q = timing._q_nominal.copy()
     com = pin.centerOfMass(model.model, model.new_data(), q).copy()
     feet = model.nominal_feet_in_world(q[:3], 0.0)
-    joints = []
+    joints, solutions = [], [q]
     for state in states:
         feet[timing._reference] = timing._q_nominal[:3] + state[:3]
         yaws = np.zeros(len(feet))
         yaws[timing._reference] = state[3]
-        q = solver.solve(IkTargets(feet, yaws, 0.0, com_in_world=com), q).q
+        q = solver.solve(IkTargets(feet, yaws, 0.0, com_in_world=com),
+                         solver.warm_start(solutions[-3:])).q
+        solutions.append(q)
         joints.append(model.joint_positions(q))
     rates = np.abs(np.diff(np.array(joints), axis=0)) / (np.diff(u) * duration_s)[:, None]
     return float((rates / model.velocity_limits_rad_s).max())

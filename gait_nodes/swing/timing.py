@@ -185,16 +185,18 @@ class SwingTiming:
         """
         from gait_nodes.robot.whole_body_ik import IkTargets
 
-        q = np.array(q_start, dtype=float)
+        solutions = [np.array(q_start, dtype=float)]
         joints = []
         for k in range(len(u)):
+            # Started where the last solutions head (as the IK node does): one Newton step.
             result = self._solver.solve(IkTargets(feet[k], yaws[k], body_yaw_rad,
-                                                  com_in_world=com), q)
+                                                  com_in_world=com),
+                                        self._solver.warm_start(solutions[-3:]))
             if result.foot_position_errors_m.max() > 1e-4 or result.com_error_m > 1e-4:
                 raise SwingPolicyError(f'a swing to {np.round(feet[-1], 3).tolist()} leaves '
                                        f'the reach of the limbs')
-            q = result.q
-            joints.append(self.robot.joint_positions(q))
+            solutions.append(result.q)
+            joints.append(self.robot.joint_positions(result.q))
         rates = np.abs(np.diff(np.array(joints), axis=0)) / np.diff(u)[:, None]
         limits = np.asarray(self.robot.velocity_limits_rad_s, dtype=float)
         return float((rates / limits).max())
