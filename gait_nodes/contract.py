@@ -486,12 +486,25 @@ class ComState:
     yaw_rate_rad_s: float = 0.0
 
     def __post_init__(self):
-        for name in ('position_in_world', 'velocity_in_world', 'acceleration_in_world'):
-            value = _frozen(getattr(self, name))
-            if value.shape != (3,):
-                raise ContractError(f'COM {name} must have 3 components, got {value.shape}')
-            _check_finite(value, f'the COM {name}')
-            object.__setattr__(self, name, value)
+        names = ('position_in_world', 'velocity_in_world', 'acceleration_in_world')
+        try:  # the usual case at once: three finite 3-vectors (rows of one read-only array)
+            rows = np.array([self.position_in_world, self.velocity_in_world,
+                             self.acceleration_in_world], dtype=float)
+        except (TypeError, ValueError):
+            rows = None
+        if rows is not None and rows.shape == (3, 3) \
+                and all(map(math.isfinite, rows.ravel().tolist())):
+            rows.setflags(write=False)
+            for name, row in zip(names, rows, strict=True):
+                object.__setattr__(self, name, row)
+        else:  # one vector at a time, to name the first bad one
+            for name in names:
+                value = _frozen(getattr(self, name))
+                if value.shape != (3,):
+                    raise ContractError(f'COM {name} must have 3 components, got '
+                                        f'{value.shape}')
+                _check_finite(value, f'the COM {name}')
+                object.__setattr__(self, name, value)
         if not (math.isfinite(self.yaw_rad) and math.isfinite(self.yaw_rate_rad_s)):
             raise ContractError('the COM reference yaw holds a NaN or infinite value')
 

@@ -222,3 +222,26 @@ def test_zmp_reference_reader_equals_the_plain_decoder(steps):
             if edit != 'wire':
                 msg = type(msg)(header, poses)
         assert _decoded(reader.read, msg) == _decoded(contract.zmp_reference_from_msg, msg)
+
+
+@pytest.mark.parametrize(('vectors', 'error'), [
+    (([0, 0, 1], [0, 0, 0], [0, 0, 0]), None),
+    (([1e308, 1e308, 1e308], [1e308] * 3, [-1e308] * 3), None),  # finite, sum overflows
+    (([0, 0, 1], [0, math.nan, 0], [0, 0, math.inf]), 'the COM velocity_in_world holds a NaN'),
+    (([0, 0, math.inf], [0, 0], [0, 0, 0]), 'the COM position_in_world holds a NaN'),
+    (([0, 0, 1], [0, 0], [0, 0, math.nan]), r'COM velocity_in_world must have 3 components, '
+                                            r'got \(2,\)'),
+    (([0, 0, 1], [0, 0, 0], [[0, 0, 0]]), 'COM acceleration_in_world must have 3'),
+    (([0, 0, 1], [0, 0, 0], 0.0), 'COM acceleration_in_world must have 3'),
+])
+def test_com_state_names_the_first_bad_vector(vectors, error):
+    if error is None:
+        state = ComState(0, *vectors)
+        for name, vector in zip(('position_in_world', 'velocity_in_world',
+                                 'acceleration_in_world'), vectors, strict=True):
+            value = getattr(state, name)
+            assert value.shape == (3,) and not value.flags.writeable
+            np.testing.assert_array_equal(value, vector)
+    else:
+        with pytest.raises(ContractError, match=error):
+            ComState(0, *vectors)
