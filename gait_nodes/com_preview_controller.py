@@ -142,6 +142,7 @@ class ComPreviewController(Node):
                                            durability=DurabilityPolicy.TRANSIENT_LOCAL))
         self.create_subscription(get_message('geometry_msgs/msg/PointStamped'),
                                  MEASURED_COM_TOPIC, self._on_measured_com, 10)
+        self._zmp_reader = contract.ZmpReferenceReader()
         self._reference = None
         self._plan = None
         self._plan_yaw: PlanYaw | None = None
@@ -216,7 +217,7 @@ class ComPreviewController(Node):
 
     def _on_zmp_reference(self, msg) -> None:
         try:
-            reference = contract.zmp_reference_from_msg(msg)
+            reference = self._zmp_reader.read(msg)
         except contract.ContractError as exc:
             self.diagnostics.drop(ZMP_TOPIC, str(exc))
             return

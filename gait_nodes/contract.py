@@ -32,8 +32,10 @@ nodes turn that into a /diagnostics report and drop the message.
 from __future__ import annotations
 
 import math
+import operator
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from itertools import compress, count, repeat
 
 import numpy as np
 
@@ -383,6 +385,12 @@ def zmp_reference_from_msg(msg) -> ZmpReference:
     poses = msg.poses
     if not poses:
         raise ContractError('/gait/zmp_reference has no poses')
+    stamps, zmp = _pose_samples(poses)
+    return ZmpReference(stamps, zmp)
+
+
+def _pose_samples(poses) -> tuple[np.ndarray, np.ndarray]:
+    """(N,) stamps [ns] and (N, 2) points of /gait/zmp_reference poses, their frames checked."""
     headers = [p.header for p in poses]
     for frame_id in dict.fromkeys(h.frame_id for h in headers):
         if frame_id not in ('', WORLD_FRAME):
@@ -391,7 +399,67 @@ def zmp_reference_from_msg(msg) -> ZmpReference:
     stamps = [h.stamp.sec * _NS_PER_S + h.stamp.nanosec for h in headers]
     points = [p.pose.position for p in poses]
     zmp = np.ascontiguousarray(np.array([[p.x for p in points], [p.y for p in points]]).T)
-    return ZmpReference(np.array(stamps, dtype=np.int64), zmp)
+    return np.array(stamps, dtype=np.int64), zmp
+
+
+class ZmpReferenceReader:
+    """Decodes the successive /gait/zmp_reference messages of a subscription, reusing work.
+
+    Gives exactly what :func:`zmp_reference_from_msg` gives (the same reference, the same
+    :class:`ContractError`) for any message, but a message whose leading poses are the very
+    objects (``is``) of the previous good message's, as :class:`ZmpReferenceMessages` publishes
+    them, costs only the decoding of its new tail: those poses were read, checked and found
+    good last time. Relies on the rule that a published message is not edited (received
+    messages are read-only, as under rclpy's intra-process communication); a message
+    deserialized from the wire never shares poses, so it is decoded whole.
+    """
+
+    def __init__(self):
+        self._poses: list = []
+        self._reference: ZmpReference | None = None
+
+    def read(self, msg) -> ZmpReference:
+        """The :class:`ZmpReference` of ``msg``; :class:`ContractError` if bad."""
+        _check_frame(msg.header, '/gait/zmp_reference')
+        poses = msg.poses
+        if not poses:
+            raise ContractError('/gait/zmp_reference has no poses')
+        previous, run = self._poses, 0
+        # Where the first pose was in the previous message, then how far the two stay the same.
+        offset = next(compress(count(), map(operator.is_, repeat(poses[0]), previous)), None)
+        if offset is not None:
+            same = poses[:len(previous) - offset]
+            run = next(compress(count(), map(operator.is_not, same, previous[offset:])),
+                       len(same))
+        if run == 0:
+            reference = zmp_reference_from_msg(msg)
+        else:
+            reference = self._extend(self._reference, offset, run, poses[run:])
+        self._poses, self._reference = list(poses), reference
+        return reference
+
+    @staticmethod
+    def _extend(known: ZmpReference, offset: int, run: int, tail) -> ZmpReference:
+        """``known``'s samples ``offset:offset + run`` followed by the decoded ``tail``."""
+        stamps = known.stamps_ns[offset:offset + run]
+        zmp = known.zmp_in_world[offset:offset + run]
+        if len(tail):
+            tail_stamps, tail_zmp = _pose_samples(tail)
+            tail_zmp = np.array(tail_zmp, dtype=float)
+            _check_finite(tail_zmp, 'the ZMP reference')
+            if tail_stamps[0] <= stamps[-1] or (tail_stamps[1:] <= tail_stamps[:-1]).any():
+                raise ContractError('ZMP reference stamps are not strictly increasing')
+            stamps = np.concatenate((stamps, tail_stamps))
+            zmp = np.concatenate((zmp, tail_zmp))
+        else:
+            stamps, zmp = stamps.copy(), zmp.copy()
+        # Checked samples followed by checked samples later than them: a valid reference.
+        stamps.setflags(write=False)
+        zmp.setflags(write=False)
+        reference = object.__new__(ZmpReference)
+        object.__setattr__(reference, 'stamps_ns', stamps)
+        object.__setattr__(reference, 'zmp_in_world', zmp)
+        return reference
 
 
 # -- /gait/com_reference ---------------------------------------------------------------------
@@ -418,12 +486,25 @@ class ComState:
     yaw_rate_rad_s: float = 0.0
 
     def __post_init__(self):
-        for name in ('position_in_world', 'velocity_in_world', 'acceleration_in_world'):
-            value = _frozen(getattr(self, name))
-            if value.shape != (3,):
-                raise ContractError(f'COM {name} must have 3 components, got {value.shape}')
-            _check_finite(value, f'the COM {name}')
-            object.__setattr__(self, name, value)
+        names = ('position_in_world', 'velocity_in_world', 'acceleration_in_world')
+        try:  # the usual case at once: three finite 3-vectors (rows of one read-only array)
+            rows = np.array([self.position_in_world, self.velocity_in_world,
+                             self.acceleration_in_world], dtype=float)
+        except (TypeError, ValueError):
+            rows = None
+        if rows is not None and rows.shape == (3, 3) \
+                and all(map(math.isfinite, rows.ravel().tolist())):
+            rows.setflags(write=False)
+            for name, row in zip(names, rows, strict=True):
+                object.__setattr__(self, name, row)
+        else:  # one vector at a time, to name the first bad one
+            for name in names:
+                value = _frozen(getattr(self, name))
+                if value.shape != (3,):
+                    raise ContractError(f'COM {name} must have 3 components, got '
+                                        f'{value.shape}')
+                _check_finite(value, f'the COM {name}')
+                object.__setattr__(self, name, value)
         if not (math.isfinite(self.yaw_rad) and math.isfinite(self.yaw_rate_rad_s)):
             raise ContractError('the COM reference yaw holds a NaN or infinite value')
 

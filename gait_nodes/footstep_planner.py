@@ -282,6 +282,8 @@ class FootstepPlanner(Node):
         self._last_now_s = 0.0
         self._pending: tuple[GaitParameters, dict, Staircase] | None = None
         self._last_plan = None
+        self._within = _HorizonCut()
+        self._swing_lifts: tuple = (None, [])  # (plan, [(foot, lift-off [ns])])
         self._zmp_messages = ZmpReferenceMessages()
         self._last_velocity_notes: list[str] = []
         self.footsteps_publisher = self.create_publisher(
@@ -610,14 +612,17 @@ class FootstepPlanner(Node):
     def _check_swings(self, plan, now_ns: int) -> None:
         """A planned swing that lifted off without its trajectory: the swing policy is down."""
         grace_ns = int(SWING_GRACE_S * NS_PER_S)
-        for swing in plan.swings():
-            lift_ns = plan.start_ns + int(round(swing.lift_off_s * NS_PER_S))
-            key = (swing.foot, lift_ns)
+        if plan is not self._swing_lifts[0]:
+            self._swing_lifts = (plan, [
+                (swing.foot, plan.start_ns + int(round(swing.lift_off_s * NS_PER_S)))
+                for swing in plan.swings()])
+        for key in self._swing_lifts[1]:
+            foot, lift_ns = key
             if key in self._swings_checked or not lift_ns + grace_ns <= now_ns:
                 continue
             self._swings_checked.add(key)
             if key not in self._swings_heard and now_ns - lift_ns < 2 * grace_ns + NS_PER_S:
-                self.swing_inputs.missed(SWING_TOPIC, f'the swing of {swing.foot} lifting off '
+                self.swing_inputs.missed(SWING_TOPIC, f'the swing of {foot} lifting off '
                                                       f'at {lift_ns * 1e-9:.3f} s')
         old = now_ns - 60 * NS_PER_S
         self._swings_checked = {k for k in self._swings_checked if k[1] > old}
@@ -735,8 +740,8 @@ class FootstepPlanner(Node):
         horizon = self.settings['zmp_horizon_s']
         self.planner.advance(now_s + horizon + self.planner.params.step_period_s)
         self.planner.prune(now_s)
-        plan = _within(self.planner.footstep_plan(now_s, self.origin_ns), now_ns,
-                       now_ns + int(horizon * NS_PER_S))
+        plan = self._within(self.planner.footstep_plan(now_s, self.origin_ns), now_ns,
+                            now_ns + int(horizon * NS_PER_S))
         if self._last_plan is None or not _same_plan(plan, self._last_plan):
             self.footsteps_publisher.publish(footsteps_to_msg(plan))
             self._last_plan = plan
@@ -780,36 +785,56 @@ class FootstepPlanner(Node):
                 'stride_m': math.hypot(twist.vx_m_s, twist.vy_m_s) * rhythm.cycle_s}
 
 
-def _within(plan: FootstepPlan, now_ns: int, until_ns: int) -> FootstepPlan:
+class _HorizonCut:
     """``plan`` up to its last contact change by ``until_ns`` with every foot down.
 
     The published footsteps reach no further than the ZMP reference: if the planner stops, the
     whole-body IK ends the walk with the feet down where the COM controller, which holds the
     reference's end, keeps the robot balanced (not with steps the ZMP reference never covered).
     A swing that lifts off by ``until_ns`` is always kept to its landing.
+
+    What depends on the plan alone is worked out once per plan object (the planner hands out
+    the same one while its plan does not change), and so is each cut of it.
     """
-    times_ns = plan.start_ns + np.round(plan.times_s * NS_PER_S).astype(np.int64)
-    swings = [(s.lift_off_s, s.touch_down_s) for s in plan.swings()]
-    now_s = (now_ns - plan.start_ns) * 1e-9
-    until_s = max(now_s, (until_ns - plan.start_ns) * 1e-9)
-    # Every swing lifting off within the horizon goes out whole: a swing longer than the
-    # horizon (the crawl's value-table swings) must reach the IK before its lift-off.
-    landing_s = max((touch for lift, touch in swings if lift <= until_s), default=0.0)
-    until_ns = max(until_ns, plan.start_ns + int(round(landing_s * NS_PER_S)))
-    last = 0
-    for k, t_s in enumerate(plan.times_s):
-        if times_ns[k] > until_ns:
-            break
-        if not any(lift < t_s < touch for lift, touch in swings):
-            last = k
-    if last == len(plan.times_s) - 1:
-        return plan
-    return FootstepPlan(plan.start_ns, plan.foot_names, plan.times_s[:last + 1],
-                        plan.positions_in_world[:last + 1], plan.yaws_rad[:last + 1])
+
+    def __init__(self):
+        self._plan = None
+        self._swings: list[tuple[float, float]] = []
+        self._times_ns: list[int] = []
+        self._all_down: list[bool] = []
+        self._cuts: dict[int, FootstepPlan] = {}
+
+    def __call__(self, plan: FootstepPlan, now_ns: int, until_ns: int) -> FootstepPlan:
+        if plan is not self._plan:
+            swings = [(s.lift_off_s, s.touch_down_s) for s in plan.swings()]
+            self._times_ns = (plan.start_ns + np.round(plan.times_s * NS_PER_S).astype(
+                np.int64)).tolist()
+            self._all_down = [not any(lift < t_s < touch for lift, touch in swings)
+                              for t_s in plan.times_s]
+            self._plan, self._swings, self._cuts = plan, swings, {}
+        now_s = (now_ns - plan.start_ns) * 1e-9
+        until_s = max(now_s, (until_ns - plan.start_ns) * 1e-9)
+        # Every swing lifting off within the horizon goes out whole: a swing longer than the
+        # horizon (the crawl's value-table swings) must reach the IK before its lift-off.
+        landing_s = max((touch for lift, touch in self._swings if lift <= until_s), default=0.0)
+        until_ns = max(until_ns, plan.start_ns + int(round(landing_s * NS_PER_S)))
+        last = 0
+        for k, time_ns in enumerate(self._times_ns):
+            if time_ns > until_ns:
+                break
+            if self._all_down[k]:
+                last = k
+        if last == len(plan.times_s) - 1:
+            return plan
+        if last not in self._cuts:
+            self._cuts[last] = FootstepPlan(
+                plan.start_ns, plan.foot_names, plan.times_s[:last + 1],
+                plan.positions_in_world[:last + 1], plan.yaws_rad[:last + 1])
+        return self._cuts[last]
 
 
 def _same_plan(a, b) -> bool:
-    return (a.start_ns == b.start_ns and a.foot_names == b.foot_names
+    return a is b or (a.start_ns == b.start_ns and a.foot_names == b.foot_names
             and a.times_s.shape == b.times_s.shape
             and bool((a.times_s == b.times_s).all())
             and bool((a.positions_in_world == b.positions_in_world).all())

@@ -4,6 +4,8 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from gait_nodes import contract
 from gait_nodes.contract import (
@@ -143,3 +145,103 @@ def test_zmp_reference_to_msg_gives_independent_messages():
     first, second = contract.zmp_reference_to_msg(ref), contract.zmp_reference_to_msg(ref)
     first.poses[3].pose.position.x = 5.0
     assert second.poses[3].pose.position.x == 0.0
+
+
+def _decoded(decode, msg):
+    """What ``decode(msg)`` gives: the reference's exact bits, or the ContractError's text."""
+    try:
+        reference = decode(msg)
+    except ContractError as exc:
+        return 'error', str(exc)
+    assert not reference.stamps_ns.flags.writeable and not reference.zmp_in_world.flags.writeable
+    assert reference.zmp_in_world.dtype == float and reference.stamps_ns.dtype == np.int64
+    return (reference.stamps_ns.tolist(),
+            np.ascontiguousarray(reference.zmp_in_world).view(np.int64).tolist())
+
+
+def _pose(stamp_ns, x, y, frame_id=contract.WORLD_FRAME):
+    path = contract.zmp_reference_to_msg(ZmpReference([0], [[0.0, 0.0]]))
+    pose = path.poses[0]
+    pose.header.stamp = contract.ns_to_time_msg(stamp_ns)
+    pose.header.frame_id = frame_id
+    pose.pose.position.x, pose.pose.position.y = x, y
+    return pose
+
+
+_EDITS = st.sampled_from(['planner', 'planner_changed', 'wire', 'drop', 'insert', 'replace',
+                          'swap', 'duplicate', 'nan', 'frame', 'path_frame', 'empty', 'same',
+                          'reversed', 'append_earlier'])
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.lists(st.tuples(_EDITS, st.integers(0, 40), st.integers(0, 10**6)), min_size=1,
+                max_size=12))
+def test_zmp_reference_reader_equals_the_plain_decoder(steps):
+    """Reusing the previous message's poses never changes what a message decodes to."""
+    rng = np.random.default_rng(len(steps))
+    knots = rng.normal(size=(120, 2))
+    knots[30] = (0.0, -0.0)
+    builder, reader = contract.ZmpReferenceMessages(), contract.ZmpReferenceReader()
+    first, msg = 0, None
+    for edit, where, seed in steps:
+        value = np.random.default_rng(seed).normal(size=2).tolist()
+        if edit.startswith('planner') or msg is None:
+            first = min(first + where % 5, 60)
+            points = knots.copy()
+            if edit == 'planner_changed':
+                points[first + where:] += 0.01
+            msg = builder.to_msg(ZmpReference(np.arange(first, first + 50) * 10_000_000,
+                                              points[first:first + 50]))
+        else:
+            poses = list(msg.poses)
+            k = where % max(len(poses), 1)
+            stamp = (first + k) * 10_000_000 + 1 if poses else 0
+            if edit == 'wire':
+                msg = through_cdr(msg)
+            elif edit == 'drop' and poses:
+                del poses[k]
+            elif edit == 'insert':
+                poses.insert(k, _pose(stamp, *value))
+            elif edit == 'replace' and poses:
+                poses[k] = _pose(contract.time_msg_to_ns(poses[k].header.stamp), *value)
+            elif edit == 'swap' and len(poses) > 1:
+                poses[k - 1], poses[k] = poses[k], poses[k - 1]
+            elif edit == 'duplicate' and poses:
+                poses.insert(k, poses[k])
+            elif edit == 'nan':
+                poses.insert(k, _pose(stamp, math.nan, value[1]))
+            elif edit == 'frame':
+                poses.insert(k, _pose(stamp, *value, frame_id=('', 'map')[seed % 2]))
+            elif edit == 'empty':
+                poses = []
+            elif edit == 'reversed':
+                poses.reverse()
+            elif edit == 'append_earlier' and poses:
+                poses.append(_pose(contract.time_msg_to_ns(poses[0].header.stamp), *value))
+            header = msg.header if edit != 'path_frame' else contract._header(0, 'map')
+            if edit != 'wire':
+                msg = type(msg)(header, poses)
+        assert _decoded(reader.read, msg) == _decoded(contract.zmp_reference_from_msg, msg)
+
+
+@pytest.mark.parametrize(('vectors', 'error'), [
+    (([0, 0, 1], [0, 0, 0], [0, 0, 0]), None),
+    (([1e308, 1e308, 1e308], [1e308] * 3, [-1e308] * 3), None),  # finite, sum overflows
+    (([0, 0, 1], [0, math.nan, 0], [0, 0, math.inf]), 'the COM velocity_in_world holds a NaN'),
+    (([0, 0, math.inf], [0, 0], [0, 0, 0]), 'the COM position_in_world holds a NaN'),
+    (([0, 0, 1], [0, 0], [0, 0, math.nan]), r'COM velocity_in_world must have 3 components, '
+                                            r'got \(2,\)'),
+    (([0, 0, 1], [0, 0, 0], [[0, 0, 0]]), 'COM acceleration_in_world must have 3'),
+    (([0, 0, 1], [0, 0, 0], 0.0), 'COM acceleration_in_world must have 3'),
+])
+def test_com_state_names_the_first_bad_vector(vectors, error):
+    if error is None:
+        state = ComState(0, *vectors)
+        for name, vector in zip(('position_in_world', 'velocity_in_world',
+                                 'acceleration_in_world'), vectors, strict=True):
+            value = getattr(state, name)
+            assert value.shape == (3,) and not value.flags.writeable
+            np.testing.assert_array_equal(value, vector)
+    else:
+        with pytest.raises(ContractError, match=error):
+            ComState(0, *vectors)

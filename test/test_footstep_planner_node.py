@@ -286,8 +286,9 @@ def test_published_footsteps_carry_every_swing_that_lifts_off_within_the_horizon
     # A swing longer than the ZMP horizon (the crawl's value-table swings, 2.1 s > 2 s) must
     # reach the IK before its foot lifts off, not when its landing enters the horizon.
     from gait_nodes.contract import FootstepPlan
-    from gait_nodes.footstep_planner import _within
+    from gait_nodes.footstep_planner import _HorizonCut
 
+    _within = _HorizonCut()  # one cutter for every call, as the node has
     names = ('a', 'b')
     times = np.array([0.0, 0.5, 2.6, 3.0, 5.1])
     feet = np.zeros((5, 2, 3))
@@ -304,3 +305,9 @@ def test_published_footsteps_carry_every_swing_that_lifts_off_within_the_horizon
     late = _within(plan, int(1.0 * ns), int(3.0 * ns))
     assert [s.foot for s in late.swings()] == ['a', 'b']
     assert late.times_s[-1] == pytest.approx(5.1)
+    # The cutter's memory of the plan changes nothing: a fresh one cuts the same.
+    for now_s, until_s in [(0.1, 2.1), (0.1, 0.4), (1.0, 3.0), (0.1, 2.1), (4.0, 6.0)]:
+        args = (int(now_s * ns), int(until_s * ns))
+        kept, fresh = _within(plan, *args), _HorizonCut()(plan, *args)
+        np.testing.assert_array_equal(kept.times_s, fresh.times_s)
+        np.testing.assert_array_equal(kept.positions_in_world, fresh.positions_in_world)

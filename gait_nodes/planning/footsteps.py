@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import operator
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -349,6 +350,7 @@ class GaitPlanner:
             next_group=0, rest_pose=pose, last_anchor=pose, measured=start is not None)
         self._steps: list[Step] = []
         self._before: tuple[float, np.ndarray, np.ndarray] | None = None
+        self._outputs: tuple = ((), {})  # see _memo
         self._check_footholds(self._terrain, [positions], compare_heights=False)
         if start is not None and start.airborne().any():
             self._steps.append(self._landing_step(start))
@@ -845,8 +847,31 @@ class GaitPlanner:
 
     # --- outputs -----------------------------------------------------------------------------
 
+    def _memo(self) -> dict:
+        """Outputs computed from the plan as it is now (emptied whenever the plan changes).
+
+        The plan is made of its steps, the last contact change before them, the state after
+        them, the airborne start and the terrain; none is ever edited in place (a change
+        replaces the object), so the plan is unchanged while they are the same objects.
+        """
+        parts = (self._before, self._initial, self._airborne, self._terrain, *self._steps)
+        known, outputs = self._outputs
+        if len(known) != len(parts) or not all(map(operator.is_, known, parts)):
+            outputs = {}
+            self._outputs = (parts, outputs)
+        return outputs
+
     def zmp_knots(self) -> tuple[np.ndarray, np.ndarray]:
         """(K,) times [s] and (K, 2) points of the ZMP reference over the planned steps."""
+        memo = self._memo()
+        if 'zmp_knots' not in memo:
+            knots = self._zmp_knots_now()
+            for array in knots:
+                array.setflags(write=False)
+            memo['zmp_knots'] = knots
+        return memo['zmp_knots']
+
+    def _zmp_knots_now(self) -> tuple[np.ndarray, np.ndarray]:
         if not self._steps:
             state = self._state()
             return np.array([state.time_s]), state.zmp[None, :]
@@ -902,13 +927,21 @@ class GaitPlanner:
                 change at or before it (so a swing under way is included). None: everything.
             origin_ns: ROS time of the planner's 0 s [ns].
         """
-        events = self._events()
+        memo = self._memo()
+        if 'events' not in memo:
+            memo['events'] = self._events()
+        events = memo['events']
         first = 0
         if now_s is not None:
             for k, (t_s, _, _) in enumerate(events):
                 if t_s <= now_s:
                     first = k
-        events = events[first:]
+        key = ('footstep_plan', first, origin_ns)
+        if key not in memo:
+            memo[key] = self._footstep_plan_from(events[first:], origin_ns)
+        return memo[key]
+
+    def _footstep_plan_from(self, events: list, origin_ns: int) -> FootstepPlan:
         start_s = events[0][0]
         start_ns = origin_ns + int(round(start_s * NS_PER_S))
         times = np.array([t for t, _, _ in events]) - start_s
