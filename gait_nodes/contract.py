@@ -12,8 +12,10 @@ layout is spelled once (DESIGN.md, "Nodes and the public topic contract"):
     the planner never emits a zero-length step, so "moved" and "swung" are the same thing.
 ``/gait/zmp_reference`` (nav_msgs/Path)
     ``header.frame_id`` = ``odom``, ``header.stamp`` = the first sample's time; each pose is one
-    sample of the ZMP reference stamped at its own (future) time, ``z = 0``, identity
-    orientation. Between samples the reference is linear in time.
+    sample of the ZMP reference stamped at its own (future) time, ``z`` = the height of the
+    plane the ZMP lies on (the lowest foot in contact at that time: 0 on flat ground, the tread
+    on stairs, as the ZMP monitor's plane), identity orientation. Between samples the
+    reference is linear in time (its x, y).
 ``/gait/com_reference`` (trajectory_msgs/MultiDOFJointTrajectory)
     ``joint_names`` = ``['com']``; point 0 is the state at ``header.stamp``: COM position in
     ``transforms[0].translation`` with the body yaw in its rotation, velocity in
@@ -290,10 +292,13 @@ class ZmpReference:
     Attributes:
         stamps_ns: (N,) sample times [ns], strictly increasing.
         zmp_in_world: (N, 2) ZMP reference in odom [m].
+        plane_heights_m: (N,) height of the plane each sample lies on [m] (the lowest contact);
+            None: zeros (flat ground).
     """
 
     stamps_ns: np.ndarray
     zmp_in_world: np.ndarray
+    plane_heights_m: np.ndarray | None = None
 
     def __post_init__(self):
         stamps = np.array(self.stamps_ns, dtype=np.int64)
@@ -306,8 +311,15 @@ class ZmpReference:
         _check_finite(zmp, 'the ZMP reference')
         if np.any(np.diff(stamps) <= 0):
             raise ContractError('ZMP reference stamps are not strictly increasing')
+        heights = _frozen(np.zeros(len(stamps)) if self.plane_heights_m is None
+                          else self.plane_heights_m)
+        if heights.shape != (len(stamps),):
+            raise ContractError(f'ZMP reference plane heights shape {heights.shape} for '
+                                f'{len(stamps)} stamps')
+        _check_finite(heights, 'the ZMP reference plane heights')
         object.__setattr__(self, 'stamps_ns', stamps)
         object.__setattr__(self, 'zmp_in_world', zmp)
+        object.__setattr__(self, 'plane_heights_m', heights)
 
     @property
     def horizon_s(self) -> float:
@@ -341,7 +353,7 @@ class ZmpReferenceMessages:
     def __init__(self):
         self._pose_type = None
         self._stamps = np.zeros(0, dtype=np.int64)
-        self._bits = np.zeros((0, 2), dtype=np.int64)
+        self._bits = np.zeros((0, 3), dtype=np.int64)
         self._poses: list = []
 
     def to_msg(self, reference: ZmpReference):
@@ -353,7 +365,7 @@ class ZmpReferenceMessages:
         point = get_constructor('geometry_msgs/msg/Point')
         quaternion = get_constructor('geometry_msgs/msg/Quaternion')
         stamps = reference.stamps_ns
-        zmp = np.ascontiguousarray(reference.zmp_in_world)
+        zmp = np.column_stack((reference.zmp_in_world, reference.plane_heights_m))
         bits = zmp.view(np.int64)  # exact comparison: 0.0 and -0.0 are different samples
         # Samples equal to the previous message's from the same stamp on (stamps increase).
         reused = np.zeros(len(stamps), dtype=bool)
@@ -370,10 +382,10 @@ class ZmpReferenceMessages:
             if reused[k]:
                 poses.append(self._poses[offset + k])
             else:
-                x, y = zmp[k].tolist()
+                x, y, z = zmp[k].tolist()
                 poses.append(pose_stamped(
                     header(time(*divmod(int(stamps[k]), _NS_PER_S)), WORLD_FRAME),
-                    pose(point(x, y, 0.0), quaternion(0.0, 0.0, 0.0, 1.0))))
+                    pose(point(x, y, z), quaternion(0.0, 0.0, 0.0, 1.0))))
         self._pose_type, self._stamps, self._bits, self._poses = \
             pose_stamped, stamps.copy(), bits.copy(), poses
         return get_constructor('nav_msgs/msg/Path')(_header(int(stamps[0])), poses)
@@ -385,12 +397,15 @@ def zmp_reference_from_msg(msg) -> ZmpReference:
     poses = msg.poses
     if not poses:
         raise ContractError('/gait/zmp_reference has no poses')
-    stamps, zmp = _pose_samples(poses)
-    return ZmpReference(stamps, zmp)
+    stamps, zmp, heights = _pose_samples(poses)
+    return ZmpReference(stamps, zmp, heights)
 
 
-def _pose_samples(poses) -> tuple[np.ndarray, np.ndarray]:
-    """(N,) stamps [ns] and (N, 2) points of /gait/zmp_reference poses, their frames checked."""
+def _pose_samples(poses) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Stamps (N,) [ns], points (N, 2) and plane heights (N,) of /gait/zmp_reference poses.
+
+    Their frames are checked.
+    """
     headers = [p.header for p in poses]
     for frame_id in dict.fromkeys(h.frame_id for h in headers):
         if frame_id not in ('', WORLD_FRAME):
@@ -399,7 +414,8 @@ def _pose_samples(poses) -> tuple[np.ndarray, np.ndarray]:
     stamps = [h.stamp.sec * _NS_PER_S + h.stamp.nanosec for h in headers]
     points = [p.pose.position for p in poses]
     zmp = np.ascontiguousarray(np.array([[p.x for p in points], [p.y for p in points]]).T)
-    return np.array(stamps, dtype=np.int64), zmp
+    return (np.array(stamps, dtype=np.int64), zmp,
+            np.array([p.z for p in points], dtype=float))
 
 
 class ZmpReferenceReader:
@@ -443,22 +459,27 @@ class ZmpReferenceReader:
         """``known``'s samples ``offset:offset + run`` followed by the decoded ``tail``."""
         stamps = known.stamps_ns[offset:offset + run]
         zmp = known.zmp_in_world[offset:offset + run]
+        heights = known.plane_heights_m[offset:offset + run]
         if len(tail):
-            tail_stamps, tail_zmp = _pose_samples(tail)
+            tail_stamps, tail_zmp, tail_heights = _pose_samples(tail)
             tail_zmp = np.array(tail_zmp, dtype=float)
             _check_finite(tail_zmp, 'the ZMP reference')
             if tail_stamps[0] <= stamps[-1] or (tail_stamps[1:] <= tail_stamps[:-1]).any():
                 raise ContractError('ZMP reference stamps are not strictly increasing')
+            _check_finite(tail_heights, 'the ZMP reference plane heights')
             stamps = np.concatenate((stamps, tail_stamps))
             zmp = np.concatenate((zmp, tail_zmp))
+            heights = np.concatenate((heights, tail_heights))
         else:
-            stamps, zmp = stamps.copy(), zmp.copy()
+            stamps, zmp, heights = stamps.copy(), zmp.copy(), heights.copy()
         # Checked samples followed by checked samples later than them: a valid reference.
         stamps.setflags(write=False)
         zmp.setflags(write=False)
+        heights.setflags(write=False)
         reference = object.__new__(ZmpReference)
         object.__setattr__(reference, 'stamps_ns', stamps)
         object.__setattr__(reference, 'zmp_in_world', zmp)
+        object.__setattr__(reference, 'plane_heights_m', heights)
         return reference
 
 

@@ -577,8 +577,15 @@ class FootstepPlanner(Node):
         period_ns = int(round(self.settings['zmp_sample_period_s'] * NS_PER_S))
         count = int(math.ceil(horizon * NS_PER_S / period_ns - 1e-9)) + 1
         stamps = now_ns + period_ns * np.arange(count, dtype=np.int64)
+        # On the plane of the lowest held foot (a foot held in the air is not a contact).
+        plane = None
+        if pause['hold'] is not None:
+            held = pause['hold'][0][:, 2]
+            ground = held[held - self.planner.terrain.height_at(pause['hold'][0][:, 0])
+                          <= AIRBORNE_M]
+            plane = np.full(count, float(ground.min() if len(ground) else held.min()))
         self.zmp_publisher.publish(self._zmp_messages.to_msg(
-            ZmpReference(stamps, np.tile(pause['zmp'], (count, 1)))))
+            ZmpReference(stamps, np.tile(pause['zmp'], (count, 1)), plane)))
         if stale:
             pause['fresh_ns'] = None
             return True

@@ -329,3 +329,25 @@ def test_the_planner_node_refuses_bad_stairs_with_the_range_and_walks_on_unchang
         assert feet[:, 2].max() >= 0.1
     finally:
         runtime.shutdown()
+
+
+def test_zmp_reference_lies_on_the_plane_of_the_lowest_contact():
+    """/gait/zmp_reference's z is the lowest contact's tread at each sample, as the monitor's."""
+    from gait_nodes.contract import zmp_reference_from_msg, zmp_reference_to_msg
+    from gait_nodes.planning.footsteps import contact_schedule
+
+    planner, _ = walk(Staircase(0.25, 0.07, 0.3, 3))
+    reference = planner.zmp_reference(0, 0, 16.0, 0.01)
+    heights = zmp_reference_from_msg(zmp_reference_to_msg(reference)).plane_heights_m
+    np.testing.assert_array_equal(heights, reference.plane_heights_m)
+    plan = planner.footstep_plan()
+    times = reference.stamps_ns * 1e-9 - plan.start_ns * 1e-9
+    down = contact_schedule(plan, times)
+    for n in range(0, len(times), 7):
+        k = max(0, int(np.searchsorted(plan.times_s, times[n], side='right')) - 1)
+        expected = plan.positions_in_world[k, down[n], 2].min()
+        assert heights[n] == pytest.approx(expected, abs=1e-12)
+    # It climbs: the first samples on the floor, the last on a stair.
+    assert heights[0] == 0.0 and heights[-1] > 0.0
+    assert np.all(np.isin(np.round(heights, 9), np.round(np.unique(
+        plan.positions_in_world[:, :, 2]), 9)))

@@ -899,7 +899,19 @@ class GaitPlanner:
         period_ns = int(round(period_s * NS_PER_S))
         count = int(math.ceil(horizon_s * NS_PER_S / period_ns - 1e-9)) + 1
         stamps = first_ns + period_ns * np.arange(count, dtype=np.int64)
-        return ZmpReference(stamps, self.zmp((stamps - origin_ns) * 1e-9))
+        times_s = (stamps - origin_ns) * 1e-9
+        heights = None if self._terrain.flat else self._plane_heights(times_s, origin_ns)
+        return ZmpReference(stamps, self.zmp(times_s), heights)
+
+    def _plane_heights(self, times_s: np.ndarray, origin_ns: int) -> np.ndarray:
+        """(N,) height of the lowest foot in contact at ``times_s`` [m] (the ZMP's plane)."""
+        plan = self.footstep_plan(float(times_s[0]), origin_ns)
+        relative = times_s - (plan.start_ns - origin_ns) * 1e-9
+        index = np.clip(np.searchsorted(plan.times_s, relative, side='right') - 1, 0,
+                        len(plan.times_s) - 1)
+        heights = plan.positions_in_world[index, :, 2]
+        down = contact_schedule(plan, relative)
+        return np.where(down, heights, np.inf).min(axis=1)
 
     def _events(self) -> list[tuple[float, np.ndarray, np.ndarray]]:
         events = []
