@@ -102,8 +102,9 @@ NS_PER_S = 1_000_000_000
 JOIN_WAIT_S = 1.0
 #: Longest wait of a planner started into a running walk for the robot to stand still [s].
 STAND_WAIT_S = 6.0
-#: The robot stands still when its base moved less than this over STILL_S [m].
-STILL_M = 1e-4
+#: The robot stands still when its base moved less than this over STILL_S [m] (5 mm/s: the
+#: COM controller still settling on a held reference is standing; a weight shift is not).
+STILL_M = 1e-3
 STILL_S = 0.2
 #: A measured foot this close to its nominal foothold is planned from the nominal one [m].
 NOMINAL_SNAP_M = 1e-3
