@@ -239,13 +239,7 @@ def _short(result: dict) -> dict:
 
 
 def test_killed_nodes_are_reported_stale_and_rejoin_the_walk(graph):
-    for name in NODES:
-        graph.start(name)
-    graph.wait_ready(*NODES)
-    graph.velocity = VELOCITY_M_S
-    walk_start = time.monotonic()
-    graph.spin_until(lambda: graph.base and graph.base_x() > 0.01, 30.0, 'the walk to start')
-    graph.spin(4.0)
+    walk_start = _start_walking(graph, 0.01, 4.0)
     baseline = _zmp_errors(graph, walk_start, time.monotonic()) / (time.monotonic() - walk_start)
 
     ik = _kill_and_restart(graph, 'whole_body_ik', 'kinematic_simulator', '/joint_commands')
@@ -265,14 +259,8 @@ def test_killed_nodes_are_reported_stale_and_rejoin_the_walk(graph):
         assert result['resumed_after_restart_s'] is not None
 
 
-def test_killed_planner_and_swing_policy_rejoin_the_walk(graph):
-    for name in NODES:
-        graph.start(name)
-    graph.wait_ready(*NODES)
-    graph.velocity = VELOCITY_M_S
-    walk_start = time.monotonic()
-    graph.spin_until(lambda: graph.base and graph.base_x() > 0.02, 30.0, 'the walk to start')
-    graph.spin(2.0)
+def test_killed_planner_rejoins_the_walk_from_the_real_feet(graph):
+    walk_start = _start_walking(graph)
     baseline = _zmp_errors(graph, walk_start, time.monotonic()) / (time.monotonic() - walk_start)
 
     last_plan = graph.plans[-1]
@@ -309,13 +297,19 @@ def test_killed_swing_policy_rejoins_the_walk(graph):
     _assert_walks_on(swing, back_m=0.03)
 
 
-def _start_walking(graph: Graph) -> None:
+def _start_walking(graph: Graph, past_m: float = 0.02, then_s: float = 2.0) -> float:
+    """Start every node, walk until the base is ``past_m`` ahead, then ``then_s`` more.
+
+    Returns the time the velocity was sent (time.monotonic()).
+    """
     for name in NODES:
         graph.start(name)
     graph.wait_ready(*NODES)
     graph.velocity = VELOCITY_M_S
-    graph.spin_until(lambda: graph.base and graph.base_x() > 0.02, 30.0, 'the walk to start')
-    graph.spin(2.0)
+    walk_start = time.monotonic()
+    graph.spin_until(lambda: graph.base and graph.base_x() > past_m, 30.0, 'the walk to start')
+    graph.spin(then_s)
+    return walk_start
 
 
 def _assert_walks_on(result: dict, back_m: float) -> None:

@@ -22,13 +22,11 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 import pytest
+from bag_topics import decode_gait_topics
 
-from gait_nodes import contract
 from gait_nodes.bag.analysis import inspect_bag
-from gait_nodes.bag.reader import BagReader
 from gait_nodes.diagnostics import ERROR, OK
 from gait_nodes.errors import ConfigError
-from gait_nodes.interfaces import deserialize_message, get_message
 from gait_nodes.robot.description import example_robot_data_dir
 from gait_nodes.robot.model import load_robot_model
 from gait_nodes.scenarios import get_scenario
@@ -71,32 +69,7 @@ def inspected(bags):
 
 def _raw(bag: Path) -> dict:
     """Full base poses, joint states, footstep plans and COM samples, decoded independently."""
-    types = {'/tf': 'tf2_msgs/msg/TFMessage', '/joint_states': 'sensor_msgs/msg/JointState',
-             '/gait/footsteps': 'trajectory_msgs/msg/MultiDOFJointTrajectory',
-             '/gait/com': 'geometry_msgs/msg/PointStamped',
-             '/gait/com_reference': 'trajectory_msgs/msg/MultiDOFJointTrajectory'}
-    raw = {'tf': {}, 'joints': {}, 'plans': [], 'com': [], 'com_reference': []}
-    for channel, _, _, data in BagReader(bag).messages():
-        if channel.topic not in types:
-            continue
-        msg = deserialize_message(data, get_message(types[channel.topic]))
-        if channel.topic == '/tf':
-            for transform in msg.transforms:
-                t, r = transform.transform.translation, transform.transform.rotation
-                raw['tf'][contract.time_msg_to_ns(transform.header.stamp)] = np.array(
-                    [t.x, t.y, t.z, r.x, r.y, r.z, r.w])
-        elif channel.topic == '/joint_states':
-            raw['joints'][contract.time_msg_to_ns(msg.header.stamp)] = dict(
-                zip(msg.name, msg.position, strict=True))
-        elif channel.topic == '/gait/footsteps':
-            raw['plans'].append(contract.footsteps_from_msg(msg))
-        elif channel.topic == '/gait/com':
-            p = msg.point
-            raw['com'].append((contract.time_msg_to_ns(msg.header.stamp), p.x, p.y, p.z))
-        else:
-            raw['com_reference'].extend(
-                (s.stamp_ns, *s.position_in_world) for s in contract.com_reference_from_msg(msg))
-    return raw
+    return decode_gait_topics(bag)
 
 
 @pytest.fixture(scope='module')

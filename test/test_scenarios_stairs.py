@@ -23,12 +23,10 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 import pytest
+from bag_topics import decode_gait_topics
 
-from gait_nodes import contract
 from gait_nodes.bag.analysis import inspect_bag
-from gait_nodes.bag.reader import BagReader
 from gait_nodes.diagnostics import ERROR, OK
-from gait_nodes.interfaces import deserialize_message, get_message
 from gait_nodes.planning.gait_params import GaitParameters
 from gait_nodes.planning.terrain import Staircase, check_walkable
 from gait_nodes.robot.description import load_robot_description
@@ -62,35 +60,7 @@ def inspected(bag):
 @pytest.fixture(scope='module')
 def raw(bag) -> dict:
     """Base poses, joint states, footstep plans, monitor COM and ZMP, decoded independently."""
-    types = {'/tf': 'tf2_msgs/msg/TFMessage', '/joint_states': 'sensor_msgs/msg/JointState',
-             '/gait/footsteps': 'trajectory_msgs/msg/MultiDOFJointTrajectory',
-             '/gait/com': 'geometry_msgs/msg/PointStamped',
-             '/gait/zmp': 'geometry_msgs/msg/PointStamped',
-             '/gait/com_reference': 'trajectory_msgs/msg/MultiDOFJointTrajectory'}
-    data = {'tf': {}, 'joints': {}, 'plans': [], 'com': [], 'zmp': [], 'com_reference': []}
-    for channel, _, _, payload in BagReader(bag).messages():
-        if channel.topic not in types:
-            continue
-        msg = deserialize_message(payload, get_message(types[channel.topic]))
-        if channel.topic == '/tf':
-            for transform in msg.transforms:
-                t, r = transform.transform.translation, transform.transform.rotation
-                data['tf'][contract.time_msg_to_ns(transform.header.stamp)] = np.array(
-                    [t.x, t.y, t.z, r.x, r.y, r.z, r.w])
-        elif channel.topic == '/joint_states':
-            data['joints'][contract.time_msg_to_ns(msg.header.stamp)] = dict(
-                zip(msg.name, msg.position, strict=True))
-        elif channel.topic == '/gait/footsteps':
-            data['plans'].append(contract.footsteps_from_msg(msg))
-        elif channel.topic in ('/gait/com', '/gait/zmp'):
-            p = msg.point
-            data[channel.topic.split('/')[-1]].append(
-                (contract.time_msg_to_ns(msg.header.stamp), p.x, p.y, p.z))
-        else:
-            data['com_reference'].extend(
-                (s.stamp_ns, *s.position_in_world, *s.velocity_in_world,
-                 *s.acceleration_in_world) for s in contract.com_reference_from_msg(msg))
-    return data
+    return decode_gait_topics(bag)
 
 
 @pytest.fixture(scope='module')
