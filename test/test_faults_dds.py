@@ -39,7 +39,9 @@ RECOVERY_S = 8.0
 
 
 def _domains():
-    return iter(random.SystemRandom().sample(range(150, 230), 4))
+    # One ROS_DOMAIN_ID per graph of this module (each test starts one, the start-order test
+    # two), none shared with a parallel run's.
+    return iter(random.SystemRandom().sample(range(150, 230), 12))
 
 
 DOMAINS = _domains()
