@@ -142,7 +142,13 @@ class ComPreviewController(Node):
                                            durability=DurabilityPolicy.TRANSIENT_LOCAL))
         self.create_subscription(get_message('geometry_msgs/msg/PointStamped'),
                                  MEASURED_COM_TOPIC, self._on_measured_com, 10)
-        self._zmp_reader = contract.ZmpReferenceReader()
+        # The incremental reader relies on poses shared by identity between the planner's
+        # successive messages, which holds within one process (inproc) only. Over DDS the
+        # samples' objects are not ours to rely on (with the reader the DDS walk recorded ZMP
+        # excursions of metres at contact changes, none without it), so every message is read
+        # whole there.
+        self._zmp_reader = contract.ZmpReferenceReader() \
+            if self.context.runtime == 'inproc' else None
         self._reference = None
         self._plan = None
         self._plan_yaw: PlanYaw | None = None
@@ -217,7 +223,8 @@ class ComPreviewController(Node):
 
     def _on_zmp_reference(self, msg) -> None:
         try:
-            reference = self._zmp_reader.read(msg)
+            reference = self._zmp_reader.read(msg) if self._zmp_reader is not None \
+                else contract.zmp_reference_from_msg(msg)
         except contract.ContractError as exc:
             self.diagnostics.drop(ZMP_TOPIC, str(exc))
             return

@@ -159,6 +159,7 @@ class WholeBodyIk(Node):
         self._q_command = self.q_nominal.copy()
         # Solutions of the last consecutive solved ticks (oldest first): the warm start.
         self._solutions: list[np.ndarray] = []
+        self._solution_times_s: list[int] = []  # their tick times [ns]
         self._reseed = False
         self._plan = None
         self._plan_order = None
@@ -328,6 +329,19 @@ class WholeBodyIk(Node):
         com, yaw = com_state_at(self._com_states, now_ns, self.params.com_extrapolation_s)
         return IkTargets(feet, yaws, yaw, com_in_world=com), fallbacks
 
+    def _warm_start(self, now_ns: int) -> np.ndarray:
+        """The solver's start from the last solutions, extrapolated to ``now_ns``.
+
+        Ticks one period apart (inproc, an idle machine) use the equal-spacing formula; late or
+        early ticks (a loaded machine) extrapolate with their real times.
+        """
+        stamps = self._solution_times_s + [now_ns]
+        steps = {b - a for a, b in zip(stamps, stamps[1:], strict=False)}
+        if len(steps) == 1:
+            return self.solver.warm_start(self._solutions)
+        return self.solver.warm_start(self._solutions,
+                                      [(t - now_ns) * 1e-9 for t in self._solution_times_s], 0.0)
+
     def tick(self) -> None:
         """Solve the IK for now, limit the joint velocities, publish /joint_commands."""
         now_ns = self.get_clock().now().nanoseconds
@@ -347,6 +361,7 @@ class WholeBodyIk(Node):
         if held:
             target = self._q_command
             self._solutions.clear()
+            self._solution_times_s.clear()
         elif self._com_states is not None and self._plan is not None:
             self._moving = True
             targets, fallbacks = self._targets_at(now_ns)
@@ -356,12 +371,15 @@ class WholeBodyIk(Node):
                                                       self._q_solution[:3])
                 self._reseed = False
                 self._solutions.clear()
-            result = self.solver.solve(targets, self.solver.warm_start(self._solutions)
+                self._solution_times_s.clear()
+            result = self.solver.solve(targets, self._warm_start(now_ns)
                                        if self._solutions else self._q_solution)
             self._q_solution = result.q
             self._solutions.append(result.q)
+            self._solution_times_s.append(now_ns)
             if len(self._solutions) > 3:
                 del self._solutions[0]
+                del self._solution_times_s[0]
             window.max_foot_error_m = max(window.max_foot_error_m,
                                           *result.foot_position_errors_m.tolist())
             window.max_orientation_error_rad = max(window.max_orientation_error_rad,

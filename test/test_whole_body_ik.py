@@ -189,6 +189,31 @@ def test_warm_start_keeps_the_joints_within_their_limits():
     np.testing.assert_array_equal(solver.warm_start(history[:1]), history[0])
 
 
+def test_warm_start_follows_the_real_tick_times():
+    """Ticks late or early: the extrapolation follows their real times.
+
+    Exact for motion quadratic in time, where the equal-spacing guess is off (its error would
+    land in the redundant joints).
+    """
+    robot = load_robot_model('robosimian')
+    solver = WholeBodyIkSolver(robot)
+    q0 = nominal_configuration(robot)
+    velocity, acceleration = np.full(len(q0), 0.05), np.full(len(q0), -0.2)
+    velocity[3:7] = acceleration[3:7] = 0.0  # the base orientation stays put
+
+    def q_at(t_s):
+        return q0 + velocity * t_s + 0.5 * acceleration * t_s ** 2
+
+    times = [-0.017, -0.005, 0.0]  # the middle tick 7 ms late, the last one 5 ms after it
+    history = [q_at(t) for t in times]
+    expected = q_at(0.005)
+    np.testing.assert_allclose(solver.warm_start(history, times, 0.005), expected, atol=1e-12)
+    assert np.abs(solver.warm_start(history) - expected).max() > 1e-4
+    # Two solutions: the line through them.
+    np.testing.assert_allclose(solver.warm_start(history[1:], times[1:], 0.005),
+                               2.0 * history[2] - history[1], atol=1e-12)
+
+
 def test_robosimian_stays_in_its_family_while_walking_the_body():
     robot = load_robot_model('robosimian')
     from gait_nodes.robot.limb_ik import RoboSimianLimbIk

@@ -180,15 +180,23 @@ class WholeBodyIkSolver:
             self._rotation_yaws = yaws
         return self._rotation_targets
 
-    def warm_start(self, solutions: Sequence[np.ndarray]) -> np.ndarray:
+    def warm_start(self, solutions: Sequence[np.ndarray],
+                   times_s: Sequence[float] | None = None,
+                   at_s: float | None = None) -> np.ndarray:
         """Where to start the next tick's solve, from the last solutions (oldest first).
 
-        The quadratic extrapolation of the last three (constant joint and base accelerations
-        over three equal ticks), the linear one of two, or the last; joints within their
-        limits. A walking tick then starts within about the square root of the tolerance of
-        its solution, where one Newton step reaches it.
+        The quadratic extrapolation of the last three (constant joint and base accelerations),
+        the linear one of two, or the last; joints within their limits. A walking tick then
+        starts within about the square root of the tolerance of its solution, where one Newton
+        step reaches it. Without ``times_s`` the solutions are one tick apart and the next is
+        one tick later; with ``times_s`` (their times [s]) and ``at_s`` (the next one's [s]) the
+        extrapolation follows the real spacing (ticks late or early on a loaded machine: an
+        equal-spacing guess would put its error into the redundant joints, which the Newton
+        step does not correct).
         """
-        if len(solutions) >= 3:
+        if times_s is not None and at_s is not None and len(solutions) >= 2:
+            q = _lagrange(solutions[-3:], times_s[-3:], at_s)
+        elif len(solutions) >= 3:
             q = 3.0 * (solutions[-1] - solutions[-2]) + solutions[-3]
         elif len(solutions) == 2:
             q = 2.0 * solutions[-1] - solutions[-2]
@@ -613,3 +621,16 @@ def swings_under_way(plan: FootstepPlan, t_s: float) -> dict[str, Swing]:
     """Foot name -> its swing under way at ``t_s`` from the plan start (feet in the air)."""
     return {swing.foot: swing for swing in plan.swings()
             if swing.lift_off_s < t_s < swing.touch_down_s}
+
+
+def _lagrange(values: Sequence[np.ndarray], times_s: Sequence[float], at_s: float) -> np.ndarray:
+    """The polynomial through ``(times_s[k], values[k])`` (two or three) evaluated at ``at_s``."""
+    t = [float(x) for x in times_s]
+    q = np.zeros_like(np.asarray(values[-1], dtype=float))
+    for k, value in enumerate(values):
+        weight = 1.0
+        for j in range(len(values)):
+            if j != k:
+                weight *= (at_s - t[j]) / (t[k] - t[j])
+        q += weight * value
+    return q
