@@ -36,6 +36,10 @@ VELOCITY_M_S = 0.04
 START_TIMEOUT_S = 60.0
 #: Walking observed after a restart [s]: two crawl steps.
 RECOVERY_S = 8.0
+#: "It walks on": at least this far in RECOVERY_S after a restart [m]. The crawl asked 0.04
+#: m/s walks 0.0317 (joint limit), in bursts, and restarts from standstill (weight shift):
+#: 8-20 cm measured; a robot that does not walk on makes < 1 cm.
+WALKS_ON_M = 0.05
 
 
 def _domains():
@@ -253,8 +257,8 @@ def test_killed_nodes_are_reported_stale_and_rejoin_the_walk(graph):
         assert result['warn_after_s'] < 2.0
         # Held while the producer was away: the base did not run off.
         assert abs(result['x_held'] - result['x_before']) < 0.05
-        # The robot walks on: at least a quarter of the commanded speed.
-        assert result['x_after'] > result['x_held'] + 0.25 * VELOCITY_M_S * RECOVERY_S
+        # The robot walks on.
+        assert result['x_after'] > result['x_held'] + WALKS_ON_M
         # The planner paused while the robot was held and planned again from where it stood:
         # no catching up with a plan that ran on (the base swung back 4-10 cm before).
         assert result['back_after_restart_m'] < 0.05
@@ -318,8 +322,8 @@ def _assert_walks_on(result: dict, back_m: float) -> None:
     # The missing input is reported (the swing policy: at the first lift-off without its
     # trajectory).
     assert result['warn_after_s'] < 5.0
-    # The walk goes on: at least a quarter of the commanded speed after the restart.
-    assert result['x_after'] > result['x_held'] + 0.25 * VELOCITY_M_S * RECOVERY_S
+    # The walk goes on after the restart.
+    assert result['x_after'] > result['x_held'] + WALKS_ON_M
     # No swinging back to catch up. ZMP ERROR samples are printed, not asserted: on two shared
     # cores the monitor's finite differences count a few with any load.
     assert result['back_after_restart_m'] < back_m
