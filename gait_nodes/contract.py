@@ -545,6 +545,54 @@ def com_reference_to_msg(states: Sequence[ComState]):
         _header(start_ns), [COM_JOINT_NAME], points)
 
 
+class ComReferenceMessages:
+    """Builds the one-state /gait/com_reference messages of a publisher, from plain floats.
+
+    The controller publishes one state per tick: ``to_msg`` gives the message of
+    ``com_reference_to_msg([ComState(...)])`` field by field, but without the ComState's arrays
+    and with the message constructors looked up once (a node lives in one runtime). A
+    non-finite value goes through :class:`ComState`, which raises its :class:`ContractError`.
+    """
+
+    def __init__(self):
+        names = ('trajectory_msgs/msg/MultiDOFJointTrajectory',
+                 'trajectory_msgs/msg/MultiDOFJointTrajectoryPoint', 'std_msgs/msg/Header',
+                 'builtin_interfaces/msg/Time', 'builtin_interfaces/msg/Duration',
+                 'geometry_msgs/msg/Transform', 'geometry_msgs/msg/Twist',
+                 'geometry_msgs/msg/Vector3', 'geometry_msgs/msg/Quaternion')
+        self._constructors = tuple(map(get_constructor, names))
+
+    def to_msg(self, stamp_ns: int, position_in_world: Sequence[float],
+               velocity_in_world: Sequence[float], acceleration_in_world: Sequence[float],
+               yaw_rad: float = 0.0, yaw_rate_rad_s: float = 0.0):
+        """MultiDOFJointTrajectory with the one state at ``stamp_ns`` [ns] (module docstring).
+
+        Args:
+            stamp_ns: Time of the state [ns].
+            position_in_world: (x, y, z) COM position [m].
+            velocity_in_world: (x, y, z) COM velocity [m/s].
+            acceleration_in_world: (x, y, z) COM acceleration [m/s^2].
+            yaw_rad: Body yaw [rad].
+            yaw_rate_rad_s: Body yaw rate [rad/s].
+        """
+        values = [*position_in_world, *velocity_in_world, *acceleration_in_world]
+        if len(values) != 9 or not all(map(math.isfinite, (*values, yaw_rad, yaw_rate_rad_s))):
+            return com_reference_to_msg([ComState(
+                stamp_ns, position_in_world, velocity_in_world, acceleration_in_world, yaw_rad,
+                yaw_rate_rad_s)])
+        trajectory, point, header, time, duration, transform, twist, vector, quaternion = \
+            self._constructors
+        px, py, pz, vx, vy, vz, ax, ay, az = map(float, values)
+        yaw = float(yaw_rad)
+        return trajectory(
+            header(time(*divmod(int(stamp_ns), _NS_PER_S)), WORLD_FRAME), [COM_JOINT_NAME],
+            [point([transform(vector(px, py, pz), quaternion(0.0, 0.0, math.sin(0.5 * yaw),
+                                                               math.cos(0.5 * yaw)))],
+                   [twist(vector(vx, vy, vz), vector(0.0, 0.0, float(yaw_rate_rad_s)))],
+                   [twist(vector(ax, ay, az), vector(0.0, 0.0, 0.0))],
+                   duration(0, 0))])
+
+
 def com_reference_from_msg(msg) -> list[ComState]:
     """The states of a /gait/com_reference message; :class:`ContractError` if malformed."""
     _check_frame(msg.header, '/gait/com_reference')

@@ -245,3 +245,30 @@ def test_com_state_names_the_first_bad_vector(vectors, error):
     else:
         with pytest.raises(ContractError, match=error):
             ComState(0, *vectors)
+
+
+_FLOATS = st.floats(allow_nan=False, allow_infinity=False, width=64) | st.sampled_from(
+    [0.0, -0.0, 1e-310, -1e308])
+
+
+@settings(max_examples=80, deadline=None)
+@given(st.integers(0, 2**62), st.lists(_FLOATS, min_size=11, max_size=11))
+def test_com_reference_messages_equal_the_com_state_path(stamp_ns, values):
+    """The controller's one-state builder gives com_reference_to_msg's message, to the byte."""
+    position, velocity, acceleration, (yaw, rate) = (values[0:3], values[3:6], values[6:9],
+                                                     values[9:11])
+    built = contract.ComReferenceMessages().to_msg(stamp_ns, position, velocity, acceleration,
+                                                   yaw, rate)
+    expected = contract.com_reference_to_msg([ComState(stamp_ns, np.array(position),
+                                                       velocity, acceleration, yaw, rate)])
+    assert serialize_message(built) == serialize_message(expected)
+
+
+def test_com_reference_messages_reject_what_com_state_rejects():
+    builder = contract.ComReferenceMessages()
+    with pytest.raises(ContractError, match='the COM velocity_in_world holds a NaN'):
+        builder.to_msg(0, (0.0, 0.0, 1.0), (0.0, math.nan, 0.0), (0.0, 0.0, 0.0))
+    with pytest.raises(ContractError, match='yaw holds a NaN'):
+        builder.to_msg(0, (0.0, 0.0, 1.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), math.inf)
+    with pytest.raises(ContractError, match='must have 3 components'):
+        builder.to_msg(0, (0.0, 0.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))

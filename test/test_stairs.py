@@ -225,6 +225,36 @@ def test_the_com_height_follows_the_support_smoothly_to_the_total_rise():
         assert support.at(t_k)[0] == pytest.approx(plan.positions_in_world[k, :, 2].min())
 
 
+def _support_height_numpy(support, t_s):
+    """SupportHeight.at in numpy scalars (np.searchsorted), as it was written first."""
+    times, heights = support.times_s, support.heights_m
+    k = int(np.searchsorted(times, t_s, side='right'))
+    if k == 0 or k == len(times):
+        return float(heights[min(k, len(times) - 1)]), 0.0, 0.0
+    t0, t1 = times[k - 1], times[k]
+    h0, h1 = heights[k - 1], heights[k]
+    span = t1 - t0
+    s = (t_s - t0) / span
+    rise = h1 - h0
+    return (float(h0 + rise * s ** 3 * (10.0 - 15.0 * s + 6.0 * s * s)),
+            float(rise * 30.0 * s * s * (1.0 - s) ** 2 / span),
+            float(rise * 60.0 * s * (1.0 - s) * (1.0 - 2.0 * s) / span ** 2))
+
+
+@pytest.mark.parametrize('rise_m', [0.05, -0.04])
+def test_the_support_height_in_floats_is_the_numpy_form_to_the_bit(rise_m):
+    _, plan = walk(Staircase(0.4, rise_m, 0.3, 3))
+    support = SupportHeight(plan)
+    rng = np.random.default_rng(3)
+    times = np.concatenate([rng.uniform(-1.0, plan.end_s + 1.0, 2000), plan.times_s,
+                            np.nextafter(plan.times_s, -np.inf), [-0.0]])
+    for t_s in times.tolist():
+        got, expected = support.at(t_s), _support_height_numpy(support, t_s)
+        # Same floats, signed zeros included (a -0.0 acceleration is other CDR bytes).
+        assert [math.copysign(1.0, v) for v in got] == [math.copysign(1.0, v) for v in expected]
+        assert got == expected
+
+
 def test_the_com_height_is_the_same_from_any_later_plan_window():
     stairs = Staircase(0.4, 0.05, 0.3, 3)
     planner, whole = walk(stairs)
