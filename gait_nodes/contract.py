@@ -328,11 +328,15 @@ class ZmpReference:
 
     def sample(self, stamps_ns: np.ndarray) -> np.ndarray:
         """(M, 2) reference at ``stamps_ns``, linear between samples, held beyond the ends."""
-        origin = int(self.stamps_ns[0])
-        t = (np.asarray(stamps_ns, dtype=np.int64) - origin) * 1e-9
-        known = (self.stamps_ns - origin) * 1e-9
-        return np.stack([np.interp(t, known, self.zmp_in_world[:, i]) for i in range(2)],
-                        axis=-1)
+        known = self.__dict__.get('_known_s')
+        if known is None:  # the samples' times from the first one, worked out once
+            known = (self.stamps_ns - self.stamps_ns[0]) * 1e-9
+            object.__setattr__(self, '_known_s', known)
+        t = (np.asarray(stamps_ns, dtype=np.int64) - self.stamps_ns[0]) * 1e-9
+        result = np.empty((len(t), 2))  # (the columns of np.stack, for fewer numpy calls)
+        result[:, 0] = np.interp(t, known, self.zmp_in_world[:, 0])
+        result[:, 1] = np.interp(t, known, self.zmp_in_world[:, 1])
+        return result
 
 
 def zmp_reference_to_msg(reference: ZmpReference):
@@ -351,26 +355,28 @@ class ZmpReferenceMessages:
     """
 
     def __init__(self):
-        self._pose_type = None
+        self._constructors = (None,)
         self._stamps = np.zeros(0, dtype=np.int64)
         self._bits = np.zeros((0, 3), dtype=np.int64)
         self._poses: list = []
 
     def to_msg(self, reference: ZmpReference):
         """nav_msgs/Path for ``reference`` (layout in the module docstring)."""
-        pose_stamped = get_constructor('geometry_msgs/msg/PoseStamped')
-        header = get_constructor('std_msgs/msg/Header')
-        time = get_constructor('builtin_interfaces/msg/Time')
-        pose = get_constructor('geometry_msgs/msg/Pose')
-        point = get_constructor('geometry_msgs/msg/Point')
-        quaternion = get_constructor('geometry_msgs/msg/Quaternion')
+        path = get_constructor('nav_msgs/msg/Path')
+        if self._constructors[0] is not path:  # first message, or another runtime's classes
+            self._constructors = (path, *map(get_constructor, (
+                'geometry_msgs/msg/PoseStamped', 'std_msgs/msg/Header',
+                'builtin_interfaces/msg/Time', 'geometry_msgs/msg/Pose',
+                'geometry_msgs/msg/Point', 'geometry_msgs/msg/Quaternion')))
+            self._stamps = self._stamps[:0]
+        _, pose_stamped, header, time, pose, point, quaternion = self._constructors
         stamps = reference.stamps_ns
         zmp = np.column_stack((reference.zmp_in_world, reference.plane_heights_m))
         bits = zmp.view(np.int64)  # exact comparison: 0.0 and -0.0 are different samples
         # Samples equal to the previous message's from the same stamp on (stamps increase).
         reused = np.zeros(len(stamps), dtype=bool)
         offset = int(np.searchsorted(self._stamps, stamps[0]))
-        if self._pose_type is pose_stamped and offset < len(self._stamps):
+        if offset < len(self._stamps):
             count = min(len(self._stamps) - offset, len(stamps))
             window = slice(offset, offset + count)
             reused[:count] = ((self._stamps[window] == stamps[:count])
@@ -386,9 +392,8 @@ class ZmpReferenceMessages:
                 poses.append(pose_stamped(
                     header(time(*divmod(int(stamps[k]), _NS_PER_S)), WORLD_FRAME),
                     pose(point(x, y, z), quaternion(0.0, 0.0, 0.0, 1.0))))
-        self._pose_type, self._stamps, self._bits, self._poses = \
-            pose_stamped, stamps.copy(), bits.copy(), poses
-        return get_constructor('nav_msgs/msg/Path')(_header(int(stamps[0])), poses)
+        self._stamps, self._bits, self._poses = stamps.copy(), bits.copy(), poses
+        return path(header(time(*divmod(int(stamps[0]), _NS_PER_S)), WORLD_FRAME), poses)
 
 
 def zmp_reference_from_msg(msg) -> ZmpReference:

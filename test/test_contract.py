@@ -272,3 +272,19 @@ def test_com_reference_messages_reject_what_com_state_rejects():
         builder.to_msg(0, (0.0, 0.0, 1.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), math.inf)
     with pytest.raises(ContractError, match='must have 3 components'):
         builder.to_msg(0, (0.0, 0.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(0, 10**12), st.lists(st.integers(1, 10**8), min_size=1, max_size=40),
+       st.integers(0, 2**32))
+def test_zmp_reference_sample_is_the_np_interp_form_to_the_bit(first_ns, gaps, seed):
+    rng = np.random.default_rng(seed)
+    stamps = first_ns + np.concatenate([[0], np.cumsum(gaps)])
+    reference = ZmpReference(stamps, rng.normal(size=(len(stamps), 2)))
+    grid = np.sort(rng.integers(first_ns - 10**8, int(stamps[-1]) + 10**8, 300))
+    for _ in range(2):  # the times of the samples are kept after the first call
+        origin = int(stamps[0])
+        expected = np.stack([np.interp((grid - origin) * 1e-9, (stamps - origin) * 1e-9,
+                                       reference.zmp_in_world[:, i]) for i in range(2)], -1)
+        np.testing.assert_array_equal(reference.sample(grid).view(np.int64),
+                                      expected.view(np.int64))
