@@ -672,11 +672,18 @@ class SwingTrajectory:
 
 def swing_trajectory_to_msg(swing: SwingTrajectory):
     """MultiDOFJointTrajectory for one swing (layout in the module docstring)."""
-    point_type = get_constructor('trajectory_msgs/msg/MultiDOFJointTrajectoryPoint')
-    points = [point_type([_transform(position, yaw)], [], [], seconds_to_duration_msg(t_s))
-              for t_s, position, yaw in zip(swing.times_s.tolist(),
-                                            swing.positions_in_world.tolist(),
-                                            swing.yaws_rad.tolist(), strict=True)]
+    point_type, transform, vector, quaternion, duration = map(get_constructor, (
+        'trajectory_msgs/msg/MultiDOFJointTrajectoryPoint', 'geometry_msgs/msg/Transform',
+        'geometry_msgs/msg/Vector3', 'geometry_msgs/msg/Quaternion',
+        'builtin_interfaces/msg/Duration'))
+    # Hundreds of waypoints: the constructors looked up once, then _transform's and
+    # seconds_to_duration_msg's arithmetic on the list's floats.
+    points = [point_type([transform(vector(x, y, z), quaternion(0.0, 0.0, math.sin(0.5 * yaw),
+                                                                math.cos(0.5 * yaw)))],
+                         [], [], duration(*divmod(int(round(t_s * 1e9)), _NS_PER_S)))
+              for t_s, (x, y, z), yaw in zip(swing.times_s.tolist(),
+                                             swing.positions_in_world.tolist(),
+                                             swing.yaws_rad.tolist(), strict=True)]
     return get_constructor('trajectory_msgs/msg/MultiDOFJointTrajectory')(
         _header(swing.start_ns), [swing.foot], points)
 

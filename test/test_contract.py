@@ -252,7 +252,7 @@ _FLOATS = st.floats(allow_nan=False, allow_infinity=False, width=64) | st.sample
 
 
 @settings(max_examples=80, deadline=None)
-@given(st.integers(0, 2**62), st.lists(_FLOATS, min_size=11, max_size=11))
+@given(st.integers(0, 2**31 * 10**9 - 1), st.lists(_FLOATS, min_size=11, max_size=11))
 def test_com_reference_messages_equal_the_com_state_path(stamp_ns, values):
     """The controller's one-state builder gives com_reference_to_msg's message, to the byte."""
     position, velocity, acceleration, (yaw, rate) = (values[0:3], values[3:6], values[6:9],
@@ -288,3 +288,21 @@ def test_zmp_reference_sample_is_the_np_interp_form_to_the_bit(first_ns, gaps, s
                                        reference.zmp_in_world[:, i]) for i in range(2)], -1)
         np.testing.assert_array_equal(reference.sample(grid).view(np.int64),
                                       expected.view(np.int64))
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.integers(0, 2**40), st.integers(2, 30), st.integers(0, 2**32))
+def test_swing_trajectory_to_msg_is_the_transform_composition_to_the_byte(start_ns, count,
+                                                                          seed):
+    rng = np.random.default_rng(seed)
+    times = np.sort(rng.uniform(0.0, 3.0, count))
+    times[0] = 0.0
+    swing = SwingTrajectory('fr', start_ns, times, rng.normal(size=(count, 3)),
+                            rng.normal(0.0, 4.0, count))
+    point = contract.get_constructor('trajectory_msgs/msg/MultiDOFJointTrajectoryPoint')
+    expected = contract.get_constructor('trajectory_msgs/msg/MultiDOFJointTrajectory')(
+        contract._header(start_ns), ['fr'],
+        [point([contract._transform(p, y)], [], [], contract.seconds_to_duration_msg(t))
+         for t, p, y in zip(times, swing.positions_in_world, swing.yaws_rad, strict=True)])
+    assert serialize_message(contract.swing_trajectory_to_msg(swing)) == \
+        serialize_message(expected)
