@@ -309,7 +309,7 @@ class ZmpReference:
         if zmp.shape != (len(stamps), 2):
             raise ContractError(f'ZMP reference shape {zmp.shape} for {len(stamps)} stamps')
         _check_finite(zmp, 'the ZMP reference')
-        if np.any(np.diff(stamps) <= 0):
+        if (stamps[1:] <= stamps[:-1]).any():  # (np.diff could overflow int64)
             raise ContractError('ZMP reference stamps are not strictly increasing')
         heights = _frozen(np.zeros(len(stamps)) if self.plane_heights_m is None
                           else self.plane_heights_m)
