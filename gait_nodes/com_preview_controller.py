@@ -140,8 +140,10 @@ class ComPreviewController(Node):
             get_message('trajectory_msgs/msg/MultiDOFJointTrajectory'), FOOTSTEPS_TOPIC,
             self._on_footsteps, QoSProfile(depth=1,
                                            durability=DurabilityPolicy.TRANSIENT_LOCAL))
-        self.create_subscription(get_message('geometry_msgs/msg/PointStamped'),
-                                 MEASURED_COM_TOPIC, self._on_measured_com, 10)
+        # Only where the generator starts: dropped once it runs (see _tick).
+        self._measured_com_subscription = self.create_subscription(
+            get_message('geometry_msgs/msg/PointStamped'), MEASURED_COM_TOPIC,
+            self._on_measured_com, 10)
         # The incremental reader relies on poses shared by identity between the planner's
         # successive messages, which holds within one process (inproc) only. Over DDS the
         # samples' objects are not ours to rely on (with the reader the DDS walk recorded ZMP
@@ -155,6 +157,7 @@ class ComPreviewController(Node):
         self._support = None
         self._generator = None
         self._last_published = None
+        self._messages = contract.ComReferenceMessages()
         self._timer = self.create_timer(self._settings.preview.dt_s, self._tick)
         self._status_timer = self.create_timer(values['status_period_s'], self._report_status)
         self.add_on_set_parameters_callback(self._on_set_parameters)
@@ -308,6 +311,10 @@ class ComPreviewController(Node):
                 return
             self._generator = make_generator(self._settings, self._start_state(now_ns), now_ns,
                                              self._reference)
+            # The measured COM only sets where the generator starts, and it never stops: a
+            # 200 Hz subscription would cost a callback per sample for nothing.
+            self.destroy_subscription(self._measured_com_subscription)
+            self._measured_com.clear()
         behind = (now_ns - self._generator.stamp_ns) // preview.dt_ns
         if behind > MAX_CATCH_UP_TICKS or behind < -1:
             # Far off the clock (a jump in time): carry the state over to now.
@@ -327,20 +334,21 @@ class ComPreviewController(Node):
         self._publish(sample)
 
     def _publish(self, sample) -> None:
+        # Plain floats into the message builder: the message of com_reference_to_msg of a
+        # ComState of the same values (test_com_preview_node), without a dozen small arrays.
+        stamp_ns = sample.stamp_ns
         yaw, yaw_rate = 0.0, 0.0
         if self._plan is not None:
-            yaw, yaw_rate = self._plan_yaw.at((sample.stamp_ns - self._plan.start_ns) * 1e-9)
+            yaw, yaw_rate = self._plan_yaw.at((stamp_ns - self._plan.start_ns) * 1e-9)
             yaw = math.remainder(yaw, 2 * math.pi)
-        support = (0.0, 0.0, 0.0) if self._support is None \
-            else self._support.at_ns(sample.stamp_ns)
-        height = self._settings.preview.com_height_m + support[0]
-        state = contract.ComState(
-            stamp_ns=sample.stamp_ns,
-            position_in_world=[*sample.position_in_world, height],
-            velocity_in_world=[*sample.velocity_in_world, support[1]],
-            acceleration_in_world=[*sample.acceleration_in_world, support[2]],
-            yaw_rad=yaw, yaw_rate_rad_s=yaw_rate)
-        self._publisher.publish(contract.com_reference_to_msg([state]))
+        height, climb, climb_rate = (0.0, 0.0, 0.0) if self._support is None \
+            else self._support.at_ns(stamp_ns)
+        px, py = sample.position_in_world.tolist()
+        vx, vy = sample.velocity_in_world.tolist()
+        ax, ay = sample.acceleration_in_world.tolist()
+        self._publisher.publish(self._messages.to_msg(
+            stamp_ns, (px, py, self._settings.preview.com_height_m + height), (vx, vy, climb),
+            (ax, ay, climb_rate), yaw, yaw_rate))
         self._last_published = sample
 
     def _report_status(self) -> None:

@@ -309,7 +309,7 @@ class ZmpReference:
         if zmp.shape != (len(stamps), 2):
             raise ContractError(f'ZMP reference shape {zmp.shape} for {len(stamps)} stamps')
         _check_finite(zmp, 'the ZMP reference')
-        if np.any(np.diff(stamps) <= 0):
+        if (stamps[1:] <= stamps[:-1]).any():  # (np.diff could overflow int64)
             raise ContractError('ZMP reference stamps are not strictly increasing')
         heights = _frozen(np.zeros(len(stamps)) if self.plane_heights_m is None
                           else self.plane_heights_m)
@@ -328,11 +328,15 @@ class ZmpReference:
 
     def sample(self, stamps_ns: np.ndarray) -> np.ndarray:
         """(M, 2) reference at ``stamps_ns``, linear between samples, held beyond the ends."""
-        origin = int(self.stamps_ns[0])
-        t = (np.asarray(stamps_ns, dtype=np.int64) - origin) * 1e-9
-        known = (self.stamps_ns - origin) * 1e-9
-        return np.stack([np.interp(t, known, self.zmp_in_world[:, i]) for i in range(2)],
-                        axis=-1)
+        known = self.__dict__.get('_known_s')
+        if known is None:  # the samples' times from the first one, worked out once
+            known = (self.stamps_ns - self.stamps_ns[0]) * 1e-9
+            object.__setattr__(self, '_known_s', known)
+        t = (np.asarray(stamps_ns, dtype=np.int64) - self.stamps_ns[0]) * 1e-9
+        result = np.empty((len(t), 2))  # (the columns of np.stack, for fewer numpy calls)
+        result[:, 0] = np.interp(t, known, self.zmp_in_world[:, 0])
+        result[:, 1] = np.interp(t, known, self.zmp_in_world[:, 1])
+        return result
 
 
 def zmp_reference_to_msg(reference: ZmpReference):
@@ -351,26 +355,28 @@ class ZmpReferenceMessages:
     """
 
     def __init__(self):
-        self._pose_type = None
+        self._constructors = (None,)
         self._stamps = np.zeros(0, dtype=np.int64)
         self._bits = np.zeros((0, 3), dtype=np.int64)
         self._poses: list = []
 
     def to_msg(self, reference: ZmpReference):
         """nav_msgs/Path for ``reference`` (layout in the module docstring)."""
-        pose_stamped = get_constructor('geometry_msgs/msg/PoseStamped')
-        header = get_constructor('std_msgs/msg/Header')
-        time = get_constructor('builtin_interfaces/msg/Time')
-        pose = get_constructor('geometry_msgs/msg/Pose')
-        point = get_constructor('geometry_msgs/msg/Point')
-        quaternion = get_constructor('geometry_msgs/msg/Quaternion')
+        path = get_constructor('nav_msgs/msg/Path')
+        if self._constructors[0] is not path:  # first message, or another runtime's classes
+            self._constructors = (path, *map(get_constructor, (
+                'geometry_msgs/msg/PoseStamped', 'std_msgs/msg/Header',
+                'builtin_interfaces/msg/Time', 'geometry_msgs/msg/Pose',
+                'geometry_msgs/msg/Point', 'geometry_msgs/msg/Quaternion')))
+            self._stamps = self._stamps[:0]
+        _, pose_stamped, header, time, pose, point, quaternion = self._constructors
         stamps = reference.stamps_ns
         zmp = np.column_stack((reference.zmp_in_world, reference.plane_heights_m))
         bits = zmp.view(np.int64)  # exact comparison: 0.0 and -0.0 are different samples
         # Samples equal to the previous message's from the same stamp on (stamps increase).
         reused = np.zeros(len(stamps), dtype=bool)
         offset = int(np.searchsorted(self._stamps, stamps[0]))
-        if self._pose_type is pose_stamped and offset < len(self._stamps):
+        if offset < len(self._stamps):
             count = min(len(self._stamps) - offset, len(stamps))
             window = slice(offset, offset + count)
             reused[:count] = ((self._stamps[window] == stamps[:count])
@@ -386,9 +392,8 @@ class ZmpReferenceMessages:
                 poses.append(pose_stamped(
                     header(time(*divmod(int(stamps[k]), _NS_PER_S)), WORLD_FRAME),
                     pose(point(x, y, z), quaternion(0.0, 0.0, 0.0, 1.0))))
-        self._pose_type, self._stamps, self._bits, self._poses = \
-            pose_stamped, stamps.copy(), bits.copy(), poses
-        return get_constructor('nav_msgs/msg/Path')(_header(int(stamps[0])), poses)
+        self._stamps, self._bits, self._poses = stamps.copy(), bits.copy(), poses
+        return path(header(time(*divmod(int(stamps[0]), _NS_PER_S)), WORLD_FRAME), poses)
 
 
 def zmp_reference_from_msg(msg) -> ZmpReference:
@@ -545,6 +550,54 @@ def com_reference_to_msg(states: Sequence[ComState]):
         _header(start_ns), [COM_JOINT_NAME], points)
 
 
+class ComReferenceMessages:
+    """Builds the one-state /gait/com_reference messages of a publisher, from plain floats.
+
+    The controller publishes one state per tick: ``to_msg`` gives the message of
+    ``com_reference_to_msg([ComState(...)])`` field by field, but without the ComState's arrays
+    and with the message constructors looked up once (a node lives in one runtime). A
+    non-finite value goes through :class:`ComState`, which raises its :class:`ContractError`.
+    """
+
+    def __init__(self):
+        names = ('trajectory_msgs/msg/MultiDOFJointTrajectory',
+                 'trajectory_msgs/msg/MultiDOFJointTrajectoryPoint', 'std_msgs/msg/Header',
+                 'builtin_interfaces/msg/Time', 'builtin_interfaces/msg/Duration',
+                 'geometry_msgs/msg/Transform', 'geometry_msgs/msg/Twist',
+                 'geometry_msgs/msg/Vector3', 'geometry_msgs/msg/Quaternion')
+        self._constructors = tuple(map(get_constructor, names))
+
+    def to_msg(self, stamp_ns: int, position_in_world: Sequence[float],
+               velocity_in_world: Sequence[float], acceleration_in_world: Sequence[float],
+               yaw_rad: float = 0.0, yaw_rate_rad_s: float = 0.0):
+        """MultiDOFJointTrajectory with the one state at ``stamp_ns`` [ns] (module docstring).
+
+        Args:
+            stamp_ns: Time of the state [ns].
+            position_in_world: (x, y, z) COM position [m].
+            velocity_in_world: (x, y, z) COM velocity [m/s].
+            acceleration_in_world: (x, y, z) COM acceleration [m/s^2].
+            yaw_rad: Body yaw [rad].
+            yaw_rate_rad_s: Body yaw rate [rad/s].
+        """
+        values = [*position_in_world, *velocity_in_world, *acceleration_in_world]
+        if len(values) != 9 or not all(map(math.isfinite, (*values, yaw_rad, yaw_rate_rad_s))):
+            return com_reference_to_msg([ComState(
+                stamp_ns, position_in_world, velocity_in_world, acceleration_in_world, yaw_rad,
+                yaw_rate_rad_s)])
+        trajectory, point, header, time, duration, transform, twist, vector, quaternion = \
+            self._constructors
+        px, py, pz, vx, vy, vz, ax, ay, az = map(float, values)
+        yaw = float(yaw_rad)
+        return trajectory(
+            header(time(*divmod(int(stamp_ns), _NS_PER_S)), WORLD_FRAME), [COM_JOINT_NAME],
+            [point([transform(vector(px, py, pz), quaternion(0.0, 0.0, math.sin(0.5 * yaw),
+                                                               math.cos(0.5 * yaw)))],
+                   [twist(vector(vx, vy, vz), vector(0.0, 0.0, float(yaw_rate_rad_s)))],
+                   [twist(vector(ax, ay, az), vector(0.0, 0.0, 0.0))],
+                   duration(0, 0))])
+
+
 def com_reference_from_msg(msg) -> list[ComState]:
     """The states of a /gait/com_reference message; :class:`ContractError` if malformed."""
     _check_frame(msg.header, '/gait/com_reference')
@@ -619,11 +672,18 @@ class SwingTrajectory:
 
 def swing_trajectory_to_msg(swing: SwingTrajectory):
     """MultiDOFJointTrajectory for one swing (layout in the module docstring)."""
-    point_type = get_constructor('trajectory_msgs/msg/MultiDOFJointTrajectoryPoint')
-    points = [point_type([_transform(position, yaw)], [], [], seconds_to_duration_msg(t_s))
-              for t_s, position, yaw in zip(swing.times_s.tolist(),
-                                            swing.positions_in_world.tolist(),
-                                            swing.yaws_rad.tolist(), strict=True)]
+    point_type, transform, vector, quaternion, duration = map(get_constructor, (
+        'trajectory_msgs/msg/MultiDOFJointTrajectoryPoint', 'geometry_msgs/msg/Transform',
+        'geometry_msgs/msg/Vector3', 'geometry_msgs/msg/Quaternion',
+        'builtin_interfaces/msg/Duration'))
+    # Hundreds of waypoints: the constructors looked up once, then _transform's and
+    # seconds_to_duration_msg's arithmetic on the list's floats.
+    points = [point_type([transform(vector(x, y, z), quaternion(0.0, 0.0, math.sin(0.5 * yaw),
+                                                                math.cos(0.5 * yaw)))],
+                         [], [], duration(*divmod(int(round(t_s * 1e9)), _NS_PER_S)))
+              for t_s, (x, y, z), yaw in zip(swing.times_s.tolist(),
+                                             swing.positions_in_world.tolist(),
+                                             swing.yaws_rad.tolist(), strict=True)]
     return get_constructor('trajectory_msgs/msg/MultiDOFJointTrajectory')(
         _header(swing.start_ns), [swing.foot], points)
 

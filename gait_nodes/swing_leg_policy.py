@@ -113,6 +113,7 @@ class SwingLegPolicy(Node):
         self._policy, self._table_path = self._load_policy(values)
         self._plan = None
         self._published: dict[tuple[str, int], tuple] = {}
+        self._swing_times_of: tuple = (None, [])  # see _swing_times
         self._lookups: dict[tuple, tuple] = {}
         self.published_count = 0
         self._publisher = self.create_publisher(
@@ -204,9 +205,7 @@ class SwingLegPolicy(Node):
         now_ns = self.get_clock().now().nanoseconds
         lead_ns = int(round(self._values['lead_time_s'] * NS_PER_S))
         busy_until: dict[str, int] = {}
-        for swing in plan.swings():
-            lift_ns = plan.start_ns + int(round(swing.lift_off_s * NS_PER_S))
-            touch_ns = plan.start_ns + int(round(swing.touch_down_s * NS_PER_S))
+        for swing, lift_ns, touch_ns, signature in self._swing_times(plan):
             previous = busy_until.get(swing.foot)
             busy_until[swing.foot] = touch_ns
             if touch_ns <= now_ns or lift_ns - lead_ns > now_ns:
@@ -214,8 +213,6 @@ class SwingLegPolicy(Node):
             if previous is not None and previous > now_ns:
                 continue  # this foot's earlier swing is still under way
             key = (swing.foot, lift_ns)
-            signature = (tuple(np.round(swing.end_in_world, 9)), round(swing.end_yaw_rad, 9),
-                         touch_ns)
             sent = self._published.get(key)
             if sent is not None and (sent == signature or lift_ns <= now_ns):
                 continue
@@ -223,8 +220,25 @@ class SwingLegPolicy(Node):
                 continue  # under way already (a restart): the IK's fallback swing goes on
             self._publish(plan, swing, lift_ns)
             self._published[key] = signature
-        self._published = {k: v for k, v in self._published.items()
-                           if k[1] + 60 * NS_PER_S > now_ns}
+        old_ns = now_ns - 60 * NS_PER_S
+        if any(k[1] <= old_ns for k in self._published):
+            self._published = {k: v for k, v in self._published.items() if k[1] > old_ns}
+
+    def _swing_times(self, plan: contract.FootstepPlan) -> list:
+        """(swing, lift-off [ns], touch-down [ns], signature) of each swing of ``plan``.
+
+        Worked out once per plan (a new one comes with each /gait/footsteps, the tick asks at
+        50 Hz); the signature tells a re-planned landing of the same swing.
+        """
+        if self._swing_times_of[0] is not plan:
+            times = []
+            for swing in plan.swings():
+                touch_ns = plan.start_ns + int(round(swing.touch_down_s * NS_PER_S))
+                times.append((swing, plan.start_ns + int(round(swing.lift_off_s * NS_PER_S)),
+                              touch_ns, (tuple(np.round(swing.end_in_world, 9)),
+                                         round(swing.end_yaw_rad, 9), touch_ns)))
+            self._swing_times_of = (plan, times)
+        return self._swing_times_of[1]
 
     def _publish(self, plan: contract.FootstepPlan, swing: contract.Swing, lift_ns: int) -> None:
         values = self._values

@@ -245,3 +245,64 @@ def test_com_state_names_the_first_bad_vector(vectors, error):
     else:
         with pytest.raises(ContractError, match=error):
             ComState(0, *vectors)
+
+
+_FLOATS = st.floats(allow_nan=False, allow_infinity=False, width=64) | st.sampled_from(
+    [0.0, -0.0, 1e-310, -1e308])
+
+
+@settings(max_examples=80, deadline=None)
+@given(st.integers(0, 2**31 * 10**9 - 1), st.lists(_FLOATS, min_size=11, max_size=11))
+def test_com_reference_messages_equal_the_com_state_path(stamp_ns, values):
+    """The controller's one-state builder gives com_reference_to_msg's message, to the byte."""
+    position, velocity, acceleration, (yaw, rate) = (values[0:3], values[3:6], values[6:9],
+                                                     values[9:11])
+    built = contract.ComReferenceMessages().to_msg(stamp_ns, position, velocity, acceleration,
+                                                   yaw, rate)
+    expected = contract.com_reference_to_msg([ComState(stamp_ns, np.array(position),
+                                                       velocity, acceleration, yaw, rate)])
+    assert serialize_message(built) == serialize_message(expected)
+
+
+def test_com_reference_messages_reject_what_com_state_rejects():
+    builder = contract.ComReferenceMessages()
+    with pytest.raises(ContractError, match='the COM velocity_in_world holds a NaN'):
+        builder.to_msg(0, (0.0, 0.0, 1.0), (0.0, math.nan, 0.0), (0.0, 0.0, 0.0))
+    with pytest.raises(ContractError, match='yaw holds a NaN'):
+        builder.to_msg(0, (0.0, 0.0, 1.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), math.inf)
+    with pytest.raises(ContractError, match='must have 3 components'):
+        builder.to_msg(0, (0.0, 0.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(0, 10**12), st.lists(st.integers(1, 10**8), min_size=1, max_size=40),
+       st.integers(0, 2**32))
+def test_zmp_reference_sample_is_the_np_interp_form_to_the_bit(first_ns, gaps, seed):
+    rng = np.random.default_rng(seed)
+    stamps = first_ns + np.concatenate([[0], np.cumsum(gaps)])
+    reference = ZmpReference(stamps, rng.normal(size=(len(stamps), 2)))
+    grid = np.sort(rng.integers(first_ns - 10**8, int(stamps[-1]) + 10**8, 300))
+    for _ in range(2):  # the times of the samples are kept after the first call
+        origin = int(stamps[0])
+        expected = np.stack([np.interp((grid - origin) * 1e-9, (stamps - origin) * 1e-9,
+                                       reference.zmp_in_world[:, i]) for i in range(2)], -1)
+        np.testing.assert_array_equal(reference.sample(grid).view(np.int64),
+                                      expected.view(np.int64))
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.integers(0, 2**40), st.integers(2, 30), st.integers(0, 2**32))
+def test_swing_trajectory_to_msg_is_the_transform_composition_to_the_byte(start_ns, count,
+                                                                          seed):
+    rng = np.random.default_rng(seed)
+    times = np.sort(rng.uniform(0.0, 3.0, count))
+    times[0] = 0.0
+    swing = SwingTrajectory('fr', start_ns, times, rng.normal(size=(count, 3)),
+                            rng.normal(0.0, 4.0, count))
+    point = contract.get_constructor('trajectory_msgs/msg/MultiDOFJointTrajectoryPoint')
+    expected = contract.get_constructor('trajectory_msgs/msg/MultiDOFJointTrajectory')(
+        contract._header(start_ns), ['fr'],
+        [point([contract._transform(p, y)], [], [], contract.seconds_to_duration_msg(t))
+         for t, p, y in zip(times, swing.positions_in_world, swing.yaws_rad, strict=True)])
+    assert serialize_message(contract.swing_trajectory_to_msg(swing)) == \
+        serialize_message(expected)

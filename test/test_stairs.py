@@ -225,6 +225,36 @@ def test_the_com_height_follows_the_support_smoothly_to_the_total_rise():
         assert support.at(t_k)[0] == pytest.approx(plan.positions_in_world[k, :, 2].min())
 
 
+def _support_height_numpy(support, t_s):
+    """SupportHeight.at in numpy scalars (np.searchsorted), as it was written first."""
+    times, heights = support.times_s, support.heights_m
+    k = int(np.searchsorted(times, t_s, side='right'))
+    if k == 0 or k == len(times):
+        return float(heights[min(k, len(times) - 1)]), 0.0, 0.0
+    t0, t1 = times[k - 1], times[k]
+    h0, h1 = heights[k - 1], heights[k]
+    span = t1 - t0
+    s = (t_s - t0) / span
+    rise = h1 - h0
+    return (float(h0 + rise * s ** 3 * (10.0 - 15.0 * s + 6.0 * s * s)),
+            float(rise * 30.0 * s * s * (1.0 - s) ** 2 / span),
+            float(rise * 60.0 * s * (1.0 - s) * (1.0 - 2.0 * s) / span ** 2))
+
+
+@pytest.mark.parametrize('rise_m', [0.05, -0.04])
+def test_the_support_height_in_floats_is_the_numpy_form_to_the_bit(rise_m):
+    _, plan = walk(Staircase(0.4, rise_m, 0.3, 3))
+    support = SupportHeight(plan)
+    rng = np.random.default_rng(3)
+    times = np.concatenate([rng.uniform(-1.0, plan.end_s + 1.0, 2000), plan.times_s,
+                            np.nextafter(plan.times_s, -np.inf), [-0.0]])
+    for t_s in times.tolist():
+        got, expected = support.at(t_s), _support_height_numpy(support, t_s)
+        # Same floats, signed zeros included (a -0.0 acceleration is other CDR bytes).
+        assert [math.copysign(1.0, v) for v in got] == [math.copysign(1.0, v) for v in expected]
+        assert got == expected
+
+
 def test_the_com_height_is_the_same_from_any_later_plan_window():
     stairs = Staircase(0.4, 0.05, 0.3, 3)
     planner, whole = walk(stairs)
@@ -351,3 +381,35 @@ def test_zmp_reference_lies_on_the_plane_of_the_lowest_contact():
     assert heights[0] == 0.0 and heights[-1] > 0.0
     assert np.all(np.isin(np.round(heights, 9), np.round(np.unique(
         plan.positions_in_world[:, :, 2]), 9)))
+
+
+@pytest.mark.parametrize('staircase', [Staircase(0.25, 0.07, 0.3, 3), Staircase()],
+                         ids=['stairs', 'flat'])
+def test_the_sliding_zmp_reference_is_the_whole_computation_to_the_bit(staircase):
+    """Each window of the node's ticks is the planner's computation without the last window.
+
+    The ticks advance and prune the plan, change the velocity and jump now and then.
+    """
+    from gait_nodes.planning.footsteps import GaitPlanner
+
+    planner = GaitPlanner(BIPED, biped_params(), terrain=staircase)
+    origin_ns, period_ns = 7_000_000_000, 20_000_000
+    commands = {0.1: Twist2D(0.1), 4.0: Twist2D(0.05, 0.0, 0.1), 9.0: Twist2D()}
+    now_ns, checked = origin_ns, 0
+    while now_ns < origin_ns + 14_000_000_000:
+        now_s = (now_ns - origin_ns) * 1e-9
+        for at_s, twist in commands.items():
+            if at_s <= now_s < at_s + 0.02:
+                planner.set_velocity(twist, now_s)
+        planner.advance(now_s + 2.0 + planner.params.step_period_s)
+        planner.prune(now_s)
+        reference = planner.zmp_reference(now_ns, origin_ns, 2.0, 0.01)
+        planner._last_zmp_reference = None
+        whole = planner.zmp_reference(now_ns, origin_ns, 2.0, 0.01)
+        for name in ('stamps_ns', 'zmp_in_world', 'plane_heights_m'):
+            np.testing.assert_array_equal(getattr(reference, name).view(np.int64),
+                                          getattr(whole, name).view(np.int64))
+        checked += 1
+        # Mostly one tick on; now and then 3 ticks, or 5 ms off the sample lattice.
+        now_ns += period_ns * (3 if checked % 37 == 0 else 1) + (5_000_000 * (checked % 53 == 0))
+    assert checked > 500

@@ -242,3 +242,40 @@ def test_without_a_built_table_the_slower_polynomial_times_stand_in(tmp_path, mo
     from gait_nodes.robot.model import load_robot_model
 
     assert swing_timing(load_robot_model('biped'), 'polynomial', STEP_HEIGHT_M)[0] is None
+
+
+def _lattice_s_numpy(timing, step_in_base, turn_rad):
+    """SwingTiming._lattice_s as it was first written (numpy), on the same cache."""
+    from gait_nodes.swing.timing import _CORNERS, LATTICE
+
+    point = np.array([step_in_base[0], step_in_base[1], turn_rad], dtype=float)
+    if point[0] < 0 or (point[0] == 0 and (point[1] < 0 or (point[1] == 0
+                                                              and point[2] < 0))):
+        point = -point
+    point = point / LATTICE
+    low = np.floor(point).astype(int)
+    weight = point - low
+    weights = np.prod(np.where(_CORNERS, weight, 1.0 - weight), axis=1)
+    total = 0.0
+    for corner, w in zip(low + _CORNERS, weights, strict=True):
+        if w == 0.0:
+            continue
+        total += float(w) * timing._cache[(int(corner[0]), int(corner[1]), int(corner[2]))]
+    return total
+
+
+def test_lattice_interpolation_in_floats_is_the_numpy_form_to_the_bit():
+    timing = object.__new__(PolynomialSwingTiming)
+    rng = np.random.default_rng(5)
+    timing._cache = {}
+
+    def raw_s(node, turn):  # a made-up smooth time law: only the interpolation is checked
+        return 0.5 + float(np.hypot(*node)) + 0.3 * abs(turn) + 1e-3 * rng.random()
+
+    timing.raw_s = raw_s
+    points = np.concatenate([rng.normal(0.0, 0.1, (3000, 3)),
+                             np.round(rng.normal(0.0, 0.1, (300, 3)) / 0.02) * 0.02,
+                             [[0.0, 0.0, 0.0], [-0.0, 0.0, -0.05], [0.0, -0.04, 0.1]]])
+    for x, y, turn in points.tolist():
+        got = timing._lattice_s(np.array([x, y]), turn)
+        assert got == _lattice_s_numpy(timing, (x, y), turn)

@@ -24,6 +24,8 @@ plans overlap in time.
 
 from __future__ import annotations
 
+import bisect
+
 import numpy as np
 
 from gait_nodes.contract import FootstepPlan
@@ -44,6 +46,9 @@ class SupportHeight:
         self.times_s = times[last]
         self.heights_m = lowest[last]
         self.start_ns = int(plan.start_ns)
+        # Asked every tick: Python floats and bisect (np.searchsorted's 'right' side), with the
+        # arithmetic of a numpy version written the same way, hence its result to the bit.
+        self._times, self._heights = self.times_s.tolist(), self.heights_m.tolist()
 
     @property
     def flat(self) -> bool:
@@ -52,18 +57,18 @@ class SupportHeight:
 
     def at(self, t_s: float) -> tuple[float, float, float]:
         """``h`` [m], ``dh/dt`` [m/s], ``d2h/dt2`` [m/s^2] at ``t_s`` from the plan start."""
-        times, heights = self.times_s, self.heights_m
-        k = int(np.searchsorted(times, t_s, side='right'))
+        times, heights = self._times, self._heights
+        k = bisect.bisect_right(times, t_s)
         if k == 0 or k == len(times):
-            return float(heights[min(k, len(times) - 1)]), 0.0, 0.0
+            return heights[min(k, len(times) - 1)], 0.0, 0.0
         t0, t1 = times[k - 1], times[k]
         h0, h1 = heights[k - 1], heights[k]
         span = t1 - t0
         s = (t_s - t0) / span
         rise = h1 - h0
-        return (float(h0 + rise * s ** 3 * (10.0 - 15.0 * s + 6.0 * s * s)),
-                float(rise * 30.0 * s * s * (1.0 - s) ** 2 / span),
-                float(rise * 60.0 * s * (1.0 - s) * (1.0 - 2.0 * s) / span ** 2))
+        return (h0 + rise * s ** 3 * (10.0 - 15.0 * s + 6.0 * s * s),
+                rise * 30.0 * s * s * (1.0 - s) ** 2 / span,
+                rise * 60.0 * s * (1.0 - s) * (1.0 - 2.0 * s) / span ** 2)
 
     def at_ns(self, stamp_ns: int) -> tuple[float, float, float]:
         """:meth:`at` for a ROS time [ns]."""

@@ -351,6 +351,7 @@ class GaitPlanner:
         self._steps: list[Step] = []
         self._before: tuple[float, np.ndarray, np.ndarray] | None = None
         self._outputs: tuple = ((), {})  # see _memo
+        self._last_zmp_reference = None  # see zmp_reference
         self._check_footholds(self._terrain, [positions], compare_heights=False)
         if start is not None and start.airborne().any():
             self._steps.append(self._landing_step(start))
@@ -900,12 +901,37 @@ class GaitPlanner:
         count = int(math.ceil(horizon_s * NS_PER_S / period_ns - 1e-9)) + 1
         stamps = first_ns + period_ns * np.arange(count, dtype=np.int64)
         times_s = (stamps - origin_ns) * 1e-9
-        heights = None if self._terrain.flat else self._plane_heights(times_s, origin_ns)
-        return ZmpReference(stamps, self.zmp(times_s), heights)
+        knots = self.zmp_knots()
+        plan = None if self._terrain.flat else self.footstep_plan(float(times_s[0]), origin_ns)
+        # The node asks every tick for a window slid by a few samples of the same plan: the
+        # samples at the stamps the last window already had are its values (np.interp works
+        # sample by sample: the same knots and time give the same bits), only the new tail
+        # is sampled. The heights too while the footstep plan they are read from is the same.
+        key = (knots, plan, origin_ns, period_ns, count)
+        last = self._last_zmp_reference
+        shift = count
+        if last is not None and last[0][0] is knots and last[0][1] is plan \
+                and last[0][2:] == key[2:] and (first_ns - last[1]) % period_ns == 0:
+            shift = (first_ns - last[1]) // period_ns
+        if 0 <= shift < count:
+            _, _, zmp, heights = last
+            fresh = times_s[count - shift:]
+            zmp = np.concatenate((zmp[shift:], self.zmp(fresh)))
+            if plan is not None:
+                heights = np.concatenate((heights[shift:],
+                                          self._plane_heights(fresh, origin_ns, plan)))
+        else:
+            zmp = self.zmp(times_s)
+            heights = None if plan is None else self._plane_heights(times_s, origin_ns, plan)
+        self._last_zmp_reference = (key, first_ns, zmp, heights)
+        return ZmpReference(stamps, zmp, heights)
 
-    def _plane_heights(self, times_s: np.ndarray, origin_ns: int) -> np.ndarray:
-        """(N,) height of the lowest foot in contact at ``times_s`` [m] (the ZMP's plane)."""
-        plan = self.footstep_plan(float(times_s[0]), origin_ns)
+    def _plane_heights(self, times_s: np.ndarray, origin_ns: int, plan: FootstepPlan
+                       ) -> np.ndarray:
+        """(N,) height of the lowest foot in contact at ``times_s`` [m] (the ZMP's plane).
+
+        ``plan``: :meth:`footstep_plan` from the window's first sample on.
+        """
         relative = times_s - (plan.start_ns - origin_ns) * 1e-9
         index = np.clip(np.searchsorted(plan.times_s, relative, side='right') - 1, 0,
                         len(plan.times_s) - 1)

@@ -57,6 +57,7 @@ BODY_MOTION_MARGIN = 0.25
 LATTICE = (0.02, 0.02, 0.05)
 #: The 8 corners of a lattice cell, as offsets.
 _CORNERS = np.array([[(corner >> axis) & 1 for axis in range(3)] for corner in range(8)])
+_CORNER_TUPLES = [tuple(int(v) for v in corner) for corner in _CORNERS]
 #: Samples of a polynomial swing when its joint speeds are measured.
 POLYNOMIAL_PROBE_SAMPLES = 61
 #: Factor on the polynomial swing's times when they stand in for a value table not built yet
@@ -247,23 +248,27 @@ class SwingTiming:
     def _lattice_s(self, step_in_base: np.ndarray, turn_rad: float) -> float:
         """:meth:`raw_s` interpolated on :data:`LATTICE` (cached; the planner asks often)."""
         # A swing backwards is the forward one reversed: the same joint speeds, the same time.
-        point = np.array([step_in_base[0], step_in_base[1], turn_rad], dtype=float)
+        # Plain floats (the planner asks thousands of times when it times a velocity): the
+        # trilinear weights multiply in np.prod's order, so the result is the numpy form's to
+        # the bit (test_swing_timing).
+        point = (float(step_in_base[0]), float(step_in_base[1]), float(turn_rad))
         if point[0] < 0 or (point[0] == 0 and (point[1] < 0 or (point[1] == 0
                                                                   and point[2] < 0))):
-            point = -point
-        point = point / LATTICE
-        low = np.floor(point).astype(int)
-        weight = point - low
-        weights = np.prod(np.where(_CORNERS, weight, 1.0 - weight), axis=1)
+            point = (-point[0], -point[1], -point[2])
+        point = [value / spacing for value, spacing in zip(point, LATTICE, strict=True)]
+        low = [math.floor(value) for value in point]
+        weight = [value - corner for value, corner in zip(point, low, strict=True)]
+        factors = [(1.0 - w, w) for w in weight]
         total = 0.0
-        for corner, w in zip(low + _CORNERS, weights, strict=True):
+        for i, j, k in _CORNER_TUPLES:
+            w = factors[0][i] * factors[1][j] * factors[2][k]
             if w == 0.0:
                 continue
-            key = (int(corner[0]), int(corner[1]), int(corner[2]))
+            key = (low[0] + i, low[1] + j, low[2] + k)
             if key not in self._cache:
                 node = np.array(key, dtype=float) * LATTICE
                 self._cache[key] = self.raw_s(node[:2], float(node[2]))
-            total += float(w) * self._cache[key]
+            total += w * self._cache[key]
         return total
 
     def swing_s(self, foot: int, step_in_base: np.ndarray, turn_rad: float = 0.0) -> float:
