@@ -23,6 +23,10 @@ class SingleThreadedExecutor:
     def __init__(self, *, context=None):
         self.context = context or context_module.default_context()
         self._nodes: list = []
+        #: Every timer of the nodes, in node then creation order, and what it was built from.
+        self._timers: list = []
+        self._timers_key = None
+        self._nodes_version = 0
         self._rclpy_executor = None
         if self.context.runtime == 'rclpy':
             from rclpy.executors import SingleThreadedExecutor as RclpyExecutor
@@ -40,6 +44,7 @@ class SingleThreadedExecutor:
         if node in self._nodes:
             return False
         self._nodes.append(node)
+        self._nodes_version += 1
         if self._rclpy_executor is not None:
             self._rclpy_executor.add_node(node.rclpy_node)
         return True
@@ -48,6 +53,7 @@ class SingleThreadedExecutor:
         """Stop running the node's callbacks."""
         if node in self._nodes:
             self._nodes.remove(node)
+            self._nodes_version += 1
             if self._rclpy_executor is not None:
                 self._rclpy_executor.remove_node(node.rclpy_node)
 
@@ -58,14 +64,22 @@ class SingleThreadedExecutor:
     def _running(self) -> bool:
         return self.context.ok() and not self.context.shutdown_requested.is_set()
 
+    def _all_timers(self) -> list:
+        """The nodes' timers, gathered again only when a node or a timer came or went."""
+        key = (getattr(self.context.transport, 'timers_version', None), self._nodes_version)
+        if key[0] is None or key != self._timers_key:
+            self._timers = [timer for node in self._nodes for timer in node._timers]
+            self._timers_key = key
+        return self._timers
+
     def _next_timer(self):
+        """The first of the timers due soonest (creation order breaks ties), or None."""
         best, best_ns = None, 0
-        for node in self._nodes:
-            for timer in node._timers:
-                if timer._canceled:
-                    continue
-                if best is None or timer.next_call_ns < best_ns:
-                    best, best_ns = timer, timer.next_call_ns
+        for timer in self._all_timers():
+            if timer._canceled:
+                continue
+            if best is None or timer.next_call_ns < best_ns:
+                best, best_ns = timer, timer.next_call_ns
         return best
 
     # --- one unit of work -----------------------------------------------------------------
@@ -120,18 +134,19 @@ class SingleThreadedExecutor:
     def _drain(self) -> None:
         transport = self.context.transport
         queue = transport.queue
-        # A message goes to all its subscriptions in a row: raw ones in a row share its bytes.
-        serialized_msg = serialized = None
+        popleft = queue.popleft
+        # A message goes to all its subscriptions in a row; raw ones share its one serialization.
         while queue:
-            subscription, msg = queue.popleft()
-            transport.delivered += 1
-            if subscription.raw and not isinstance(msg, bytes):
-                if msg is not serialized_msg:
-                    serialized_msg, serialized = msg, msg.serialize()
-                subscription.callback(serialized)
-            else:
-                serialized_msg = None
-                subscription.callback(msg)
+            msg, subscriptions = popleft()
+            transport.delivered += len(subscriptions)
+            data = None
+            for subscription in subscriptions:
+                if not subscription.raw:
+                    subscription.callback(msg)
+                    continue
+                if data is None:
+                    data = msg if isinstance(msg, bytes) else msg.serialize()
+                subscription.callback(data)
 
     # --- loops ------------------------------------------------------------------------------
 
@@ -183,4 +198,5 @@ class SingleThreadedExecutor:
         if self._rclpy_executor is not None:
             self._rclpy_executor.shutdown(timeout_sec)
         self._nodes.clear()
+        self._nodes_version += 1
         return True
