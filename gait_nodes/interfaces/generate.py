@@ -254,6 +254,11 @@ class _SerializerBuilder:
             if flat is not None:
                 self._flat_run(indent, var, count, *flat, state)
                 return
+            record = self.record_layout(self.definitions[field.base_type], loop_var)
+            if record is not None:
+                self._record_run(indent, var, loop_var, single, *record)
+                state.reset(1)
+                return
         elif count is None and field.base_type == 'string' and not field.string_bound:
             # After its count a sequence of strings starts 4-aligned and holds 4-aligned
             # items only: its bytes depend on its content alone, and a name list sent again
@@ -271,6 +276,69 @@ class _SerializerBuilder:
         self.single(indent + 1, single, loop_var, _Alignment(1))
         self.flush()
         state.reset(1)
+
+    def record_layout(self, msgdef: MsgDef, expr: str) -> tuple[list, list[str], list[str]] | None:
+        """Items, value expressions and name bindings of a struct without containers.
+
+        Such a struct (PoseStamped, TransformStamped, KeyValue...) has primitives and strings
+        only, nested structs included. Items are ``(format character, size)`` for a primitive
+        and ``('s', bound)`` for a string, which takes two values: the string twice (its length
+        and its bytes, once encoded). None for a struct with a container or a wstring.
+        """
+        items, values, bindings = [], [], []
+        if len(msgdef.fields) > 1 and '.' in expr:
+            var = self.w.unique('r')
+            bindings.append(f'{var} = {expr}')
+            expr = var
+        for field in msgdef.fields:
+            if field.container is not None or field.base_type == 'wstring':
+                return None
+            value = f'{expr}.{field.name}'
+            if field.is_primitive:
+                items.append(PRIMITIVES[field.base_type])
+                values.append(value)
+            elif field.is_string:
+                items.append(('s', field.string_bound))
+                values += [value, value]
+            else:
+                inner = self.record_layout(self.definitions[field.base_type], value)
+                if inner is None:
+                    return None
+                items += inner[0]
+                values += inner[1]
+                bindings += inner[2]
+        return items, values, bindings
+
+    def _record_run(self, indent: int, var: str, loop_var: str, single: FieldDef,
+                    items: list, values: list[str], bindings: list[str]) -> None:
+        """A sequence or array of container-free structs: one pack for all, when it can be.
+
+        Packing each element field by field costs a few appends per element; gathering every
+        element's values in one list and packing them with one Struct (:class:`RecordRun`) is
+        several times faster. That works when each string field has the same encoded length in
+        every element (frame ids usually are one string): then every element has the same layout
+        but for its alignment, which the Struct spells out from the position of the first. When
+        it does not, or for a few elements, the general per-element code runs instead.
+        """
+        self.flush()
+        run = self.w.unique('RUN')
+        self.w.constants[run] = RecordRun(items)
+        gathered, data = self.w.unique('g'), self.w.unique('d')
+        self.w.emit(indent, f'if {var}:')
+        self.w.emit(indent + 1, f'{data} = None')
+        self.w.emit(indent + 1, f'if len({var}) >= {RecordRun.MIN_ELEMENTS}:')
+        self.w.emit(indent + 2, f'{gathered} = []')
+        self.w.emit(indent + 2, f'for {loop_var} in {var}:')
+        for line in bindings:
+            self.w.emit(indent + 3, line)
+        self.w.emit(indent + 3, f'{gathered} += ({", ".join(values)},)')
+        self.w.emit(indent + 2, f'{data} = {run}({gathered}, len({var}), (len(b) - 4) % 8)')
+        self.w.emit(indent + 1, f'if {data} is not None:')
+        self.w.emit(indent + 2, f'b += {data}')
+        self.w.emit(indent + 1, 'else:')
+        self.w.emit(indent + 2, f'for {loop_var} in {var}:')
+        self.single(indent + 3, single, loop_var, _Alignment(1))
+        self.flush()
 
     def _flat_run(self, indent: int, var: str, count: int | None, fmt: str, values: list[str],
                   size: int, state: _Alignment) -> None:
@@ -420,6 +488,91 @@ class _DeserializerBuilder:
         self.single(indent + 1, single, element, _Alignment(1))
         self.emit(indent + 1, f'{target}.append({element})')
         state.reset(1)
+
+
+class RecordRun:
+    """The CDR of a run of container-free structs whose strings have the same length in each.
+
+    Called with the elements' values gathered in one list (each string twice, see
+    :meth:`_SerializerBuilder.record_layout`), their number and the position of the first
+    element modulo 8 (counted from the end of the encapsulation header). Each string field is
+    encoded once when it is the same string in every element (the usual frame id), else
+    element by element; when its encoded length varies, the run has no single layout and None
+    is returned (the caller packs element by element). Otherwise the elements' layout is
+    fixed by the string lengths and the start position: one Struct for them all, compiled
+    once per layout and kept, gives the same bytes as packing the elements one by one.
+
+    Args:
+        items: Per element, ``(format character, size)`` of each primitive and
+            ``('s', bound)`` of each string (bound 0: unbounded), in field order.
+    """
+
+    #: Below this many elements the element by element code is as fast.
+    MIN_ELEMENTS = 4
+    #: Layouts kept per run (a new one is compiled when the run meets a new length or shape).
+    LAYOUTS_KEPT = 64
+
+    def __init__(self, items: list):
+        self.items = list(items)
+        self.width = sum(2 if kind == 's' else 1 for kind, _ in items)
+        self.strings = []  # (column of the first of the string's two values, bound)
+        column = 0
+        for kind, size in items:
+            if kind == 's':
+                self.strings.append((column, size))
+                column += 2
+            else:
+                column += 1
+        self.layouts: dict[tuple, struct.Struct] = {}
+
+    def __call__(self, values: list, count: int, phase: int) -> bytes | None:
+        """CDR of ``count`` elements from their gathered ``values``, or None (see above)."""
+        width = self.width
+        lengths = []
+        for column, bound in self.strings:
+            strings = values[column::width]
+            first = strings[0]
+            if strings.count(first) == count:
+                if bound and len(first) > bound:
+                    raise ValueError(f'string longer than bound {bound}')
+                encoded = first.encode()
+                values[column + 1::width] = [encoded] * count
+            else:
+                if bound and max(map(len, strings)) > bound:
+                    raise ValueError(f'string longer than bound {bound}')
+                encoded = [string.encode() for string in strings]
+                if len(set(map(len, encoded))) > 1:
+                    return None
+                values[column + 1::width] = encoded
+                encoded = encoded[0]
+            values[column::width] = [len(encoded) + 1] * count
+            lengths.append(len(encoded))
+        key = (phase, count, *lengths)
+        layout = self.layouts.get(key)
+        if layout is None:
+            layout = self._layout(phase, count, lengths)
+        return layout.pack(*values)
+
+    def _layout(self, phase: int, count: int, lengths: list[int]) -> struct.Struct:
+        """The Struct of ``count`` elements starting at ``phase`` (mod 8), remembered."""
+        parts, position = ['<'], phase
+        for _ in range(count):
+            string_lengths = iter(lengths)
+            for kind, size in self.items:
+                if kind == 's':
+                    length = next(string_lengths)
+                    pad = -position % 4
+                    parts.append(f'{pad}xI{length + 1}s' if pad else f'I{length + 1}s')
+                    position += pad + 5 + length
+                else:
+                    pad = -position % size
+                    parts.append(f'{pad}x{kind}' if pad else kind)
+                    position += pad + size
+                position %= 8
+        if len(self.layouts) >= self.LAYOUTS_KEPT:
+            self.layouts.clear()
+        layout = self.layouts[(phase, count, *lengths)] = struct.Struct(''.join(parts))
+        return layout
 
 
 #: Encoded sequences of strings by content (see :func:`_string_sequence`), for all types.
