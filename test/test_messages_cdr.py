@@ -921,3 +921,28 @@ def test_record_runs_refuse_strings_beyond_bound(uniform):
             element.tag = 'abcde'
     with pytest.raises(SerializationError, match='string longer than bound 4'):
         records(bounded=elements).serialize()
+
+
+def test_get_constructor_is_looked_up_again_when_the_runtime_changes(monkeypatch):
+    """get_constructor keeps what it found per name, for the runtime selected at the time."""
+    from gait_nodes import interfaces
+    from gait_nodes.runtime import selection
+
+    vector_class = generated_class('geometry_msgs/msg/Vector3')
+    monkeypatch.setattr(selection, '_selected', 'inproc')
+    vector = interfaces.get_constructor('geometry_msgs/msg/Vector3')
+    assert vector(1.0, 2.0, 3.0) == vector_class(x=1.0, y=2.0, z=3.0)
+    assert interfaces.get_constructor('geometry_msgs/Vector3') is vector
+    resolved = []
+
+    def resolve(type_name, rclpy_active):
+        resolved.append((type_name, rclpy_active))
+        return generated_class(type_name)
+
+    monkeypatch.setattr(interfaces, '_resolve_message', resolve)
+    assert interfaces.get_constructor('geometry_msgs/msg/Vector3') is vector
+    assert resolved == []
+    monkeypatch.setattr(selection, '_selected', 'dds')
+    assert interfaces.get_constructor('geometry_msgs/msg/Vector3') is vector
+    assert interfaces.get_constructor('geometry_msgs/msg/Vector3') is vector
+    assert resolved == [('geometry_msgs/msg/Vector3', False)]
