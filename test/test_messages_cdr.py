@@ -23,6 +23,7 @@ from __future__ import annotations
 import contextlib
 import functools
 import math
+import random
 import struct
 import sys
 from collections.abc import Callable
@@ -946,3 +947,44 @@ def test_get_constructor_is_looked_up_again_when_the_runtime_changes(monkeypatch
     assert interfaces.get_constructor('geometry_msgs/msg/Vector3') is vector
     assert interfaces.get_constructor('geometry_msgs/msg/Vector3') is vector
     assert resolved == [('geometry_msgs/msg/Vector3', False)]
+
+
+def test_published_sequences_are_packed_once_and_stay_right():
+    """serialize_published gives serialize's bytes when it copies a sequence met before.
+
+    The same vertex list in successive messages and twice in one message (at another
+    alignment), equal but new lists, more lists than are remembered, short lists, and lists
+    freed and made again (ids reused). serialize() never uses what serialize_published kept: a
+    list edited after it (as a DDS publisher may do) is packed anew.
+    """
+    polygon_stamped = generated_class('geometry_msgs/msg/PolygonStamped')
+    polygon = generated_class('geometry_msgs/msg/Polygon')
+    point32 = generated_class('geometry_msgs/msg/Point32')
+    marker_array = generated_class('visualization_msgs/msg/MarkerArray')
+    marker = generated_class('visualization_msgs/msg/Marker')
+    point = generated_class('geometry_msgs/msg/Point')
+    vertices = [point32(x=float(k), y=-k / 4, z=0.5) for k in range(12)]  # exact in float32
+    outline = [point(x=k / 7, y=float(k), z=-1.0) for k in range(9)]
+    for frame in ('', 'a', 'ab', 'abc', 'abcd'):
+        message = polygon_stamped(polygon=polygon(points=vertices))
+        message.header.frame_id = frame
+        data = assert_conforms(SHIPPED, 'geometry_msgs/msg/PolygonStamped', message)
+        assert message.serialize_published() == data
+        markers = marker_array(markers=[marker(ns=frame, points=outline),
+                                        marker(ns=frame + 'x', text='t', points=outline)])
+        data = assert_conforms(SHIPPED, 'visualization_msgs/msg/MarkerArray', markers)
+        assert markers.serialize_published() == data
+    rng = random.Random(5)
+    for size in [3, 7, 8, 9, 30] * 6:  # fresh lists, freed after use
+        points = [point32(x=rng.randint(-99, 99) / 8, y=rng.randint(-99, 99) / 16, z=0.0)
+                  for _ in range(size)]
+        message = polygon_stamped(polygon=polygon(points=points))
+        assert message.serialize_published() == message.serialize()
+        assert polygon_stamped(polygon=polygon(points=list(points))).serialize_published() == \
+            message.serialize()
+        del points, message
+    message = polygon_stamped(polygon=polygon(points=vertices))
+    published = message.serialize_published()
+    vertices[3].x = 42.0
+    assert message.serialize() != published
+    assert_conforms(SHIPPED, 'geometry_msgs/msg/PolygonStamped', message)

@@ -346,12 +346,25 @@ class _SerializerBuilder:
         loop_var = values[0].split('.')[0]
         element = self.w.struct_const('<' + fmt)
         if count is None:
+            # Once aligned, the run's bytes depend on its content alone: a sequence object met
+            # again in a published message (never edited, see serialize_published) is not
+            # packed again (the support polygon's vertices, the same for hundreds of ticks).
             self.flush()
+            memo, known, start = self.w.unique('MEMO'), self.w.unique('k'), self.w.unique('t')
+            self.w.constants[memo] = {}
             self.w.emit(indent, f'if {var}:')
             if size > 4:
                 self.w.emit(indent + 1, f'b += PAD[(4 - len(b)) % {size}]')
-            self.w.emit(indent + 1, f'for {loop_var} in {var}:')
-            self.w.emit(indent + 2, f'b += {element}.pack({", ".join(values)})')
+            self.w.emit(indent + 1, f'{known} = {memo}.get(id({var})) if published and '
+                                    f'len({var}) >= MEMO_MIN else None')
+            self.w.emit(indent + 1, f'if {known} is not None and {known}[0] is {var}:')
+            self.w.emit(indent + 2, f'b += {known}[1]')
+            self.w.emit(indent + 1, 'else:')
+            self.w.emit(indent + 2, f'{start} = len(b)')
+            self.w.emit(indent + 2, f'for {loop_var} in {var}:')
+            self.w.emit(indent + 3, f'b += {element}.pack({", ".join(values)})')
+            self.w.emit(indent + 2, f'if published and len({var}) >= MEMO_MIN: '
+                                    f'remember({memo}, {var}, b, {start})')
             state.reset(min(size, 4))
         elif count:
             self.align(indent, size, state)
@@ -597,6 +610,22 @@ def _string_sequence(strings: tuple) -> bytes:
     return out
 
 
+#: Sequences shorter than this are packed again rather than looked up.
+_MEMO_MIN = 8
+#: Sequences remembered per place in a message type (the oldest are forgotten all at once).
+_MEMO_KEPT = 8
+
+
+def _remember(memo: dict, sequence, data: bytearray, start: int) -> None:
+    """Keep the bytes ``data[start:]`` packed from ``sequence``, and the sequence (its id).
+
+    Holding the sequence keeps its id from being given to another object while remembered.
+    """
+    if len(memo) >= _MEMO_KEPT:
+        memo.clear()
+    memo[id(sequence)] = (sequence, bytes(data[start:]))
+
+
 def _compile(writer: _CodeWriter, name: str, args: str, result: str) -> Callable:
     source = '\n'.join([f'def {name}({args}):', *writer.lines, f'    return {result}'])
     namespace = dict(writer.constants)
@@ -604,6 +633,7 @@ def _compile(writer: _CodeWriter, name: str, args: str, result: str) -> Callable
         PAD=[bytes(i) for i in range(8)], U32=struct.Struct('<I'),
         pack=struct.pack, unpack_from=struct.unpack_from,
         STRINGS=_STRING_SEQUENCES, string_sequence=_string_sequence,
+        MEMO_MIN=_MEMO_MIN, remember=_remember,
     )
     exec(compile(source, f'<cdr {name}>', 'exec'), namespace)  # noqa: S102 - generated above
     function = namespace[name]
@@ -612,13 +642,17 @@ def _compile(writer: _CodeWriter, name: str, args: str, result: str) -> Callable
 
 
 def make_serializer(msgdef: MsgDef, definitions: dict[str, MsgDef]) -> Callable:
-    """Function ``(message) -> bytes`` giving the CDR (with header) of one message."""
+    """Function ``(message, published=False) -> bytes``: the CDR (with header) of one message.
+
+    ``published``: the message and everything in it stay as they are from now on (see
+    ``serialize_published`` of the message classes).
+    """
     writer = _CodeWriter()
     builder = _SerializerBuilder(definitions, writer)
     writer.emit(1, f'b = bytearray({_HEADER_LE!r})')
     builder.struct(1, msgdef, 'm', _Alignment())
     builder.flush()
-    return _compile(writer, 'serialize', 'm', 'bytes(b)')
+    return _compile(writer, 'serialize', 'm, published=False', 'bytes(b)')
 
 
 def make_deserializer(msgdef: MsgDef, definitions: dict[str, MsgDef],
@@ -703,12 +737,26 @@ def make_class(msgdef: MsgDef, definitions: dict[str, MsgDef], classes: dict[str
         b'\x00': make_deserializer(msgdef, definitions, classes, '>'),
     }
 
+    errors = (struct.error, ValueError, TypeError, AttributeError, UnicodeError, OverflowError)
+
     def serialize(self, buffer=None, endianness=None, use_version_2=None) -> bytes:
         """CDR bytes of this message with the 4-byte encapsulation header."""
         try:
             return serialize_fn(self)
-        except (struct.error, ValueError, TypeError, AttributeError, UnicodeError,
-                OverflowError) as exc:
+        except errors as exc:
+            raise SerializationError(f'cannot serialize {msgdef.type_name}: {exc}') from exc
+
+    def serialize_published(self) -> bytes:
+        """:meth:`serialize` of a message published under the inproc runtime's rule.
+
+        The rule (a published message and its parts are never edited again, see
+        :mod:`gait_nodes.runtime.inproc`) lets a sequence of flat structs that was packed for
+        an earlier published message, the very same object, be copied from then rather than
+        packed again. The bytes are those of :meth:`serialize` as long as the rule holds.
+        """
+        try:
+            return serialize_fn(self, True)
+        except errors as exc:
             raise SerializationError(f'cannot serialize {msgdef.type_name}: {exc}') from exc
 
     @classmethod
@@ -731,5 +779,6 @@ def make_class(msgdef: MsgDef, definitions: dict[str, MsgDef], classes: dict[str
         return message
 
     cls.serialize = serialize
+    cls.serialize_published = serialize_published
     cls.deserialize = deserialize
     return cls

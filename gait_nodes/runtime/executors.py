@@ -45,6 +45,12 @@ def _deliver(subscription, msg) -> None:
     subscription.callback(msg)
 
 
+def _serialize_published(msg) -> bytes:
+    """CDR of a message published under inproc's rule (never edited again): it may reuse work."""
+    serialize = getattr(type(msg), 'serialize_published', None)
+    return serialize(msg) if serialize is not None else msg.serialize()
+
+
 class SingleThreadedExecutor:
     """Runs the callbacks of its nodes one at a time, in the calling thread."""
 
@@ -173,7 +179,7 @@ class SingleThreadedExecutor:
                     subscription.callback(msg)
                     continue
                 if data is None:
-                    data = msg if isinstance(msg, bytes) else msg.serialize()
+                    data = msg if isinstance(msg, bytes) else _serialize_published(msg)
                 subscription.callback(data)
 
     # --- loops ------------------------------------------------------------------------------
