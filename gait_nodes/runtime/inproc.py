@@ -10,8 +10,10 @@ received message as read-only, as rclpy's intra-process communication also requi
 publisher must not edit a message once published. Under that rule node code may share unchanging
 sub-messages between the messages it publishes (the kinematic_simulator shares stamps, joint
 names and polygon vertices, the footstep_planner the poses its successive ZMP references have in
-common), which saves building them again and is invisible to subscribers. Raw subscriptions that
-receive the same message one after the other share its one serialization.
+common), which saves building them again and is invisible to subscribers. The raw subscriptions
+of a message share its one serialization, which relies on the rule too: a sequence of flat
+structs serialized for an earlier message (the same object, such as the support polygon's
+vertices) is copied from then, not packed again (``serialize_published`` of the classes).
 """
 
 from __future__ import annotations
