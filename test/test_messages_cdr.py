@@ -839,8 +839,8 @@ def record_runs_watched(cls: type):
     results = []
 
     def watched(run):
-        def call(values, count, phase):
-            data = run(values, count, phase)
+        def call(*args):
+            data = run(*args)
             results.append(data is not None)
             return data
 
@@ -988,3 +988,70 @@ def test_published_sequences_are_packed_once_and_stay_right():
     vertices[3].x = 42.0
     assert message.serialize() != published
     assert_conforms(SHIPPED, 'geometry_msgs/msg/PolygonStamped', message)
+
+
+
+def _run_of(cls: type):
+    """The (one) RecordRun of ``cls``'s serializer."""
+    serialize_fn = next(cell.cell_contents for cell in cls.serialize.__closure__
+                        if hasattr(cell.cell_contents, '__source__'))
+    [run] = [value for name, value in serialize_fn.__globals__.items() if name.startswith('RUN')]
+    return run
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(steps=st.lists(st.tuples(st.integers(-3, 12), st.sampled_from(['', 'a', 'odom', 'world']),
+                                st.sampled_from(['odom', 'odom', 'map', 'world', 'mapx']),
+                                st.integers(0, 3)), min_size=1, max_size=12))
+def test_published_zmp_reference_windows_match_serialize(steps):
+    """A Path sliding along one list of poses, as the footstep planner publishes it.
+
+    Each published message's leading poses are (``is``) a stretch of the previous one's; its
+    bytes are serialize()'s whatever the shift (none, ahead, back, past the end), the header
+    frame (the run's alignment), the frame of the new poses (another length: no one layout),
+    and messages of another publisher in between.
+    """
+    path_type = generated_class('nav_msgs/msg/Path')
+    pose = generated_class('geometry_msgs/msg/PoseStamped')
+
+    def new_pose(k: int, frame: str):
+        element = pose()
+        element.header.frame_id = frame
+        element.header.stamp.sec = k
+        element.pose.position.x, element.pose.orientation.z = k / 8, -k / 3
+        return element
+
+    poses = [new_pose(k, 'odom') for k in range(40)]
+    other = [new_pose(-k, 'odom') for k in range(12)]
+    start = 0
+    for shift, header_frame, tail_frame, others in steps:
+        start = max(start + shift, 0)
+        window = poses[start:start + 20]
+        window += [new_pose(100 + k, tail_frame) for k in range(20 - len(window))]
+        for message_poses in [other[:6 + others]] * (others > 1) + [window]:
+            message = path_type(poses=message_poses)
+            message.header.frame_id = header_frame
+            assert message.serialize_published() == message.serialize()
+
+
+def test_published_zmp_reference_packs_only_its_new_poses():
+    """Sliding by 4 poses: 4 are gathered and packed, the other 196 copied."""
+    path_type = generated_class('nav_msgs/msg/Path')
+    pose = generated_class('geometry_msgs/msg/PoseStamped')
+    run = _run_of(path_type)
+    gather = run.gather
+    gathered = []
+    poses = [pose() for _ in range(240)]
+    for k, element in enumerate(poses):
+        element.header.frame_id = 'odom'
+        element.header.stamp.sec = k
+    try:
+        run.gather = lambda elements: gathered.append(len(elements)) or gather(elements)
+        for start in range(0, 40, 4):
+            message = path_type(poses=poses[start:start + 200])
+            message.header.frame_id = 'odom'
+            assert message.serialize_published() == message.serialize()
+    finally:
+        run.gather = gather
+    # serialize() gathers all 200 each time; the first published message too.
+    assert gathered[0::2] == [200] + [4] * 9 and gathered[1::2] == [200] * 10

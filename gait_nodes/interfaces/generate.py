@@ -16,8 +16,10 @@ followed by the elements, no padding after the last field.
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import struct
 from collections.abc import Callable
+from operator import is_, is_not
 
 import cyclonedds.idl.types as idl_types
 from cyclonedds.idl import IdlMeta, IdlStruct
@@ -321,18 +323,17 @@ class _SerializerBuilder:
         it does not, or for a few elements, the general per-element code runs instead.
         """
         self.flush()
-        run = self.w.unique('RUN')
-        self.w.constants[run] = RecordRun(items)
-        gathered, data = self.w.unique('g'), self.w.unique('d')
+        gather = ['def gather(elements):', '    g = []', f'    for {loop_var} in elements:',
+                  *(f'        {line}' for line in bindings),
+                  f'        g += ({", ".join(values)},)', '    return g']
+        namespace: dict = {}
+        exec(compile('\n'.join(gather), '<cdr gather>', 'exec'), namespace)  # noqa: S102
+        namespace['gather'].__source__ = '\n'.join(gather)
+        run, data = self.w.unique('RUN'), self.w.unique('d')
+        self.w.constants[run] = RecordRun(items, namespace['gather'])
         self.w.emit(indent, f'if {var}:')
-        self.w.emit(indent + 1, f'{data} = None')
-        self.w.emit(indent + 1, f'if len({var}) >= {RecordRun.MIN_ELEMENTS}:')
-        self.w.emit(indent + 2, f'{gathered} = []')
-        self.w.emit(indent + 2, f'for {loop_var} in {var}:')
-        for line in bindings:
-            self.w.emit(indent + 3, line)
-        self.w.emit(indent + 3, f'{gathered} += ({", ".join(values)},)')
-        self.w.emit(indent + 2, f'{data} = {run}({gathered}, len({var}), (len(b) - 4) % 8)')
+        self.w.emit(indent + 1, f'{data} = {run}({var}, (len(b) - 4) % 8, published) '
+                                f'if len({var}) >= {RecordRun.MIN_ELEMENTS} else None')
         self.w.emit(indent + 1, f'if {data} is not None:')
         self.w.emit(indent + 2, f'b += {data}')
         self.w.emit(indent + 1, 'else:')
@@ -506,18 +507,25 @@ class _DeserializerBuilder:
 class RecordRun:
     """The CDR of a run of container-free structs whose strings have the same length in each.
 
-    Called with the elements' values gathered in one list (each string twice, see
-    :meth:`_SerializerBuilder.record_layout`), their number and the position of the first
-    element modulo 8 (counted from the end of the encapsulation header). Each string field is
-    encoded once when it is the same string in every element (the usual frame id), else
-    element by element; when its encoded length varies, the run has no single layout and None
-    is returned (the caller packs element by element). Otherwise the elements' layout is
-    fixed by the string lengths and the start position: one Struct for them all, compiled
-    once per layout and kept, gives the same bytes as packing the elements one by one.
+    Called with the elements and the position of the first modulo 8 (counted from the end of
+    the encapsulation header). The elements' values are gathered in one list (each string
+    twice, see :meth:`_SerializerBuilder.record_layout`). Each string field is encoded once
+    when it is the same string in every element (the usual frame id), else element by element;
+    when its encoded length varies, the run has no single layout and None is returned (the
+    caller packs element by element). Otherwise the elements' layout is fixed by the string
+    lengths and the start position: one Struct for them all, compiled once per layout and kept,
+    gives the same bytes as packing the elements one by one.
+
+    A run of a published message (``published``, see ``serialize_published``) whose leading
+    elements are the very objects of a stretch of the previous published run here (a ZMP
+    reference sliding along its horizon) copies their bytes from then and packs only the rest,
+    when every element of both has the same size, a multiple of 8 (each element then starts at
+    the same alignment, so that its bytes depend on its content alone).
 
     Args:
         items: Per element, ``(format character, size)`` of each primitive and
             ``('s', bound)`` of each string (bound 0: unbounded), in field order.
+        gather: ``gather(elements) -> list`` of the elements' values, in item order.
     """
 
     #: Below this many elements the element by element code is as fast.
@@ -525,8 +533,9 @@ class RecordRun:
     #: Layouts kept per run (a new one is compiled when the run meets a new length or shape).
     LAYOUTS_KEPT = 64
 
-    def __init__(self, items: list):
+    def __init__(self, items: list, gather: Callable[[list], list]):
         self.items = list(items)
+        self.gather = gather
         self.width = sum(2 if kind == 's' else 1 for kind, _ in items)
         self.strings = []  # (column of the first of the string's two values, bound)
         column = 0
@@ -536,10 +545,31 @@ class RecordRun:
                 column += 2
             else:
                 column += 1
-        self.layouts: dict[tuple, struct.Struct] = {}
+        #: (start alignment, count, string lengths...) -> (Struct, element size or None).
+        self.layouts: dict[tuple, tuple[struct.Struct, int | None]] = {}
+        #: The last published run: (elements, start alignment, element size, bytes), or None.
+        self.published: tuple | None = None
 
-    def __call__(self, values: list, count: int, phase: int) -> bytes | None:
-        """CDR of ``count`` elements from their gathered ``values``, or None (see above)."""
+    def __call__(self, elements, phase: int, published: bool = False) -> bytes | None:
+        """CDR of the ``elements`` starting at ``phase`` (mod 8), or None (see above)."""
+        known, prefix, size = 0, b'', None
+        if published and self.published is not None and self.published[1] == phase:
+            previous, _, size, data = self.published
+            known, offset = _shared_lead(elements, previous)
+            prefix = data[offset * size:(offset + known) * size]
+        tail = elements[known:] if known else elements
+        packed = self._pack(self.gather(tail), len(tail), phase) if tail else (b'', size)
+        if packed is None:
+            self.published = None
+            return None
+        data = prefix + packed[0] if known else packed[0]
+        if published:
+            uniform = packed[1] is not None and (not known or packed[1] == size)
+            self.published = (elements, phase, packed[1], data) if uniform else None
+        return data
+
+    def _pack(self, values: list, count: int, phase: int) -> tuple[bytes, int | None] | None:
+        """Bytes and element size (None if not one multiple of 8) of gathered values."""
         width = self.width
         lengths = []
         for column, bound in self.strings:
@@ -564,13 +594,14 @@ class RecordRun:
         layout = self.layouts.get(key)
         if layout is None:
             layout = self._layout(phase, count, lengths)
-        return layout.pack(*values)
+        return layout[0].pack(*values), layout[1]
 
-    def _layout(self, phase: int, count: int, lengths: list[int]) -> struct.Struct:
-        """The Struct of ``count`` elements starting at ``phase`` (mod 8), remembered."""
-        parts, position = ['<'], phase
+    def _layout(self, phase: int, count: int, lengths: list[int]) -> tuple:
+        """Struct of ``count`` elements starting at ``phase`` (mod 8) and their one size."""
+        parts, position, sizes = ['<'], phase, set()
         for _ in range(count):
             string_lengths = iter(lengths)
+            start = position
             for kind, size in self.items:
                 if kind == 's':
                     length = next(string_lengths)
@@ -581,11 +612,27 @@ class RecordRun:
                     pad = -position % size
                     parts.append(f'{pad}x{kind}' if pad else kind)
                     position += pad + size
-                position %= 8
+            sizes.add(position - start)
+        size = sizes.pop() if len(sizes) == 1 else None
         if len(self.layouts) >= self.LAYOUTS_KEPT:
             self.layouts.clear()
-        layout = self.layouts[(phase, count, *lengths)] = struct.Struct(''.join(parts))
+        layout = self.layouts[(phase, count, *lengths)] = (
+            struct.Struct(''.join(parts)), size if size is not None and size % 8 == 0 else None)
         return layout
+
+
+def _shared_lead(elements, previous) -> tuple[int, int]:
+    """How many leading ``elements`` are (``is``) ``previous[offset:]``'s, and the offset.
+
+    (0, 0) when the first element is not in ``previous``. Searched without a Python loop.
+    """
+    offset = next(itertools.compress(itertools.count(),
+                                     map(is_, itertools.repeat(elements[0]), previous)), None)
+    if offset is None:
+        return 0, 0
+    same = elements[:len(previous) - offset]
+    return next(itertools.compress(itertools.count(), map(is_not, same, previous[offset:])),
+                len(same)), offset
 
 
 #: Encoded sequences of strings by content (see :func:`_string_sequence`), for all types.
