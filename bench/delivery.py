@@ -12,7 +12,10 @@ instant, and the real recorder writing a new bag. What is measured is therefore 
 of ``bench/sim.py``'s graph run that is neither a node's computation nor message building: the
 executor loop, timers, publish and delivery, CDR serialization of the recorded messages and the
 recorder (bag writer). The new bag must be the old one byte for byte (checked: a mismatch is
-printed).
+printed). Two differences with the graph: the replayed messages were all decoded beforehand, so
+they share no parts (what ``serialize_published`` saves on the nodes' shared vertex lists and
+sliding ZMP reference does not show here), and reading them misses the CPU caches more than
+freshly built ones do; the figures are an upper bound of the graph's.
 
 Prints, as medians over ``--runs``: CPU per 5 ms tick of the whole replay, of the recorder's
 callbacks, and of serializing the recorded messages (measured apart, on the same messages).
