@@ -70,12 +70,7 @@ class Recorder(Node):
         # The runtime's Clock reads integer nanoseconds without a Time object; rclpy's has no
         # now_ns.
         now_ns = getattr(clock, 'now_ns', None) or (lambda: clock.now().nanoseconds)
-        writer = self.writer
-
-        def write(data: bytes) -> None:
-            writer.write(topic, bytes(data), now_ns())
-
-        return write
+        return self.writer.topic_writer(topic, now_ns)
 
     def destroy_node(self) -> None:
         """Finish the bag, then release the node."""

@@ -465,8 +465,9 @@ def test_writer_refuses_an_existing_directory(tmp_path):
 def test_fast_message_path_writes_the_bytes_of_mcap_add_message(compression):
     """The recorder's message appender leaves the file mcap's own add_message would write.
 
-    Small chunks (many chunk ends), out-of-order log times, channels appearing mid-chunk,
-    empty and large messages, explicit flushes in between.
+    Small chunks (many chunk ends, some in the middle of a batch), out-of-order log times,
+    channels appearing mid-chunk, empty and large messages, batches of 1 to 40 messages,
+    explicit flushes in between.
     """
     import io
 
@@ -485,16 +486,22 @@ def test_fast_message_path_writes_the_bytes_of_mcap_add_message(compression):
                for t in channels}
         append = message_appender(writer) if fast else None
         assert not fast or append is not None
+        batch = []
         for k, (topic, stamp, data) in enumerate(messages):
             log_time = stamp - (k % 5) * 1000  # not monotonic
             data = b'' if k % 97 == 0 else data * (1 + (k % 13 == 0) * 20)
             if fast:
-                append(ids[topic], log_time, data, stamp, k)
+                batch.append((ids[topic], log_time, data, stamp, k))
+                if len(batch) > k % 41 or k % 301 == 0:
+                    append(batch)
+                    batch = []
             else:
                 writer.add_message(channel_id=ids[topic], log_time=log_time, data=data,
                                    publish_time=stamp, sequence=k)
             if k % 301 == 0:
                 writer.flush()
+        if batch:
+            append(batch)
         writer.finish()
         outputs.append(stream.getvalue())
     assert len(messages) > 500

@@ -20,8 +20,10 @@ a float is ``(value, sign)`` so that ``-0.0`` differs from ``0.0``, and a NaN is
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import math
+import random
 import struct
 import sys
 from collections.abc import Callable
@@ -105,9 +107,15 @@ def _everything_text() -> str:
 
 
 #: Synthetic definitions, dependencies first. ``Small`` needs padding inside; ``Tail`` starts with
-#: a sequence and ends with a 1-byte field; ``Empty`` gets ROS 2's placeholder member.
+#: a sequence and ends with a 1-byte field; ``Empty`` gets ROS 2's placeholder member; ``Record``
+#: has no container but strings, a bounded one, and fields of every alignment between them (runs
+#: of them are packed at once, see RecordRun), ``Records`` holds them in each kind of container.
 SYNTHETIC_TEXT = {
     'cdr_test_msgs/msg/Small': 'uint8 a\nfloat64 b\nint16 c\n',
+    'cdr_test_msgs/msg/Record': ('uint8 a\nstring name\nfloat64 b\nHeader header\nstring<=4 tag\n'
+                                 'int16 c\nSmall small\nbool d\n'),
+    'cdr_test_msgs/msg/Records': ('uint8 pad\nRecord[] records\nfloat64 after\nuint8[3] pad2\n'
+                                  'Record[5] record_array\nRecord[<=8] bounded\nint8 last\n'),
     'cdr_test_msgs/msg/Empty': '# No fields: ROS 2 gives the message one uint8 placeholder.\n',
     'cdr_test_msgs/msg/Tail': 'float32[] data\nstring label\nint8 last\n',
     'cdr_test_msgs/msg/Everything': _everything_text(),
@@ -748,3 +756,302 @@ def test_float32_limits_are_accepted():
     message = point(x=F32_MAX, y=-F32_MAX, z=F32_MIN_SUBNORMAL)
     data = assert_conforms(SHIPPED, 'geometry_msgs/msg/Point32', message)
     assert data[4:] == b'\xff\xff\x7f\x7f\xff\xff\x7f\xff\x01\x00\x00\x00'
+
+
+# -------------------------------------------------------------------------------------------------
+# Runs of container-free structs packed at once (RecordRun): every string layout they meet.
+
+#: (universe, message type, field): a sequence or array of container-free structs.
+RECORD_RUNS = [
+    (SHIPPED, 'nav_msgs/msg/Path', 'poses'),
+    (SHIPPED, 'tf2_msgs/msg/TFMessage', 'transforms'),
+    (SHIPPED, 'diagnostic_msgs/msg/DiagnosticStatus', 'values'),
+    (SYNTHETIC, 'cdr_test_msgs/msg/Records', 'records'),
+    (SYNTHETIC, 'cdr_test_msgs/msg/Records', 'record_array'),
+    (SYNTHETIC, 'cdr_test_msgs/msg/Records', 'bounded'),
+]
+#: Characters of 1 to 4 bytes in UTF-8, to make strings of one byte length but other contents.
+PIECES = ['a', 'Z', '\u00e9', '\u20ac', '\U0001f600']
+#: How the values of one string field vary across the elements of a run.
+STRING_MODES = ['same object', 'equal copies', 'same byte length', 'free']
+
+
+def _string_paths(universe: Universe, type_name: str) -> list[tuple[tuple[str, ...], int]]:
+    """Attribute paths and bounds of every string field of a container-free struct."""
+    paths = []
+    for field in universe.fields(type_name):
+        if field.is_string:
+            paths.append(((field.name,), field.string_bound))
+        elif not field.is_primitive:
+            paths += [((field.name, *path), bound)
+                      for path, bound in _string_paths(universe, field.base_type)]
+    return paths
+
+
+def _set_path(message, path: tuple[str, ...], value) -> None:
+    for name in path[:-1]:
+        message = getattr(message, name)
+    setattr(message, path[-1], value)
+
+
+def _string_of_bytes(data, length: int) -> str:
+    """A string of ``length`` UTF-8 bytes made of random 1- to 4-byte characters."""
+    text, left = '', length
+    while left:
+        piece = data.draw(st.sampled_from([p for p in PIECES if len(p.encode()) <= left]))
+        text += piece
+        left -= len(piece.encode())
+    return text
+
+
+def draw_record_run(data, universe: Universe, type_name: str, field: FieldDef) -> list:
+    """Elements for ``field`` whose string fields are each drawn in one of STRING_MODES."""
+    element_type = field.base_type
+    if field.container == 'array':
+        count = field.size
+    else:
+        count = data.draw(st.integers(0, field.size or 40), label='count')
+    elements = [data.draw(message_strategy(universe, element_type)) for _ in range(count)]
+    for path, bound in _string_paths(universe, element_type):
+        mode = data.draw(st.sampled_from(STRING_MODES), label=f'{".".join(path)} mode')
+        length = data.draw(st.integers(0, bound or 9), label='bytes')
+        if mode == 'free':
+            continue
+        first = _string_of_bytes(data, length)
+        for element in elements:
+            if mode == 'same object':
+                value = first
+            elif mode == 'equal copies':
+                value = ''.join(list(first))
+            else:
+                value = _string_of_bytes(data, length)
+            _set_path(element, path, value)
+    return elements
+
+
+@contextlib.contextmanager
+def record_runs_watched(cls: type):
+    """Within: what the RecordRun calls of ``cls``'s serializer did (True: packed at once)."""
+    serialize_fn = next(cell.cell_contents for cell in cls.serialize.__closure__
+                        if hasattr(cell.cell_contents, '__source__'))
+    namespace = serialize_fn.__globals__
+    runs = {name: value for name, value in namespace.items() if name.startswith('RUN')}
+    results = []
+
+    def watched(run):
+        def call(*args):
+            data = run(*args)
+            results.append(data is not None)
+            return data
+
+        return call
+
+    namespace.update({name: watched(run) for name, run in runs.items()})
+    try:
+        yield results
+    finally:
+        namespace.update(runs)
+
+
+@pytest.mark.parametrize(('universe', 'type_name', 'field_name'), RECORD_RUNS,
+                         ids=[f'{t}.{f}' for _, t, f in RECORD_RUNS])
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(data=st.data())
+def test_record_runs_match_rosbags(universe, type_name, field_name, data):
+    """Runs of container-free structs give rosbags' bytes in every string layout.
+
+    Each string field of the elements is one object in all, equal copies, strings of one byte
+    length but different contents (multi-byte characters), or free; every start alignment
+    (random content before the run), empty runs, runs below the packed-at-once size.
+    """
+    field = next(f for f in universe.fields(type_name) if f.name == field_name)
+    message = data.draw(message_strategy(universe, type_name), label='message')
+    setattr(message, field_name, draw_record_run(data, universe, type_name, field))
+    assert_conforms(universe, type_name, message)
+
+
+def test_record_runs_are_packed_at_once_when_strings_agree():
+    """The one-pack path is taken when it should be, and falls back when lengths differ."""
+    path_type = generated_class('nav_msgs/msg/Path')
+    pose = generated_class('geometry_msgs/msg/PoseStamped')
+    with record_runs_watched(path_type) as packed:
+        for frame in ('', 'a', 'odom', 'world', 'map_frame'):
+            for count in (3, 4, 5, 201):
+                poses = [pose() for _ in range(count)]
+                for k, element in enumerate(poses):
+                    element.header.frame_id = frame
+                    element.header.stamp.sec = k
+                    element.pose.position.x = 0.1 * k
+                message = path_type(poses=poses)
+                for header_frame in ('', 'a', 'ab', 'abc'):
+                    message.header.frame_id = header_frame
+                    assert_conforms(SHIPPED, 'nav_msgs/msg/Path', message)
+        assert packed and all(packed)
+        packed.clear()
+        poses = [pose() for _ in range(6)]
+        poses[3].header.frame_id = 'longer'
+        assert_conforms(SHIPPED, 'nav_msgs/msg/Path', path_type(poses=poses))
+        assert packed and not any(packed)
+
+
+def test_nested_record_runs_match_rosbags():
+    """Runs inside the elements of a sequence (DiagnosticArray.status[k].values)."""
+    array = generated_class('diagnostic_msgs/msg/DiagnosticArray')
+    status = generated_class('diagnostic_msgs/msg/DiagnosticStatus')
+    key_value = generated_class('diagnostic_msgs/msg/KeyValue')
+    statuses = []
+    for k in range(6):
+        values = [key_value(key=f'k{k}', value=str(j % 10)) for j in range(k * 3)]
+        statuses.append(status(level=k % 3, name='n' * k, message='m' * (5 - k), values=values))
+    for frame in ('', 'a', 'ab', 'abc'):
+        message = array(status=statuses)
+        message.header.frame_id = frame
+        assert_conforms(SHIPPED, 'diagnostic_msgs/msg/DiagnosticArray', message)
+
+
+@pytest.mark.parametrize('uniform', [True, False])
+def test_record_runs_refuse_strings_beyond_bound(uniform):
+    """A bounded string too long in a run raises as element by element packing does."""
+    records = SYNTHETIC.cls('cdr_test_msgs/msg/Records')
+    record = SYNTHETIC.cls('cdr_test_msgs/msg/Record')
+    elements = [record(tag='abcd' if uniform or k % 2 else 'ab') for k in range(6)]
+    assert_conforms(SYNTHETIC, 'cdr_test_msgs/msg/Records', records(bounded=elements))
+    elements[4].tag = 'abcde'
+    if uniform:
+        for element in elements:
+            element.tag = 'abcde'
+    with pytest.raises(SerializationError, match='string longer than bound 4'):
+        records(bounded=elements).serialize()
+
+
+def test_get_constructor_is_looked_up_again_when_the_runtime_changes(monkeypatch):
+    """get_constructor keeps what it found per name, for the runtime selected at the time."""
+    from gait_nodes import interfaces
+    from gait_nodes.runtime import selection
+
+    vector_class = generated_class('geometry_msgs/msg/Vector3')
+    monkeypatch.setattr(selection, '_selected', 'inproc')
+    vector = interfaces.get_constructor('geometry_msgs/msg/Vector3')
+    assert vector(1.0, 2.0, 3.0) == vector_class(x=1.0, y=2.0, z=3.0)
+    assert interfaces.get_constructor('geometry_msgs/Vector3') is vector
+    resolved = []
+
+    def resolve(type_name, rclpy_active):
+        resolved.append((type_name, rclpy_active))
+        return generated_class(type_name)
+
+    monkeypatch.setattr(interfaces, '_resolve_message', resolve)
+    assert interfaces.get_constructor('geometry_msgs/msg/Vector3') is vector
+    assert resolved == []
+    monkeypatch.setattr(selection, '_selected', 'dds')
+    assert interfaces.get_constructor('geometry_msgs/msg/Vector3') is vector
+    assert interfaces.get_constructor('geometry_msgs/msg/Vector3') is vector
+    assert resolved == [('geometry_msgs/msg/Vector3', False)]
+
+
+def test_published_sequences_are_packed_once_and_stay_right():
+    """serialize_published gives serialize's bytes when it copies a sequence met before.
+
+    The same vertex list in successive messages and twice in one message (at another
+    alignment), equal but new lists, more lists than are remembered, short lists, and lists
+    freed and made again (ids reused). serialize() never uses what serialize_published kept: a
+    list edited after it (as a DDS publisher may do) is packed anew.
+    """
+    polygon_stamped = generated_class('geometry_msgs/msg/PolygonStamped')
+    polygon = generated_class('geometry_msgs/msg/Polygon')
+    point32 = generated_class('geometry_msgs/msg/Point32')
+    marker_array = generated_class('visualization_msgs/msg/MarkerArray')
+    marker = generated_class('visualization_msgs/msg/Marker')
+    point = generated_class('geometry_msgs/msg/Point')
+    vertices = [point32(x=float(k), y=-k / 4, z=0.5) for k in range(12)]  # exact in float32
+    outline = [point(x=k / 7, y=float(k), z=-1.0) for k in range(9)]
+    for frame in ('', 'a', 'ab', 'abc', 'abcd'):
+        message = polygon_stamped(polygon=polygon(points=vertices))
+        message.header.frame_id = frame
+        data = assert_conforms(SHIPPED, 'geometry_msgs/msg/PolygonStamped', message)
+        assert message.serialize_published() == data
+        markers = marker_array(markers=[marker(ns=frame, points=outline),
+                                        marker(ns=frame + 'x', text='t', points=outline)])
+        data = assert_conforms(SHIPPED, 'visualization_msgs/msg/MarkerArray', markers)
+        assert markers.serialize_published() == data
+    rng = random.Random(5)
+    for size in [3, 7, 8, 9, 30] * 6:  # fresh lists, freed after use
+        points = [point32(x=rng.randint(-99, 99) / 8, y=rng.randint(-99, 99) / 16, z=0.0)
+                  for _ in range(size)]
+        message = polygon_stamped(polygon=polygon(points=points))
+        assert message.serialize_published() == message.serialize()
+        assert polygon_stamped(polygon=polygon(points=list(points))).serialize_published() == \
+            message.serialize()
+        del points, message
+    message = polygon_stamped(polygon=polygon(points=vertices))
+    published = message.serialize_published()
+    vertices[3].x = 42.0
+    assert message.serialize() != published
+    assert_conforms(SHIPPED, 'geometry_msgs/msg/PolygonStamped', message)
+
+
+
+def _run_of(cls: type):
+    """The (one) RecordRun of ``cls``'s serializer."""
+    serialize_fn = next(cell.cell_contents for cell in cls.serialize.__closure__
+                        if hasattr(cell.cell_contents, '__source__'))
+    [run] = [value for name, value in serialize_fn.__globals__.items() if name.startswith('RUN')]
+    return run
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(steps=st.lists(st.tuples(st.integers(-3, 12), st.sampled_from(['', 'a', 'odom', 'world']),
+                                st.sampled_from(['odom', 'odom', 'map', 'world', 'mapx']),
+                                st.integers(0, 3)), min_size=1, max_size=12))
+def test_published_zmp_reference_windows_match_serialize(steps):
+    """A Path sliding along one list of poses, as the footstep planner publishes it.
+
+    Each published message's leading poses are (``is``) a stretch of the previous one's; its
+    bytes are serialize()'s whatever the shift (none, ahead, back, past the end), the header
+    frame (the run's alignment), the frame of the new poses (another length: no one layout),
+    and messages of another publisher in between.
+    """
+    path_type = generated_class('nav_msgs/msg/Path')
+    pose = generated_class('geometry_msgs/msg/PoseStamped')
+
+    def new_pose(k: int, frame: str):
+        element = pose()
+        element.header.frame_id = frame
+        element.header.stamp.sec = k
+        element.pose.position.x, element.pose.orientation.z = k / 8, -k / 3
+        return element
+
+    poses = [new_pose(k, 'odom') for k in range(40)]
+    other = [new_pose(-k, 'odom') for k in range(12)]
+    start = 0
+    for shift, header_frame, tail_frame, others in steps:
+        start = max(start + shift, 0)
+        window = poses[start:start + 20]
+        window += [new_pose(100 + k, tail_frame) for k in range(20 - len(window))]
+        for message_poses in [other[:6 + others]] * (others > 1) + [window]:
+            message = path_type(poses=message_poses)
+            message.header.frame_id = header_frame
+            assert message.serialize_published() == message.serialize()
+
+
+def test_published_zmp_reference_packs_only_its_new_poses():
+    """Sliding by 4 poses: 4 are gathered and packed, the other 196 copied."""
+    path_type = generated_class('nav_msgs/msg/Path')
+    pose = generated_class('geometry_msgs/msg/PoseStamped')
+    run = _run_of(path_type)
+    gather = run.gather
+    gathered = []
+    poses = [pose() for _ in range(240)]
+    for k, element in enumerate(poses):
+        element.header.frame_id = 'odom'
+        element.header.stamp.sec = k
+    try:
+        run.gather = lambda elements: gathered.append(len(elements)) or gather(elements)
+        for start in range(0, 40, 4):
+            message = path_type(poses=poses[start:start + 200])
+            message.header.frame_id = 'odom'
+            assert message.serialize_published() == message.serialize()
+    finally:
+        run.gather = gather
+    # serialize() gathers all 200 each time; the first published message too.
+    assert gathered[0::2] == [200] + [4] * 9 and gathered[1::2] == [200] * 10

@@ -302,3 +302,118 @@ def test_a_second_shutdown_signal_inside_the_first_does_not_deadlock():
         assert context.shutdown_requested.is_set()
     finally:
         runtime.shutdown()
+
+
+def test_timers_created_or_destroyed_while_spinning_are_seen(inproc):
+    """The executor's gathered timer list follows timers and nodes that come and go."""
+    first, second = runtime.Node('first'), runtime.Node('second')
+    calls = []
+    created = []
+
+    def on_first():
+        calls.append(('first', inproc.now_ns))
+        if not created:
+            created.append(second.create_timer(0.25, lambda: calls.append(
+                ('new', inproc.now_ns))))
+        elif len(created) == 1 and inproc.now_ns >= 2 * NS_PER_S:
+            second.destroy_timer(created[0])
+            created.append(None)
+
+    first.create_timer(1.0, on_first)
+    executor = executor_with(first, second)
+    executor.spin_for(3.0)
+    ms = NS_PER_S // 1000
+    # At 2 s the first timer (created first) runs first and destroys the new one, also due.
+    assert calls == [('first', 1000 * ms), ('new', 1250 * ms), ('new', 1500 * ms),
+                     ('new', 1750 * ms), ('first', 2000 * ms), ('first', 3000 * ms)]
+    third = runtime.Node('third')
+    third.create_timer(0.5, lambda: calls.append(('third', inproc.now_ns)))
+    executor.add_node(third)
+    executor.spin_for(1.0)
+    assert calls[-3:] == [('third', 3500 * ms), ('first', 4000 * ms), ('third', 4000 * ms)]
+    executor.remove_node(first)
+    executor.spin_for(1.0)
+    assert calls[-2:] == [('third', 4500 * ms), ('third', 5000 * ms)]
+
+
+def test_one_message_reaches_its_subscriptions_in_a_row_with_one_serialization(inproc,
+                                                                             monkeypatch):
+    """Typed and raw subscriptions in creation order; the raw ones share the same bytes."""
+    talker = runtime.Node('talker')
+    publisher = talker.create_publisher(std_msgs.msg.String, 'chatter', 10)
+    heard = []
+    listener = runtime.Node('listener')
+    for name, raw in (('raw_a', True), ('typed', False), ('raw_b', True)):
+        listener.create_subscription(std_msgs.msg.String, 'chatter',
+                                     lambda msg, name=name: heard.append((name, msg)), 10,
+                                     raw=raw)
+    messages = [std_msgs.msg.String(data=text) for text in ('one', 'two')]
+    serializations = []
+    serialize = std_msgs.msg.String.serialize_published
+    monkeypatch.setattr(std_msgs.msg.String, 'serialize_published',
+                        lambda message: serializations.append(1) or serialize(message))
+    for message in messages:
+        publisher.publish(message)
+    executor_with(talker, listener).spin_once()
+    assert [name for name, _ in heard] == ['raw_a', 'typed', 'raw_b'] * 2
+    assert len(serializations) == 2
+    for k, message in enumerate(messages):
+        raw_a, typed, raw_b = (msg for _, msg in heard[3 * k:3 * k + 3])
+        assert typed is message
+        assert raw_a is raw_b and std_msgs.msg.String.deserialize(raw_a).data == message.data
+
+
+def test_spinning_collects_garbage_less_often_and_restores_the_thresholds(inproc):
+    """The young generation's threshold is raised while spinning, and put back after."""
+    import gc
+
+    from gait_nodes.runtime.executors import INPROC_GC_THRESHOLD
+
+    node = runtime.Node('ticker')
+    seen = []
+
+    def tick():
+        seen.append(gc.get_threshold())
+        if len(seen) == 3:
+            raise RuntimeError('callback failure')
+
+    node.create_timer(0.1, tick)
+    executor = executor_with(node)
+    before = gc.get_threshold()
+    try:
+        gc.set_threshold(700, 11, 12)
+        executor.spin_for(0.25)
+        assert seen == [(INPROC_GC_THRESHOLD, 11, 12)] * 2
+        assert gc.get_threshold() == (700, 11, 12)
+        with pytest.raises(RuntimeError, match='callback failure'):
+            executor.spin()
+        assert gc.get_threshold() == (700, 11, 12)
+        gc.set_threshold(0)  # collection disabled by the user: left so
+        seen.clear()
+        executor.spin_for(0.25)
+        assert seen[0][0] == 0 and gc.get_threshold()[0] == 0
+    finally:
+        gc.set_threshold(*before)
+
+
+def test_raw_subscribers_get_the_bytes_of_messages_sharing_a_sequence(inproc):
+    """Raw subscribers get each message's own bytes when messages share a vertex list.
+
+    (Sharing is allowed: published messages are not edited.) New headers, a new list, the
+    first list again.
+    """
+    talker = runtime.Node('talker')
+    publisher = talker.create_publisher(geometry_msgs.msg.PolygonStamped, 'polygon', 10)
+    raw = Listener('polygon', geometry_msgs.msg.PolygonStamped, 'raw_listener', raw=True)
+    point = geometry_msgs.msg.Point32
+    lists = [[point(x=k / 4, y=-k / 8, z=0.0) for k in range(n)] for n in (20, 9, 20)]
+    published = []
+    for k in range(12):
+        msg = geometry_msgs.msg.PolygonStamped()
+        msg.header.frame_id = 'odom' if k % 3 else 'world'
+        msg.header.stamp.sec = k
+        msg.polygon.points = lists[min(k // 4, 2)]
+        publisher.publish(msg)
+        published.append(msg)
+    executor_with(talker, raw).spin_once()
+    assert [data for _, data in raw.received] == [msg.serialize() for msg in published]

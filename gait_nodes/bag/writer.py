@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 import io
+import itertools
 import struct
 import time
 from pathlib import Path
@@ -26,19 +27,37 @@ ROS_DISTRO = 'jazzy'
 #: An MCAP Message record up to its data: opcode, record length, channel id, sequence, log time
 #: and publish time (little endian, as mcap's RecordBuilder writes them).
 _MESSAGE_RECORD = struct.Struct('<BQHIQQ')
+#: Messages a BagWriter keeps before appending them to the MCAP chunk in one batch.
+_PENDING_MAX = 256
+
+
+class _MessageIndex(MessageIndex):
+    """A MessageIndex record written with one ``pack`` (the bytes of ``MessageIndex.write``).
+
+    mcap writes an index entry with two calls per message when it finishes a chunk.
+    """
+
+    def write(self, stream) -> None:
+        records = self.records
+        stream.start_record(Opcode.MESSAGE_INDEX)
+        stream.write2(self.channel_id)
+        stream.write4(len(records) * 16)
+        stream.write(struct.pack(f'<{2 * len(records)}Q', *itertools.chain.from_iterable(records)))
+        stream.finish_record()
 
 
 def message_appender(writer: Writer):
-    """A function doing what ``writer.add_message`` does, faster, or None.
+    """A function doing what ``writer.add_message`` does, for many messages at once, or None.
 
     ``add_message`` builds a Message record object and writes it field by field, which is most
     of a recorder's cost per message. The function returned appends the same bytes to the open
-    chunk and updates the same statistics and indexes (test_bags checks the files are the same
-    byte for byte). It works on the Writer's private state, so with a mcap version laid out
-    otherwise there is none and ``add_message`` is used.
+    chunk, finishes chunks at the same messages and updates the same statistics and indexes
+    (test_bags checks the files are the same byte for byte). It works on the Writer's private
+    state, so with a mcap version laid out otherwise there is none and ``add_message`` is used.
 
     Returns:
-        ``append(channel_id, log_time, data, publish_time, sequence)``, or None.
+        ``append(messages)`` taking a list of ``(channel_id, log_time, data, publish_time,
+        sequence)``, or None.
     """
     try:
         statistics = writer._Writer__statistics
@@ -56,33 +75,55 @@ def message_appender(writer: Writer):
     if not usable:
         return None
     opcode = int(Opcode.MESSAGE)
+    header = _MESSAGE_RECORD.pack
 
-    def append(channel_id: int, log_time: int, data: bytes, publish_time: int,
-               sequence: int) -> None:
-        # Writer.add_message: file statistics.
-        if statistics.message_count == 0 or log_time < statistics.message_start_time:
-            statistics.message_start_time = log_time
-        if log_time > statistics.message_end_time:
-            statistics.message_end_time = log_time
-        counts[channel_id] += 1
-        statistics.message_count += 1
-        # ChunkBuilder.add_message: chunk times, message index, record.
-        if chunks.num_messages == 0 or log_time < chunks.message_start_time:
-            chunks.message_start_time = log_time
-        if log_time > chunks.message_end_time:
-            chunks.message_end_time = log_time
-        index = indexes.get(channel_id)
-        if index is None:
-            index = indexes[channel_id] = MessageIndex(channel_id=channel_id, records=[])
-        buffer = chunks.record_writer._buffer  # replaced whenever a chunk is finished
-        offset = buffer.tell()
-        index.records.append((log_time, offset))
-        chunks.num_messages += 1
-        buffer.write(_MESSAGE_RECORD.pack(opcode, 22 + len(data), channel_id, sequence,
-                                          log_time, publish_time))
-        buffer.write(data)
-        if offset + _MESSAGE_RECORD.size + len(data) > chunk_size:
-            finish_chunk_if_full()
+    def append(messages: list) -> None:
+        # The statistics and chunk times, as Writer.add_message and ChunkBuilder.add_message
+        # keep them, are updated per run of messages that goes into one chunk.
+        end = len(messages)
+        first = 0
+        while first < end:
+            buffer = chunks.record_writer._buffer  # replaced whenever a chunk is finished
+            offset = buffer.tell()
+            records = []
+            count = statistics.message_count
+            file_start, file_end = statistics.message_start_time, statistics.message_end_time
+            chunk_count = chunks.num_messages
+            chunk_start, chunk_end = chunks.message_start_time, chunks.message_end_time
+            index = first
+            while index < end:
+                channel_id, log_time, data, publish_time, sequence = messages[index]
+                index += 1
+                if count == 0 or log_time < file_start:
+                    file_start = log_time
+                if log_time > file_end:
+                    file_end = log_time
+                if chunk_count == 0 or log_time < chunk_start:
+                    chunk_start = log_time
+                if log_time > chunk_end:
+                    chunk_end = log_time
+                count += 1
+                chunk_count += 1
+                counts[channel_id] += 1
+                channel_index = indexes.get(channel_id)
+                if channel_index is None:
+                    channel_index = indexes[channel_id] = _MessageIndex(channel_id=channel_id,
+                                                                        records=[])
+                channel_index.records.append((log_time, offset))
+                records.append(header(opcode, 22 + len(data), channel_id, sequence, log_time,
+                                      publish_time))
+                records.append(data)
+                offset += _MESSAGE_RECORD.size + len(data)
+                if offset > chunk_size:
+                    break
+            statistics.message_count = count
+            statistics.message_start_time, statistics.message_end_time = file_start, file_end
+            chunks.num_messages = chunk_count
+            chunks.message_start_time, chunks.message_end_time = chunk_start, chunk_end
+            buffer.writelines(records)
+            if offset > chunk_size:
+                finish_chunk_if_full()
+            first = index
 
     return append
 
@@ -125,11 +166,15 @@ class BagWriter:
                               f'{compression!r}')
         self._writer = Writer(self._stream, chunk_size=chunk_size, compression=kinds[compression])
         self._writer.start(profile='ros2', library=f'gait_nodes, {ROS_DISTRO}')
-        self._append = message_appender(self._writer) or self._add_message
+        self._append = message_appender(self._writer) or self._add_messages
+        #: Messages written but not yet appended to the MCAP chunk, in order:
+        #: ``(channel_id, log_time, data, publish_time, sequence)``.
+        self._pending: list = []
         self._schemas: dict[str, int] = {}
         self.topics: dict[str, _Topic] = {}
         self.flush_period_s = flush_period_s
-        self._last_flush = time.monotonic()
+        #: Wall time (time.monotonic) at which the open chunk is due to be flushed [s].
+        self._flush_at = time.monotonic() + flush_period_s
         self.start_ns: int | None = None
         self.end_ns = 0
         self.message_count = 0
@@ -163,34 +208,69 @@ class BagWriter:
               publish_time_ns: int | None = None) -> None:
         """Append one serialized message received at ``log_time_ns``."""
         entry = self.topics[topic]
-        self._append(entry.channel_id, log_time_ns, data, publish_time_ns or log_time_ns,
-                     entry.count)
+        self._pending.append((entry.channel_id, log_time_ns, bytes(data),
+                              publish_time_ns or log_time_ns, entry.count))
         entry.count += 1
-        self.message_count += 1
-        if self.start_ns is None or log_time_ns < self.start_ns:
-            self.start_ns = log_time_ns
-        self.end_ns = max(self.end_ns, log_time_ns)
-        now = time.monotonic()
-        if now - self._last_flush >= self.flush_period_s:
+        if len(self._pending) >= _PENDING_MAX or time.monotonic() >= self._flush_at:
+            self._take_pending(flush_if_due=True)
+
+    def topic_writer(self, topic: str, now_ns):
+        """``write(data)`` doing ``self.write(topic, data, now_ns())``, for a recorder's callback.
+
+        The recorder calls it for every message it receives, so it does the least: queue the
+        message (the MCAP records are made for many messages at once, :meth:`_take_pending`)
+        and check the flush period.
+        """
+        entry = self.topics[topic]
+        channel_id = entry.channel_id
+        pending = self._pending
+        monotonic = time.monotonic
+
+        def write(data: bytes) -> None:
+            if data.__class__ is not bytes:
+                data = bytes(data)
+            log_time = now_ns()
+            pending.append((channel_id, log_time, data, log_time, entry.count))
+            entry.count += 1
+            if len(pending) >= _PENDING_MAX or monotonic() >= self._flush_at:
+                self._take_pending(flush_if_due=True)
+
+        return write
+
+    def _take_pending(self, flush_if_due: bool = False) -> None:
+        """Append the pending messages to the MCAP chunk; then flush if ``flush_if_due``."""
+        pending = self._pending
+        if pending:
+            self._append(pending)
+            self.message_count += len(pending)
+            log_times = [message[1] for message in pending]
+            earliest = min(log_times)
+            if self.start_ns is None or earliest < self.start_ns:
+                self.start_ns = earliest
+            self.end_ns = max(self.end_ns, max(log_times))
+            pending.clear()
+        if flush_if_due and time.monotonic() >= self._flush_at:
             self.flush()
 
-    def _add_message(self, channel_id: int, log_time: int, data: bytes, publish_time: int,
-                     sequence: int) -> None:
-        self._writer.add_message(channel_id=channel_id, log_time=log_time, data=data,
-                                 publish_time=publish_time, sequence=sequence)
+    def _add_messages(self, messages: list) -> None:
+        for channel_id, log_time, data, publish_time, sequence in messages:
+            self._writer.add_message(channel_id=channel_id, log_time=log_time, data=data,
+                                     publish_time=publish_time, sequence=sequence)
 
     def flush_if_due(self) -> None:
         """Flush when the open chunk is older than ``flush_period_s`` (call it from a timer)."""
-        if not self._closed and time.monotonic() - self._last_flush >= self.flush_period_s:
+        if not self._closed and time.monotonic() >= self._flush_at:
             self.flush()
 
     def flush(self) -> None:
         """Finish the open chunk and push it to the file."""
+        self._take_pending()
         self._writer.flush()
-        self._last_flush = time.monotonic()
+        self._flush_at = time.monotonic() + self.flush_period_s
 
     def metadata(self) -> dict:
         """``metadata.yaml`` contents (rosbag2 version 9)."""
+        self._take_pending()
         start = self.start_ns or 0
         duration = max(self.end_ns - start, 0)
         return {'rosbag2_bagfile_information': {

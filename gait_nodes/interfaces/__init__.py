@@ -75,6 +75,9 @@ def generated_class(type_name: str) -> type:
 _resolved: dict[str, type] = {}
 _resolved_runtime: list = [None]
 _selection = []
+#: Constructors already looked up, by the name as asked, for the runtime in ``_resolved_runtime``
+#: (node code calls get_constructor for each message it builds, ~20 times per graph tick).
+_constructors_by_name: dict[str, object] = {}
 
 
 def get_message(type_name: str) -> type:
@@ -90,6 +93,7 @@ def get_message(type_name: str) -> type:
             return cls
     else:
         _resolved.clear()
+        _constructors_by_name.clear()
         _resolved_runtime[0] = runtime
     cls = _resolve_message(type_name, runtime == 'rclpy')
     _resolved[type_name] = cls
@@ -106,7 +110,12 @@ def get_constructor(type_name: str):
     messages: the generated class itself (a dataclass), or for rclpy's classes (keyword
     arguments only) a wrapper passing the fields by name.
     """
-    cls = get_message(type_name)
+    runtime = _resolved_runtime[0]
+    if runtime is not None and _selection[0]._selected is runtime:
+        constructor = _constructors_by_name.get(type_name)
+        if constructor is not None:
+            return constructor
+    cls = get_message(type_name)  # (re)sets _resolved_runtime, clears _constructors_by_name
     constructor = _constructors.get(cls)
     if constructor is None:
         if hasattr(cls, '__ros_type__'):
@@ -118,6 +127,7 @@ def get_constructor(type_name: str):
                 return _cls(**dict(zip(_names, values, strict=True)))
 
         _constructors[cls] = constructor
+    _constructors_by_name[type_name] = constructor
     return constructor
 
 

@@ -16,8 +16,10 @@ followed by the elements, no padding after the last field.
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import struct
 from collections.abc import Callable
+from operator import is_, is_not
 
 import cyclonedds.idl.types as idl_types
 from cyclonedds.idl import IdlMeta, IdlStruct
@@ -254,6 +256,11 @@ class _SerializerBuilder:
             if flat is not None:
                 self._flat_run(indent, var, count, *flat, state)
                 return
+            record = self.record_layout(self.definitions[field.base_type], loop_var)
+            if record is not None:
+                self._record_run(indent, var, loop_var, single, *record)
+                state.reset(1)
+                return
         elif count is None and field.base_type == 'string' and not field.string_bound:
             # After its count a sequence of strings starts 4-aligned and holds 4-aligned
             # items only: its bytes depend on its content alone, and a name list sent again
@@ -272,18 +279,93 @@ class _SerializerBuilder:
         self.flush()
         state.reset(1)
 
+    def record_layout(self, msgdef: MsgDef, expr: str) -> tuple[list, list[str], list[str]] | None:
+        """Items, value expressions and name bindings of a struct without containers.
+
+        Such a struct (PoseStamped, TransformStamped, KeyValue...) has primitives and strings
+        only, nested structs included. Items are ``(format character, size)`` for a primitive
+        and ``('s', bound)`` for a string, which takes two values: the string twice (its length
+        and its bytes, once encoded). None for a struct with a container or a wstring.
+        """
+        items, values, bindings = [], [], []
+        if len(msgdef.fields) > 1 and '.' in expr:
+            var = self.w.unique('r')
+            bindings.append(f'{var} = {expr}')
+            expr = var
+        for field in msgdef.fields:
+            if field.container is not None or field.base_type == 'wstring':
+                return None
+            value = f'{expr}.{field.name}'
+            if field.is_primitive:
+                items.append(PRIMITIVES[field.base_type])
+                values.append(value)
+            elif field.is_string:
+                items.append(('s', field.string_bound))
+                values += [value, value]
+            else:
+                inner = self.record_layout(self.definitions[field.base_type], value)
+                if inner is None:
+                    return None
+                items += inner[0]
+                values += inner[1]
+                bindings += inner[2]
+        return items, values, bindings
+
+    def _record_run(self, indent: int, var: str, loop_var: str, single: FieldDef,
+                    items: list, values: list[str], bindings: list[str]) -> None:
+        """A sequence or array of container-free structs: one pack for all, when it can be.
+
+        Packing each element field by field costs a few appends per element; gathering every
+        element's values in one list and packing them with one Struct (:class:`RecordRun`) is
+        several times faster. That works when each string field has the same encoded length in
+        every element (frame ids usually are one string): then every element has the same layout
+        but for its alignment, which the Struct spells out from the position of the first. When
+        it does not, or for a few elements, the general per-element code runs instead.
+        """
+        self.flush()
+        gather = ['def gather(elements):', '    g = []', f'    for {loop_var} in elements:',
+                  *(f'        {line}' for line in bindings),
+                  f'        g += ({", ".join(values)},)', '    return g']
+        namespace: dict = {}
+        exec(compile('\n'.join(gather), '<cdr gather>', 'exec'), namespace)  # noqa: S102
+        namespace['gather'].__source__ = '\n'.join(gather)
+        run, data = self.w.unique('RUN'), self.w.unique('d')
+        self.w.constants[run] = RecordRun(items, namespace['gather'])
+        self.w.emit(indent, f'if {var}:')
+        self.w.emit(indent + 1, f'{data} = {run}({var}, (len(b) - 4) % 8, published) '
+                                f'if len({var}) >= {RecordRun.MIN_ELEMENTS} else None')
+        self.w.emit(indent + 1, f'if {data} is not None:')
+        self.w.emit(indent + 2, f'b += {data}')
+        self.w.emit(indent + 1, 'else:')
+        self.w.emit(indent + 2, f'for {loop_var} in {var}:')
+        self.single(indent + 3, single, loop_var, _Alignment(1))
+        self.flush()
+
     def _flat_run(self, indent: int, var: str, count: int | None, fmt: str, values: list[str],
                   size: int, state: _Alignment) -> None:
         """A sequence (``count`` None) or array of flat structs: aligned once, one pack each."""
         loop_var = values[0].split('.')[0]
         element = self.w.struct_const('<' + fmt)
         if count is None:
+            # Once aligned, the run's bytes depend on its content alone: a sequence object met
+            # again in a published message (never edited, see serialize_published) is not
+            # packed again (the support polygon's vertices, the same for hundreds of ticks).
             self.flush()
+            memo, known, start = self.w.unique('MEMO'), self.w.unique('k'), self.w.unique('t')
+            self.w.constants[memo] = {}
             self.w.emit(indent, f'if {var}:')
             if size > 4:
                 self.w.emit(indent + 1, f'b += PAD[(4 - len(b)) % {size}]')
-            self.w.emit(indent + 1, f'for {loop_var} in {var}:')
-            self.w.emit(indent + 2, f'b += {element}.pack({", ".join(values)})')
+            self.w.emit(indent + 1, f'{known} = {memo}.get(id({var})) if published and '
+                                    f'len({var}) >= MEMO_MIN else None')
+            self.w.emit(indent + 1, f'if {known} is not None and {known}[0] is {var}:')
+            self.w.emit(indent + 2, f'b += {known}[1]')
+            self.w.emit(indent + 1, 'else:')
+            self.w.emit(indent + 2, f'{start} = len(b)')
+            self.w.emit(indent + 2, f'for {loop_var} in {var}:')
+            self.w.emit(indent + 3, f'b += {element}.pack({", ".join(values)})')
+            self.w.emit(indent + 2, f'if published and len({var}) >= MEMO_MIN: '
+                                    f'remember({memo}, {var}, b, {start})')
             state.reset(min(size, 4))
         elif count:
             self.align(indent, size, state)
@@ -422,6 +504,137 @@ class _DeserializerBuilder:
         state.reset(1)
 
 
+class RecordRun:
+    """The CDR of a run of container-free structs whose strings have the same length in each.
+
+    Called with the elements and the position of the first modulo 8 (counted from the end of
+    the encapsulation header). The elements' values are gathered in one list (each string
+    twice, see :meth:`_SerializerBuilder.record_layout`). Each string field is encoded once
+    when it is the same string in every element (the usual frame id), else element by element;
+    when its encoded length varies, the run has no single layout and None is returned (the
+    caller packs element by element). Otherwise the elements' layout is fixed by the string
+    lengths and the start position: one Struct for them all, compiled once per layout and kept,
+    gives the same bytes as packing the elements one by one.
+
+    A run of a published message (``published``, see ``serialize_published``) whose leading
+    elements are the very objects of a stretch of the previous published run here (a ZMP
+    reference sliding along its horizon) copies their bytes from then and packs only the rest,
+    when every element of both has the same size, a multiple of 8 (each element then starts at
+    the same alignment, so that its bytes depend on its content alone).
+
+    Args:
+        items: Per element, ``(format character, size)`` of each primitive and
+            ``('s', bound)`` of each string (bound 0: unbounded), in field order.
+        gather: ``gather(elements) -> list`` of the elements' values, in item order.
+    """
+
+    #: Below this many elements the element by element code is as fast.
+    MIN_ELEMENTS = 4
+    #: Layouts kept per run (a new one is compiled when the run meets a new length or shape).
+    LAYOUTS_KEPT = 64
+
+    def __init__(self, items: list, gather: Callable[[list], list]):
+        self.items = list(items)
+        self.gather = gather
+        self.width = sum(2 if kind == 's' else 1 for kind, _ in items)
+        self.strings = []  # (column of the first of the string's two values, bound)
+        column = 0
+        for kind, size in items:
+            if kind == 's':
+                self.strings.append((column, size))
+                column += 2
+            else:
+                column += 1
+        #: (start alignment, count, string lengths...) -> (Struct, element size or None).
+        self.layouts: dict[tuple, tuple[struct.Struct, int | None]] = {}
+        #: The last published run: (elements, start alignment, element size, bytes), or None.
+        self.published: tuple | None = None
+
+    def __call__(self, elements, phase: int, published: bool = False) -> bytes | None:
+        """CDR of the ``elements`` starting at ``phase`` (mod 8), or None (see above)."""
+        known, prefix, size = 0, b'', None
+        if published and self.published is not None and self.published[1] == phase:
+            previous, _, size, data = self.published
+            known, offset = _shared_lead(elements, previous)
+            prefix = data[offset * size:(offset + known) * size]
+        tail = elements[known:] if known else elements
+        packed = self._pack(self.gather(tail), len(tail), phase) if tail else (b'', size)
+        if packed is None:
+            self.published = None
+            return None
+        data = prefix + packed[0] if known else packed[0]
+        if published:
+            uniform = packed[1] is not None and (not known or packed[1] == size)
+            self.published = (elements, phase, packed[1], data) if uniform else None
+        return data
+
+    def _pack(self, values: list, count: int, phase: int) -> tuple[bytes, int | None] | None:
+        """Bytes and element size (None if not one multiple of 8) of gathered values."""
+        width = self.width
+        lengths = []
+        for column, bound in self.strings:
+            strings = values[column::width]
+            first = strings[0]
+            if strings.count(first) == count:
+                if bound and len(first) > bound:
+                    raise ValueError(f'string longer than bound {bound}')
+                encoded = first.encode()
+                values[column + 1::width] = [encoded] * count
+            else:
+                if bound and max(map(len, strings)) > bound:
+                    raise ValueError(f'string longer than bound {bound}')
+                encoded = [string.encode() for string in strings]
+                if len(set(map(len, encoded))) > 1:
+                    return None
+                values[column + 1::width] = encoded
+                encoded = encoded[0]
+            values[column::width] = [len(encoded) + 1] * count
+            lengths.append(len(encoded))
+        key = (phase, count, *lengths)
+        layout = self.layouts.get(key)
+        if layout is None:
+            layout = self._layout(phase, count, lengths)
+        return layout[0].pack(*values), layout[1]
+
+    def _layout(self, phase: int, count: int, lengths: list[int]) -> tuple:
+        """Struct of ``count`` elements starting at ``phase`` (mod 8) and their one size."""
+        parts, position, sizes = ['<'], phase, set()
+        for _ in range(count):
+            string_lengths = iter(lengths)
+            start = position
+            for kind, size in self.items:
+                if kind == 's':
+                    length = next(string_lengths)
+                    pad = -position % 4
+                    parts.append(f'{pad}xI{length + 1}s' if pad else f'I{length + 1}s')
+                    position += pad + 5 + length
+                else:
+                    pad = -position % size
+                    parts.append(f'{pad}x{kind}' if pad else kind)
+                    position += pad + size
+            sizes.add(position - start)
+        size = sizes.pop() if len(sizes) == 1 else None
+        if len(self.layouts) >= self.LAYOUTS_KEPT:
+            self.layouts.clear()
+        layout = self.layouts[(phase, count, *lengths)] = (
+            struct.Struct(''.join(parts)), size if size is not None and size % 8 == 0 else None)
+        return layout
+
+
+def _shared_lead(elements, previous) -> tuple[int, int]:
+    """How many leading ``elements`` are (``is``) ``previous[offset:]``'s, and the offset.
+
+    (0, 0) when the first element is not in ``previous``. Searched without a Python loop.
+    """
+    offset = next(itertools.compress(itertools.count(),
+                                     map(is_, itertools.repeat(elements[0]), previous)), None)
+    if offset is None:
+        return 0, 0
+    same = elements[:len(previous) - offset]
+    return next(itertools.compress(itertools.count(), map(is_not, same, previous[offset:])),
+                len(same)), offset
+
+
 #: Encoded sequences of strings by content (see :func:`_string_sequence`), for all types.
 _STRING_SEQUENCES: dict[tuple, bytes] = {}
 _STRING_SEQUENCES_KEPT = 256
@@ -444,6 +657,22 @@ def _string_sequence(strings: tuple) -> bytes:
     return out
 
 
+#: Sequences shorter than this are packed again rather than looked up.
+_MEMO_MIN = 8
+#: Sequences remembered per place in a message type (the oldest are forgotten all at once).
+_MEMO_KEPT = 8
+
+
+def _remember(memo: dict, sequence, data: bytearray, start: int) -> None:
+    """Keep the bytes ``data[start:]`` packed from ``sequence``, and the sequence (its id).
+
+    Holding the sequence keeps its id from being given to another object while remembered.
+    """
+    if len(memo) >= _MEMO_KEPT:
+        memo.clear()
+    memo[id(sequence)] = (sequence, bytes(data[start:]))
+
+
 def _compile(writer: _CodeWriter, name: str, args: str, result: str) -> Callable:
     source = '\n'.join([f'def {name}({args}):', *writer.lines, f'    return {result}'])
     namespace = dict(writer.constants)
@@ -451,6 +680,7 @@ def _compile(writer: _CodeWriter, name: str, args: str, result: str) -> Callable
         PAD=[bytes(i) for i in range(8)], U32=struct.Struct('<I'),
         pack=struct.pack, unpack_from=struct.unpack_from,
         STRINGS=_STRING_SEQUENCES, string_sequence=_string_sequence,
+        MEMO_MIN=_MEMO_MIN, remember=_remember,
     )
     exec(compile(source, f'<cdr {name}>', 'exec'), namespace)  # noqa: S102 - generated above
     function = namespace[name]
@@ -459,13 +689,17 @@ def _compile(writer: _CodeWriter, name: str, args: str, result: str) -> Callable
 
 
 def make_serializer(msgdef: MsgDef, definitions: dict[str, MsgDef]) -> Callable:
-    """Function ``(message) -> bytes`` giving the CDR (with header) of one message."""
+    """Function ``(message, published=False) -> bytes``: the CDR (with header) of one message.
+
+    ``published``: the message and everything in it stay as they are from now on (see
+    ``serialize_published`` of the message classes).
+    """
     writer = _CodeWriter()
     builder = _SerializerBuilder(definitions, writer)
     writer.emit(1, f'b = bytearray({_HEADER_LE!r})')
     builder.struct(1, msgdef, 'm', _Alignment())
     builder.flush()
-    return _compile(writer, 'serialize', 'm', 'bytes(b)')
+    return _compile(writer, 'serialize', 'm, published=False', 'bytes(b)')
 
 
 def make_deserializer(msgdef: MsgDef, definitions: dict[str, MsgDef],
@@ -550,12 +784,26 @@ def make_class(msgdef: MsgDef, definitions: dict[str, MsgDef], classes: dict[str
         b'\x00': make_deserializer(msgdef, definitions, classes, '>'),
     }
 
+    errors = (struct.error, ValueError, TypeError, AttributeError, UnicodeError, OverflowError)
+
     def serialize(self, buffer=None, endianness=None, use_version_2=None) -> bytes:
         """CDR bytes of this message with the 4-byte encapsulation header."""
         try:
             return serialize_fn(self)
-        except (struct.error, ValueError, TypeError, AttributeError, UnicodeError,
-                OverflowError) as exc:
+        except errors as exc:
+            raise SerializationError(f'cannot serialize {msgdef.type_name}: {exc}') from exc
+
+    def serialize_published(self) -> bytes:
+        """:meth:`serialize` of a message published under the inproc runtime's rule.
+
+        The rule (a published message and its parts are never edited again, see
+        :mod:`gait_nodes.runtime.inproc`) lets a sequence of flat structs that was packed for
+        an earlier published message, the very same object, be copied from then rather than
+        packed again. The bytes are those of :meth:`serialize` as long as the rule holds.
+        """
+        try:
+            return serialize_fn(self, True)
+        except errors as exc:
             raise SerializationError(f'cannot serialize {msgdef.type_name}: {exc}') from exc
 
     @classmethod
@@ -578,5 +826,6 @@ def make_class(msgdef: MsgDef, definitions: dict[str, MsgDef], classes: dict[str
         return message
 
     cls.serialize = serialize
+    cls.serialize_published = serialize_published
     cls.deserialize = deserialize
     return cls

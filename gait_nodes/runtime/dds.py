@@ -110,6 +110,8 @@ class DdsTransport:
     """One DomainParticipant per process, a WaitSet over its readers."""
 
     sim_time_source = None
+    #: Bumped whenever a node of this process creates or destroys a timer.
+    timers_version = 0
 
     def __init__(self, context, domain_id: int | None = None):
         from cyclonedds.core import GuardCondition, WaitSet

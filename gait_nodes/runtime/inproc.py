@@ -10,13 +10,16 @@ received message as read-only, as rclpy's intra-process communication also requi
 publisher must not edit a message once published. Under that rule node code may share unchanging
 sub-messages between the messages it publishes (the kinematic_simulator shares stamps, joint
 names and polygon vertices, the footstep_planner the poses its successive ZMP references have in
-common), which saves building them again and is invisible to subscribers. Raw subscriptions that
-receive the same message one after the other share its one serialization.
+common), which saves building them again and is invisible to subscribers. The raw subscriptions
+of a message share its one serialization, which relies on the rule too: a sequence of flat
+structs serialized for an earlier message (the same object, such as the support polygon's
+vertices) is copied from then, not packed again (``serialize_published`` of the classes).
 """
 
 from __future__ import annotations
 
 import collections
+import functools
 import os
 
 from gait_nodes.interfaces import validate_message
@@ -41,23 +44,29 @@ class _InprocPublisher:
         self.profile = profile
         latched = profile.durability == DurabilityPolicy.TRANSIENT_LOCAL
         self.history = collections.deque(maxlen=profile.depth) if latched else None
-        self._matched: list = []
+        self._queue = transport.queue
+        self._matched: tuple = ()
         self._matched_version = -1
 
-    def matched(self) -> list:
+    def matched(self) -> tuple:
         """The topic's subscriptions DDS would match with this publisher, in creation order."""
         topic = self.topic
         if self._matched_version != topic.version:
-            self._matched = [s for s in topic.subscriptions if _compatible(self, s)]
+            self._matched = tuple(s for s in topic.subscriptions if _compatible(self, s))
             self._matched_version = topic.version
         return self._matched
 
     def publish(self, msg) -> None:
+        # Called for every message of the graph: one queue entry per message, whatever the
+        # number of subscriptions (the executor hands it to each in a row).
         if self.transport.strict:
             validate_message(msg)
         if self.history is not None:
             self.history.append(msg)
-        self.transport.deliver(self, msg)
+        matched = self._matched if self._matched_version == self.topic.version \
+            else self.matched()
+        if matched:
+            self._queue.append((msg, matched))
 
     def publish_raw(self, data: bytes) -> None:
         self.publish(self.msg_type.deserialize(data))
@@ -100,14 +109,16 @@ class InprocTransport:
         self.context = context
         self.now_ns = 0
         self.topics: dict[str, _Topic] = {}
+        #: Pending deliveries, first in first out: ``(message, subscriptions)``.
         self.queue: collections.deque = collections.deque()
         self.delivered = 0
-        self.sim_time_source = self._now
+        #: Bumped whenever a node of this process creates or destroys a timer.
+        self.timers_version = 0
+        # The clocks of the nodes read the simulated time through this C-level callable (many
+        # times per tick: no Python frame for it).
+        self.sim_time_source = functools.partial(getattr, self, 'now_ns')
         #: Check every published message as rclpy's setters would (see validate_message).
         self.strict = os.environ.get('GAIT_NODES_STRICT_MESSAGES', '') not in ('', '0')
-
-    def _now(self) -> int:
-        return self.now_ns
 
     def _topic(self, name: str, msg_type: type) -> _Topic:
         topic = self.topics.get(name)
@@ -134,14 +145,14 @@ class InprocTransport:
                 if publisher.history and _compatible(publisher, subscription):
                     depth = subscription.qos_profile.depth
                     for msg in list(publisher.history)[-depth:]:
-                        self.queue.append((subscription, msg))
+                        self.queue.append((msg, (subscription,)))
         return _InprocSubscription(self, topic, subscription)
 
     def deliver(self, publisher: _InprocPublisher, msg) -> None:
         """Queue ``msg`` for every compatible subscription of the topic."""
-        queue = self.queue
-        for subscription in publisher.matched():
-            queue.append((subscription, msg))
+        matched = publisher.matched()
+        if matched:
+            self.queue.append((msg, matched))
 
     def count(self, name: str, kind: str) -> int:
         """Endpoints on a topic (``kind``: publishers or subscriptions)."""

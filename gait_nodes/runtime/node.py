@@ -66,6 +66,9 @@ class Publisher:
 
     def publish(self, msg) -> None:
         """Send ``msg`` (an instance of ``msg_type``, or its CDR bytes)."""
+        if msg.__class__ is self.msg_type:  # the usual case first: one check per message
+            self._impl.publish(msg)
+            return
         if isinstance(msg, (bytes, bytearray, memoryview)):
             self._impl.publish_raw(bytes(msg))
             return
@@ -319,6 +322,7 @@ class Node:
         timer = Timer(callback, int(round(timer_period_sec * NS_PER_S)), clock or self._clock,
                       autostart)
         self._timers.append(timer)
+        self._transport.timers_version += 1
         self._transport.notify()
         return timer
 
@@ -346,6 +350,7 @@ class Node:
         if timer not in self._timers:
             return False
         self._timers.remove(timer)
+        self._transport.timers_version += 1
         timer.destroy()
         return True
 
