@@ -32,6 +32,7 @@ from gait_nodes.sim.kinematics import (
     PositionActuators,
     fit_base_pose,
     kabsch,
+    svd3,
 )
 from gait_nodes.sim.zmp_monitor import POLYGON_SEGMENTS_PER_FOOT
 
@@ -106,6 +107,75 @@ def test_base_fit_recovers_the_pose_that_holds_the_feet(robot, q_nominal, seed, 
     if len(stance) >= 3:
         assert kabsch(np.array([f.translation for f in in_base]),
                       np.array([f.translation for f in in_world])) is not None
+
+
+def numpy_kabsch(points_in_base, points_in_world):
+    """The reference: Kabsch with numpy.linalg.svd, as the simulator had it."""
+    if len(points_in_base) < 3:
+        return None
+    centre_base, centre_world = points_in_base.mean(0), points_in_world.mean(0)
+    u, singular, vt = np.linalg.svd((points_in_base - centre_base).T
+                                    @ (points_in_world - centre_world))
+    if singular[1] <= 1e-6 * max(singular[0], 1e-300):
+        return None
+    rotation = vt.T @ np.diag([1.0, 1.0, np.sign(np.linalg.det(vt.T @ u.T))]) @ u.T
+    return pin.SE3(rotation, centre_world - rotation @ centre_base)
+
+
+@st.composite
+def stance_point_sets(draw):
+    """(points in the base, in the world): 1 to 5 feet, noisy, coplanar, collinear, tiny."""
+    rng = np.random.default_rng(draw(st.integers(0, 2**31)))
+    count = draw(st.integers(1, 5))
+    shape = draw(st.sampled_from(['general', 'coplanar', 'collinear', 'nearly collinear']))
+    scale = draw(st.sampled_from([1e-3, 0.3, 1.0, 50.0]))
+    points = rng.uniform(-1.0, 1.0, (count, 3)) * scale
+    if shape == 'coplanar':  # feet on flat ground
+        points[:, 2] = -0.5 * scale
+    elif shape in ('collinear', 'nearly collinear'):
+        points = np.outer(rng.uniform(-1.0, 1.0, count), rng.normal(size=3)) * scale
+        if shape == 'nearly collinear':
+            points += rng.normal(0.0, 1e-5 * scale, points.shape)
+    truth = pin.SE3(pin.rpy.rpyToMatrix(*rng.uniform(-np.pi, np.pi, 3)),
+                    rng.uniform(-2.0, 2.0, 3))
+    noise = draw(st.sampled_from([0.0, 1e-9, 1e-4])) * scale
+    in_world = points @ truth.rotation.T + truth.translation + rng.normal(0.0, noise,
+                                                                             points.shape)
+    return points, in_world
+
+
+@settings(max_examples=300, deadline=None)
+@given(stance_point_sets())
+def test_kabsch_agrees_with_the_numpy_svd_reference(point_sets):
+    """The fit (LAPACK's SVD called directly) is numpy's Kabsch.
+
+    None on 1, 2 or collinear feet, else the same pose to 1e-12 relative (here bit for bit:
+    one LAPACK routine).
+    """
+    in_base, in_world = point_sets
+    fitted, reference = kabsch(in_base, in_world), numpy_kabsch(in_base, in_world)
+    assert (fitted is None) == (reference is None)
+    if fitted is None:
+        return
+    scale = 1.0 + np.abs(in_world).max()
+    np.testing.assert_allclose(fitted.rotation, reference.rotation, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(fitted.translation, reference.translation, rtol=0,
+                               atol=1e-12 * scale)
+    assert np.linalg.det(fitted.rotation) > 0.0
+
+
+@settings(max_examples=200, deadline=None)
+@given(seed=st.integers(0, 2**31), rank=st.integers(0, 3),
+       scale=st.sampled_from([1e-12, 1e-3, 1.0, 1e6]))
+def test_svd3_is_numpys_svd(seed, rank, scale):
+    rng = np.random.default_rng(seed)
+    matrix = (rng.normal(size=(3, rank)) @ rng.normal(size=(rank, 3))) * scale
+    u, singular, vt = svd3(matrix)
+    reference = np.linalg.svd(matrix)
+    np.testing.assert_allclose(singular, reference[1], rtol=0, atol=1e-12 * scale)
+    np.testing.assert_allclose((u * singular) @ vt, matrix, rtol=0, atol=1e-12 * scale)
+    np.testing.assert_allclose(u @ u.T, np.eye(3), atol=1e-12)
+    np.testing.assert_allclose(vt @ vt.T, np.eye(3), atol=1e-12)
 
 
 def test_two_point_feet_keep_the_free_rotation_of_the_previous_pose(robot, q_nominal):

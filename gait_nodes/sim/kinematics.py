@@ -29,6 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import pinocchio as pin
+from scipy.linalg import lapack
 
 from gait_nodes.errors import ParameterError
 from gait_nodes.robot.model import RobotModel
@@ -50,6 +51,8 @@ BASE_FIT_ITERATIONS = 10
 #: rotation about the line of the feet into every body translation (that line does not pass
 #: through the base origin), and a trot's base pitched 0.09 rad in 20 s.
 ORIENTATION_PRIOR_M = 1e-3
+#: LAPACK's SVD (divide and conquer), what numpy.linalg.svd runs.
+_DGESDD = lapack.dgesdd
 
 
 def _skew(vectors: np.ndarray) -> np.ndarray:
@@ -137,11 +140,19 @@ def kabsch(points_in_base: np.ndarray, points_in_world: np.ndarray) -> pin.SE3 |
     count = len(points_in_base)
     if count < 3:
         return None
-    centre_base = np.add.reduce(points_in_base, 0) / count
     centre_world = np.add.reduce(points_in_world, 0) / count
+    return _kabsch_centred(points_in_base, points_in_world - centre_world, centre_world)
+
+
+def _kabsch_centred(points_in_base: np.ndarray, centred_world: np.ndarray,
+                    centre_world: np.ndarray) -> pin.SE3 | None:
+    """:func:`kabsch` with the world side already centred.
+
+    The simulation keeps the centred world side per stance: the latched feet do not move.
+    """
+    centre_base = np.add.reduce(points_in_base, 0) / len(points_in_base)
     # ndarray.dot: the products of matmul (@) with less overhead per call on 3x3 matrices.
-    u, singular, vt = np.linalg.svd((points_in_base - centre_base).T.dot(
-        points_in_world - centre_world))
+    u, singular, vt = svd3((points_in_base - centre_base).T.dot(centred_world))
     largest, second, _ = singular.tolist()
     if second <= COLLINEAR_TOLERANCE * max(largest, 1e-300):
         return None
@@ -151,6 +162,21 @@ def kabsch(points_in_base: np.ndarray, points_in_world: np.ndarray) -> pin.SE3 |
     if _det3(rotation) < 0.0:
         rotation = v.dot((u * [1.0, 1.0, -1.0]).T)
     return pin.SE3(rotation, centre_world - rotation.dot(centre_base))
+
+
+def svd3(matrix: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``numpy.linalg.svd(matrix)`` of a small matrix by calling LAPACK's ``dgesdd`` directly.
+
+    numpy.linalg.svd runs the same LAPACK routine (``dgesdd``, full U and V^T) behind a
+    wrapper that costs twice the factorization of a 3x3 matrix; scipy's binding skips it.
+    Where numpy and scipy ship the same LAPACK the factors are equal to the bit (they are here:
+    test_kinematic_simulator checks them against numpy's to 1e-12 on random, rank-deficient and
+    scaled matrices). A failure to converge falls back to numpy (which raises LinAlgError).
+    """
+    u, singular, vt, info = _DGESDD(matrix)
+    if info != 0:
+        return np.linalg.svd(matrix)
+    return u, singular, vt
 
 
 def _det3(m: np.ndarray) -> float:
@@ -288,7 +314,9 @@ class KinematicSimulation:
         feet = self._feet_in_base(self.joints)
         self.latched: list[pin.SE3 | None] = [self.base * foot for foot in feet]
         self._heights: np.ndarray | None = None
-        self._points: np.ndarray | None = None  # contact_points() until a foot lands or lifts
+        # contact_points() and the stance's latched positions, until a foot lands or lifts.
+        self._points: np.ndarray | None = None
+        self._stance: tuple | None = None
 
     @property
     def contacts(self) -> np.ndarray:
@@ -319,15 +347,32 @@ class KinematicSimulation:
         return near & (self.contacts | settled)
 
     def contact_points(self) -> np.ndarray:
-        """(F, 3) contact points of the latched feet; NaN rows for feet in the air [m]."""
+        """(F, 3) contact points of the latched feet; NaN rows for feet in the air [m].
+
+        Read-only, and the same array until a foot lands or lifts: a caller may key what it
+        derives from the contacts on the array's identity.
+        """
         if self._points is None:
             points = np.full((len(self.latched), 3), np.nan)
             for k, foot in enumerate(self.latched):
                 if foot is not None:
                     points[k] = foot.translation
                     points[k, 2] -= self.robot.foot_frame_height_m
+            points.flags.writeable = False
             self._points = points
-        return self._points.copy()
+        return self._points
+
+    def _latched_stance(self, kept: tuple[int, ...]) -> tuple:
+        """``(kept, centred, centre, positions)`` of the latched feet ``kept`` in the world.
+
+        Their positions (F, 3) [m] centred on their ``centre`` (what :func:`kabsch` computes of
+        its world side) and as lists of floats: kept while the stance does not change.
+        """
+        if self._stance is None or self._stance[0] != kept:
+            in_world = np.array([self.latched[k].translation for k in kept])
+            centre = np.add.reduce(in_world, 0) / len(kept)
+            self._stance = (kept, in_world - centre, centre, in_world.tolist())
+        return self._stance
 
     def step(self, commanded_joints: np.ndarray, dt_s: float,
              contacts: np.ndarray | None = None) -> SimulationStep:
@@ -346,15 +391,22 @@ class KinematicSimulation:
         contacts = np.asarray(contacts, dtype=bool)
         down = contacts.tolist()
         latched = self.latched
-        kept = [k for k, d in enumerate(down) if d and latched[k] is not None]
+        kept = tuple(k for k, d in enumerate(down) if d and latched[k] is not None)
         base = self.base
         slip = 0.0
         if kept:
-            base = fit_base_pose(self.base, [feet[k] for k in kept], [latched[k] for k in kept],
-                                 self.settings.rotation_weight_m if self._flat_feet else 0.0)
+            _, centred_world, centre_world, in_world = self._latched_stance(kept)
+            in_base = [feet[k].translation for k in kept]
+            # fit_base_pose's closed form, with the world side of the stance kept.
+            fitted = (_kabsch_centred(np.array(in_base), centred_world, centre_world)
+                      if len(kept) >= 3 else None)
+            base = fitted if fitted is not None else fit_base_pose(
+                self.base, [feet[k] for k in kept], [latched[k] for k in kept],
+                self.settings.rotation_weight_m if self._flat_feet else 0.0)
             squared = []
-            for k in kept:
-                dx, dy, dz = (base.act(feet[k].translation) - latched[k].translation).tolist()
+            for point, (wx, wy, wz) in zip(in_base, in_world, strict=True):
+                x, y, z = base.act(point).tolist()
+                dx, dy, dz = x - wx, y - wy, z - wz
                 squared.append(dx * dx + dy * dy + dz * dz)
             slip = math.sqrt(max(squared))
         touched = []
@@ -362,10 +414,10 @@ class KinematicSimulation:
             if not d:
                 if latched[k] is not None:
                     latched[k] = None
-                    self._points = None
+                    self._points = self._stance = None
             elif latched[k] is None:
                 latched[k] = base * feet[k]
-                self._points = None
+                self._points = self._stance = None
                 touched.append(self.robot.foot_names[k])
         self.base = base
         self.joints = actuators.positions_rad
