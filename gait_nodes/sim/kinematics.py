@@ -309,6 +309,9 @@ class KinematicSimulation:
         self._data = robot.new_data()
         self._flat_feet = robot.foot_orientation == 'yaw'
         self.q = np.array(q_initial, dtype=float)
+        # The configuration of the forward kinematics in the base frame: base at the origin.
+        self._q_in_base = self.q.copy()
+        self._q_in_base[:7] = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0)
         self.joints = robot.joint_positions(self.q)
         self.base = pin.XYZQUATToSE3(self.q[:7])
         feet = self._feet_in_base(self.joints)
@@ -324,13 +327,12 @@ class KinematicSimulation:
         return np.array([foot is not None for foot in self.latched])
 
     def _feet_in_base(self, joints: np.ndarray) -> list[pin.SE3]:
-        q = self.q.copy()
-        q[:7] = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0)
+        """Foot frames in the base frame at ``joints`` (updateFramePlacement returns copies)."""
+        q = self._q_in_base
         self.robot.set_joint_positions(q, joints)
         model, data = self.robot.model, self._data
         pin.forwardKinematics(model, data, q)
-        return [pin.updateFramePlacement(model, data, f).copy()
-                for f in self.robot.foot_frame_ids]
+        return [pin.updateFramePlacement(model, data, f) for f in self.robot.foot_frame_ids]
 
     def _contacts_by_height(self, feet: list[pin.SE3]) -> np.ndarray:
         """Contacts without a schedule, from the foot heights.
