@@ -266,7 +266,8 @@ class KinematicSimulator(Node):
         # have changed since it was last asked (see _check_inputs).
         self._inputs_quiet_ns = (0, 0)
         self._stability_level: int | None = None
-        # (stamp [ns], q, contact points) of the last three ticks, oldest first.
+        # (stamp [ns], q, contact points, odom header or None) of the last three ticks, oldest
+        # first.
         self._history: deque = deque(maxlen=3)
         self._window = _Window()
         self._last_summary_ns: int | None = None
@@ -404,7 +405,8 @@ class KinematicSimulator(Node):
         self._last_command_ns = self._now_ns()
         if self.inputs is not None:
             self.inputs.heard('/joint_commands', self._last_command_ns)
-            self._inputs_quiet_ns = (0, 0)
+            if self.inputs.stale:
+                self._inputs_quiet_ns = (0, 0)  # fresh again: the verdict changes
 
     def _command_at(self, now_ns: int) -> np.ndarray:
         """The command stream at ``now_ns - command_delay_s``, by its stamps.
@@ -471,8 +473,8 @@ class KinematicSimulator(Node):
                 self.inputs.heard('/joint_commands', self._last_command_ns)
             q0 = self.simulation.q.copy()
             points = self.simulation.contact_points()
-            self._history.extend([(now_ns - 2 * period_ns, q0, points),
-                                  (now_ns - period_ns, q0, points)])
+            self._history.extend([(now_ns - 2 * period_ns, q0, points, None),
+                                  (now_ns - period_ns, q0, points, None)])
         previous_ns = self._history[-1][0]
         dt_s = (now_ns - previous_ns) * 1e-9 if now_ns > previous_ns else period_ns * 1e-9
 
@@ -480,17 +482,17 @@ class KinematicSimulator(Node):
         if self._plan is not None:
             contacts = self._plan_contacts.at((now_ns - self._plan.start_ns) * 1e-9)
         step = self.simulation.step(self._command_at(now_ns), dt_s, contacts)
-        self._history.append((now_ns, step.q, step.contact_points_in_world))
-        self._publish_state(now_ns, step.q, step.actuators)
+        header = self._publish_state(now_ns, step.q, step.actuators)
+        self._history.append((now_ns, step.q, step.contact_points_in_world, header))
         self._account(step)
 
-        (t0, q0, _), (t1, q1, points1), (t2, q2, _) = self._history
+        (t0, q0, _, _), (t1, q1, points1, header1), (t2, q2, _, _) = self._history
         if t0 < t1 < t2:
             v, a = central_differences(self.robot.model, q0, q1, q2, (t1 - t0) * 1e-9,
                                        (t2 - t1) * 1e-9)
             support = self._support_of(points1)
             state = self.monitor.evaluate(q1, v, a, support)
-            self._publish_monitor(t1, state, support)
+            self._publish_monitor(t1, header1, state, support)
             self._check_stability(t1, state)
         self._check_inputs(now_ns)
         if self._last_summary_ns is None:
@@ -526,19 +528,16 @@ class KinematicSimulator(Node):
         window = self._window
         window.ticks += 1
         actuators = step.actuators
-        # np.count_nonzero rather than ndarray.any: a third of the cost, every tick.
-        saturated = actuators.saturated
-        if np.count_nonzero(saturated):
+        if actuators.any_saturated:
             window.saturated_ticks += 1
             ratios = actuators.demanded_over_limit
             window.max_ratio = max(window.max_ratio, float(ratios.max()))
-            for k in np.flatnonzero(saturated):
+            for k in np.flatnonzero(actuators.saturated):
                 name = self.robot.joint_names[k]
                 window.saturated_joints[name] = max(window.saturated_joints.get(name, 0.0),
                                                     float(ratios[k]))
-        clamped = actuators.clamped_to_limits
-        if np.count_nonzero(clamped):
-            for k in np.flatnonzero(clamped):
+        if actuators.any_clamped:
+            for k in np.flatnonzero(actuators.clamped_to_limits):
                 window.clamped_joints.add(self.robot.joint_names[k])
         if step.slip_m > window.max_slip_m:
             window.max_slip_m = step.slip_m
@@ -552,7 +551,8 @@ class KinematicSimulator(Node):
     # polygon vertices and the markers' unchanging parts are shared between messages rather than
     # copied.
 
-    def _publish_state(self, now_ns: int, q: np.ndarray, actuators: ActuatorStep) -> None:
+    def _publish_state(self, now_ns: int, q: np.ndarray, actuators: ActuatorStep):
+        """Publish /joint_states and /tf; return the odom-frame header of ``now_ns``."""
         new = self._new
         stamp = self._stamp(now_ns)
         # Without continuous joints (cos, sin in q) the joint positions are q's as they were
@@ -563,14 +563,19 @@ class KinematicSimulator(Node):
             new['Header'](stamp, ''), self._joint_names,
             positions.tolist(), actuators.velocities_rad_s.tolist(), []))
         x, y, z, qx, qy, qz, qw = q[:7].tolist()
+        header = new['Header'](stamp, WORLD_FRAME)
         transform = new['TransformStamped'](
-            new['Header'](stamp, WORLD_FRAME), BASE_FRAME,
+            header, BASE_FRAME,
             new['Transform'](new['Vector3'](x, y, z), new['Quaternion'](qx, qy, qz, qw)))
         self._tf.publish(new['TFMessage']([transform]))
+        return header
 
-    def _publish_monitor(self, stamp_ns: int, state: ZmpState, support: Support) -> None:
+    def _publish_monitor(self, stamp_ns: int, header, state: ZmpState,
+                         support: Support) -> None:
+        """Publish the monitor's view of ``stamp_ns`` (``header``: its odom header, or None)."""
         new = self._new
-        header = new['Header'](self._stamp(stamp_ns), WORLD_FRAME)
+        if header is None:
+            header = new['Header'](self._stamp(stamp_ns), WORLD_FRAME)
         zmp = state.zmp_in_world.tolist()
         zmp_finite = all(map(math.isfinite, zmp))
         com = state.com_in_world.tolist()
@@ -685,9 +690,10 @@ class KinematicSimulator(Node):
         return f'ZMP {margin:.4f} m inside the support polygon'
 
     def _check_inputs(self, now_ns: int) -> None:
-        # The watchdog's verdict changes only when a command arrives (which resets the quiet
-        # interval), time goes back, or the last command ages past stale_after_s: until a
-        # microsecond before that, update() would answer "unchanged" and is not asked.
+        # The watchdog's verdict changes only when a command arrives while it is stale (which
+        # ends the quiet interval), time goes back, or the last command ages past
+        # stale_after_s: until a microsecond before that, update() would answer "unchanged"
+        # and is not asked.
         checked_ns, quiet_until_ns = self._inputs_quiet_ns
         if checked_ns <= now_ns < quiet_until_ns:
             return

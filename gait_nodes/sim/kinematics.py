@@ -67,23 +67,58 @@ def _skew(vectors: np.ndarray) -> np.ndarray:
 class ActuatorStep:
     """One step of the position-controlled joints.
 
+    The step keeps its inputs; the diagnostics (:attr:`demanded_over_limit`, :attr:`saturated`,
+    :attr:`clamped_to_limits`) are computed from them when asked, and :attr:`any_saturated`,
+    :attr:`any_clamped` answer the usual "none" with one comparison each.
+
     Attributes:
         positions_rad: (J,) joint positions after the step [rad or m].
         velocities_rad_s: (J,) mean joint velocities over the step [rad/s or m/s].
-        demanded_over_limit: (J,) commanded displacement over the displacement the velocity
-            limit allows in the step; above 1 the joint saturated.
-        clamped_to_limits: (J,) booleans: the command was beyond the joint's position limits.
+        commanded_rad: (J,) the command [rad or m].
+        target_rad: (J,) the command clamped to the position limits [rad or m].
+        demanded_rad: (J,) displacement toward the target (the short way round for continuous
+            joints) [rad or m].
+        moved_rad: (J,) the demanded displacement clipped to the velocity limits [rad or m].
+        allowed_rad: (J,) displacement the velocity limits allow in the step [rad or m].
     """
 
     positions_rad: np.ndarray
     velocities_rad_s: np.ndarray
-    demanded_over_limit: np.ndarray
-    clamped_to_limits: np.ndarray
+    commanded_rad: np.ndarray
+    target_rad: np.ndarray
+    demanded_rad: np.ndarray
+    moved_rad: np.ndarray
+    allowed_rad: np.ndarray
+
+    @property
+    def demanded_over_limit(self) -> np.ndarray:
+        """(J,) demanded displacement over the allowed one; above 1 the joint saturated."""
+        return np.abs(self.demanded_rad) / self.allowed_rad
 
     @property
     def saturated(self) -> np.ndarray:
         """(J,) booleans: the joint moved at its velocity limit and still lags its command."""
         return self.demanded_over_limit > 1.0 + 1e-9
+
+    @property
+    def clamped_to_limits(self) -> np.ndarray:
+        """(J,) booleans: the command was beyond the joint's position limits."""
+        return np.abs(self.target_rad - self.commanded_rad) > 1e-12
+
+    @property
+    def any_saturated(self) -> bool:
+        """Whether any joint saturated (``saturated.any()``)."""
+        # A ratio above 1 + 1e-9 means |demanded| > allowed, which the clipping changed: where
+        # every joint moved as demanded, none saturated.
+        return bool(np.count_nonzero(self.moved_rad != self.demanded_rad)
+                    and np.count_nonzero(self.saturated))
+
+    @property
+    def any_clamped(self) -> bool:
+        """Whether any command was beyond its joint's limits (``clamped_to_limits.any()``)."""
+        # A command the limits did not change is not clamped.
+        return bool(np.count_nonzero(self.target_rad != self.commanded_rad)
+                    and np.count_nonzero(self.clamped_to_limits))
 
 
 class PositionActuators:
@@ -115,7 +150,6 @@ class PositionActuators:
         if not dt_s > 0.0:
             raise ParameterError(f'dt_s must be > 0 s, got {dt_s!r}')
         target = np.minimum(np.maximum(commanded_rad, self.lower), self.upper)
-        clamped = np.abs(target - commanded_rad) > 1e-12
         delta = target - positions_rad
         if self._any_continuous:
             wrapped = (delta + math.pi) % (2.0 * math.pi) - math.pi
@@ -125,11 +159,10 @@ class PositionActuators:
             allowed = self.velocity_limits_rad_s * dt_s
             minus_allowed = -allowed
             self._allowed = (dt_s, allowed, minus_allowed)
-        ratio = np.abs(delta) / allowed
         moved = np.minimum(np.maximum(delta, minus_allowed), allowed)
         positions = np.minimum(np.maximum(positions_rad + moved, self.lower), self.upper)
         velocities = (positions - positions_rad) / dt_s
-        return ActuatorStep(positions, velocities, ratio, clamped)
+        return ActuatorStep(positions, velocities, commanded_rad, target, delta, moved, allowed)
 
 
 def kabsch(points_in_base: np.ndarray, points_in_world: np.ndarray) -> pin.SE3 | None:
@@ -160,8 +193,13 @@ def _kabsch_centred(points_in_base: np.ndarray, centred_world: np.ndarray,
     v = vt.T
     rotation = v.dot(u.T)
     if _det3(rotation) < 0.0:
-        rotation = v.dot((u * [1.0, 1.0, -1.0]).T)
-    return pin.SE3(rotation, centre_world - rotation.dot(centre_base))
+        u[:, 2] *= -1.0  # u diag(1, 1, -1)
+        rotation = v.dot(u.T)
+    # Identity and assignments: cheaper than SE3(R, t)'s overload resolution, the same pose.
+    pose = pin.SE3.Identity()
+    pose.rotation = rotation
+    pose.translation = centre_world - rotation.dot(centre_base)
+    return pose
 
 
 def svd3(matrix: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -275,7 +313,7 @@ class SimulationStep:
     """What one step of :class:`KinematicSimulation` produced.
 
     Attributes:
-        q: Pinocchio configuration after the step (base pose and joints).
+        q: Pinocchio configuration after the step (base pose and joints), read-only.
         actuators: The joint step (velocities, saturation, clamping).
         contacts: (F,) booleans: feet in contact after the step.
         contact_points_in_world: (F, 3) contact points; NaN for feet in the air [m].
@@ -426,6 +464,7 @@ class KinematicSimulation:
         q = self.q.copy()
         q[:7] = pin.SE3ToXYZQUAT(base)
         self.robot.set_joint_positions(q, self.joints)
+        q.flags.writeable = False
         self.q = q
-        return SimulationStep(q.copy(), actuators, contacts.copy(), self.contact_points(), slip,
+        return SimulationStep(q, actuators, contacts.copy(), self.contact_points(), slip,
                               tuple(touched))

@@ -169,11 +169,11 @@ class ZmpMonitor:
         """
         plane = self.ground_height_m if plane_height_m is None else float(plane_height_m)
         data = self.data
-        pin.computeCentroidalMomentumTimeVariation(self.model, data, q, v, a)
+        dhg = pin.computeCentroidalMomentumTimeVariation(self.model, data, q, v, a)
         com = data.com[0].copy()
         # Scalars: numpy's per-call cost exceeds the arithmetic of three components.
         weight_x, weight_y, weight_z = self._weight
-        linear_x, linear_y, linear_z, lx, ly, _ = data.dhg.vector.tolist()
+        linear_x, linear_y, linear_z, lx, ly, _ = dhg.vector.tolist()
         fx, fy, fz = linear_x - weight_x, linear_y - weight_y, linear_z - weight_z
         cx, cy, cz = com.tolist()
         cz -= plane
