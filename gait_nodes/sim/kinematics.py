@@ -69,7 +69,8 @@ class ActuatorStep:
 
     The step keeps its inputs; the diagnostics (:attr:`demanded_over_limit`, :attr:`saturated`,
     :attr:`clamped_to_limits`) are computed from them when asked, and :attr:`any_saturated`,
-    :attr:`any_clamped` answer the usual "none" with one comparison each.
+    :attr:`any_clamped` answer the usual "none" with one comparison of bytes each (np.minimum
+    and np.maximum return an input unchanged, bit for bit, where they do not clip it).
 
     Attributes:
         positions_rad: (J,) joint positions after the step [rad or m].
@@ -110,15 +111,15 @@ class ActuatorStep:
         """Whether any joint saturated (``saturated.any()``)."""
         # A ratio above 1 + 1e-9 means |demanded| > allowed, which the clipping changed: where
         # every joint moved as demanded, none saturated.
-        return bool(np.count_nonzero(self.moved_rad != self.demanded_rad)
-                    and np.count_nonzero(self.saturated))
+        return (self.moved_rad.tobytes() != self.demanded_rad.tobytes()
+                and bool(np.count_nonzero(self.saturated)))
 
     @property
     def any_clamped(self) -> bool:
         """Whether any command was beyond its joint's limits (``clamped_to_limits.any()``)."""
         # A command the limits did not change is not clamped.
-        return bool(np.count_nonzero(self.target_rad != self.commanded_rad)
-                    and np.count_nonzero(self.clamped_to_limits))
+        return (self.target_rad.tobytes() != self.commanded_rad.tobytes()
+                and bool(np.count_nonzero(self.clamped_to_limits)))
 
 
 class PositionActuators:
@@ -149,6 +150,7 @@ class PositionActuators:
         """
         if not dt_s > 0.0:
             raise ParameterError(f'dt_s must be > 0 s, got {dt_s!r}')
+        commanded_rad = np.asarray(commanded_rad, dtype=float)
         target = np.minimum(np.maximum(commanded_rad, self.lower), self.upper)
         delta = target - positions_rad
         if self._any_continuous:
