@@ -11,7 +11,9 @@ publishes /joint_states (positions, velocities) and /tf (odom -> base_link).
 The ZMP monitor (:mod:`gait_nodes.sim.zmp_monitor`) evaluates the full multi-body model one tick
 behind, by central differences of the integrated configurations: the /gait/zmp, /gait/com,
 /gait/support_polygon and /gait/markers messages are stamped at the instant they describe (the
-previous tick). /diagnostics: a stability report at once whenever the level changes (OK, WARN
+previous tick). /gait/markers (ZMP and COM spheres, support polygon outline, for RViz or
+Foxglove) comes at a display's rate, ``markers_rate_hz``: the first sample of each of its
+periods. /diagnostics: a stability report at once whenever the level changes (OK, WARN
 below ``warn_margin_m``, ERROR with the ZMP outside the support polygon) and a stale-input report
 when /joint_commands stop for ``stale_after_s``; every ``diagnostics_period_s`` a summary
 (stability margin, joint velocity saturation, foot slip, inputs). Joint commands with unknown
