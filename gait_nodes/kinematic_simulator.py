@@ -11,7 +11,9 @@ publishes /joint_states (positions, velocities) and /tf (odom -> base_link).
 The ZMP monitor (:mod:`gait_nodes.sim.zmp_monitor`) evaluates the full multi-body model one tick
 behind, by central differences of the integrated configurations: the /gait/zmp, /gait/com,
 /gait/support_polygon and /gait/markers messages are stamped at the instant they describe (the
-previous tick). /diagnostics: a stability report at once whenever the level changes (OK, WARN
+previous tick). /gait/markers (ZMP and COM spheres, support polygon outline, for RViz or
+Foxglove) comes at a display's rate, ``markers_rate_hz``: the first sample of each of its
+periods. /diagnostics: a stability report at once whenever the level changes (OK, WARN
 below ``warn_margin_m``, ERROR with the ZMP outside the support polygon) and a stale-input report
 when /joint_commands stop for ``stale_after_s``; every ``diagnostics_period_s`` a summary
 (stability margin, joint velocity saturation, foot slip, inputs). Joint commands with unknown
@@ -29,6 +31,7 @@ finite differences see the motion and not the scheduler's jitter; if the timer f
 
 from __future__ import annotations
 
+import bisect
 import math
 import sys
 from collections import deque
@@ -60,8 +63,8 @@ from gait_nodes.runtime import (
     SetParametersResult,
 )
 from gait_nodes.settings import checked_number as _number
-from gait_nodes.sim.kinematics import KinematicSimulation, SimulationSettings
-from gait_nodes.sim.zmp_monitor import ZmpMonitor, ZmpState, central_differences
+from gait_nodes.sim.kinematics import ActuatorStep, KinematicSimulation, SimulationSettings
+from gait_nodes.sim.zmp_monitor import Support, ZmpMonitor, ZmpState, central_differences
 from gait_nodes.watchdog import InputWatchdog
 
 NODE_NAME = 'kinematic_simulator'
@@ -100,6 +103,7 @@ class KinematicSimulatorParams:
     contact_height_tolerance_m: float
     ground_height_m: float
     publish_markers: bool
+    markers_rate_hz: float
 
     @classmethod
     def from_values(cls, values: dict) -> KinematicSimulatorParams:
@@ -119,6 +123,7 @@ class KinematicSimulatorParams:
             contact_height_tolerance_m=_number(values, 'contact_height_tolerance_m', 0.0, 0.5),
             ground_height_m=_number(values, 'ground_height_m', -10.0, 10.0),
             publish_markers=_flag(values, 'publish_markers'),
+            markers_rate_hz=_number(values, 'markers_rate_hz', 0.0, 2000.0, low_open=True),
         )
 
     def simulation_settings(self) -> SimulationSettings:
@@ -152,7 +157,9 @@ def joint_command_from_msg(msg, robot: RobotModel, previous: np.ndarray,
         positions = np.array(msg.position, dtype=float)
         velocity = (np.array(msg.velocity, dtype=float) if len(msg.velocity)
                     else np.zeros(len(positions)))
-        if not (np.isfinite(positions).all() and np.isfinite(velocity).all()):
+        # On the message's numbers: cheaper than numpy's isfinite and its reduction.
+        if not (all(map(math.isfinite, msg.position))
+                and all(map(math.isfinite, msg.velocity))):
             raise ContractError('a joint command holds a NaN or infinite value')
         return positions, velocity
     if len(set(names)) != len(names):
@@ -173,6 +180,42 @@ def joint_command_from_msg(msg, robot: RobotModel, previous: np.ndarray,
     command[indices] = positions
     velocity[indices] = np.array(msg.velocity, dtype=float) if len(msg.velocity) else 0.0
     return command, velocity
+
+
+class PlanContacts:
+    """Which feet a footstep plan has on the ground, in the robot's foot order.
+
+    :meth:`FootstepPlan.contacts_at` walks every swing of the plan; its answer only changes
+    at a lift-off or a touch-down, so between two consecutive contact changes it is looked up
+    once and kept (at a change itself it is asked each time). Equal to
+    ``plan.contacts_at(t_s)[order]`` at every instant.
+
+    Args:
+        plan: The footstep plan.
+        order: (F,) index in ``plan.foot_names`` of each of the robot's feet.
+    """
+
+    def __init__(self, plan: FootstepPlan, order: np.ndarray):
+        self.plan = plan
+        self.order = order
+        self.changes_s = sorted({t for swing in plan.swings()
+                                 for t in (swing.lift_off_s, swing.touch_down_s)})
+        self._between: dict[int, np.ndarray] = {}
+
+    def at(self, t_s: float) -> np.ndarray:
+        """(F,) booleans, read-only: the feet on the ground at ``t_s`` [s] from the start."""
+        k = bisect.bisect_left(self.changes_s, t_s)
+        if k < len(self.changes_s) and self.changes_s[k] == t_s:
+            return self._lookup(t_s)
+        contacts = self._between.get(k)
+        if contacts is None:
+            contacts = self._between[k] = self._lookup(t_s)
+        return contacts
+
+    def _lookup(self, t_s: float) -> np.ndarray:
+        contacts = self.plan.contacts_at(t_s)[self.order]
+        contacts.flags.writeable = False
+        return contacts
 
 
 class _Window:
@@ -214,18 +257,30 @@ class KinematicSimulator(Node):
         #: (stamp [ns], joint vector) of the latest setpoints, oldest first.
         self._setpoints: deque = deque(maxlen=SETPOINT_BUFFER)
         self._plan: FootstepPlan | None = None
-        self._plan_order: np.ndarray | None = None
+        self._plan_contacts: PlanContacts | None = None
         self._last_command_ns: int | None = None
         self._started_ns: int | None = None
         self.inputs: InputWatchdog | None = None  # from the first tick, when time starts
+        # [checked, quiet until) [ns]: the instants at which the watchdog's verdict cannot
+        # have changed since it was last asked (see _check_inputs).
+        self._inputs_quiet_ns = (0, 0)
         self._stability_level: int | None = None
-        # (stamp [ns], q, contact points) of the last three ticks, oldest first.
+        # (stamp [ns], q, contact points, odom header or None) of the last three ticks, oldest
+        # first.
         self._history: deque = deque(maxlen=3)
         self._window = _Window()
         self._last_summary_ns: int | None = None
         self._sim_ns = 0
-        self._polygon_key = None
+        # The monitor's Support of the simulation's contact points (the same array until a
+        # foot lands or lifts), and the polygon's message parts of that support.
+        self._support_source: np.ndarray | None = None
+        self._support: Support | None = None
+        self._polygon_support: Support | None = None
         self._polygon_cache: tuple[list, list] = ([], [])
+        #: Index of the last /gait/markers period that got its message.
+        self._markers_slot: int | None = None
+        self._period_ns = int(round(1e9 / self.params.rate_hz))
+        self._markers_period_ns = int(round(1e9 / self.params.markers_rate_hz))
         # Under inproc the executor owns time; elsewhere publish_clock makes the simulator the
         # source of time (even with use_sim_time, which would make it wait for itself).
         self._owns_time = self.params.publish_clock and self.context.runtime != 'inproc'
@@ -253,6 +308,7 @@ class KinematicSimulator(Node):
             'sensor_msgs/msg/CompressedImage', 'visualization_msgs/msg/MeshFile',
             'builtin_interfaces/msg/Time')}
         self._joint_names = list(self.robot.joint_names)
+        self._continuous_joints = bool(self.simulation.actuators.continuous.any())
         self._marker_parts_cache = self._marker_parts()
         joint_state = self._msg['JointState']
         point = self._msg['PointStamped']
@@ -322,6 +378,12 @@ class KinematicSimulator(Node):
             self.timer = self._make_timer(params.rate_hz)
         self.simulation.settings = settings
         self.monitor.ground_height_m = params.ground_height_m
+        self._period_ns = int(round(1e9 / params.rate_hz))
+        self._markers_period_ns = int(round(1e9 / params.markers_rate_hz))
+        self._support_source = None  # the support's plane height may follow the ground
+        if self.inputs is not None:
+            self.inputs.timeout_s = params.stale_after_s
+            self._inputs_quiet_ns = (0, 0)
         self.params = params
         return SetParametersResult(successful=True)
 
@@ -346,6 +408,8 @@ class KinematicSimulator(Node):
         self._last_command_ns = self._now_ns()
         if self.inputs is not None:
             self.inputs.heard('/joint_commands', self._last_command_ns)
+            if self.inputs.stale:
+                self._inputs_quiet_ns = (0, 0)  # fresh again: the verdict changes
 
     def _command_at(self, now_ns: int) -> np.ndarray:
         """The command stream at ``now_ns - command_delay_s``, by its stamps.
@@ -383,13 +447,14 @@ class KinematicSimulator(Node):
             self.diagnostics.drop('/gait/footsteps', str(exc))
             return
         self._plan = plan
-        self._plan_order = np.array([plan.foot_names.index(n) for n in self.robot.foot_names])
+        self._plan_contacts = PlanContacts(
+            plan, np.array([plan.foot_names.index(n) for n in self.robot.foot_names]))
 
     # -- tick ----------------------------------------------------------------------------------
 
     def tick(self) -> None:
         """Integrate one step, publish the state and the monitor's view of the previous tick."""
-        period_ns = int(round(1e9 / self.params.rate_hz))
+        period_ns = self._period_ns
         if self._owns_time:
             self._sim_ns += period_ns
             self._step(self._sim_ns, period_ns)
@@ -411,32 +476,40 @@ class KinematicSimulator(Node):
                 self.inputs.heard('/joint_commands', self._last_command_ns)
             q0 = self.simulation.q.copy()
             points = self.simulation.contact_points()
-            self._history.extend([(now_ns - 2 * period_ns, q0, points),
-                                  (now_ns - period_ns, q0, points)])
+            self._history.extend([(now_ns - 2 * period_ns, q0, points, None),
+                                  (now_ns - period_ns, q0, points, None)])
         previous_ns = self._history[-1][0]
         dt_s = (now_ns - previous_ns) * 1e-9 if now_ns > previous_ns else period_ns * 1e-9
 
         contacts = None
         if self._plan is not None:
-            t_plan = (now_ns - self._plan.start_ns) * 1e-9
-            contacts = self._plan.contacts_at(t_plan)[self._plan_order]
+            contacts = self._plan_contacts.at((now_ns - self._plan.start_ns) * 1e-9)
         step = self.simulation.step(self._command_at(now_ns), dt_s, contacts)
-        self._history.append((now_ns, step.q, step.contact_points_in_world))
-        self._publish_state(now_ns, step.q, step.actuators.velocities_rad_s)
+        header = self._publish_state(now_ns, step.q, step.actuators)
+        self._history.append((now_ns, step.q, step.contact_points_in_world, header))
         self._account(step)
 
-        (t0, q0, _), (t1, q1, points1), (t2, q2, _) = self._history
+        (t0, q0, _, _), (t1, q1, points1, header1), (t2, q2, _, _) = self._history
         if t0 < t1 < t2:
             v, a = central_differences(self.robot.model, q0, q1, q2, (t1 - t0) * 1e-9,
                                        (t2 - t1) * 1e-9)
-            state = self.monitor.evaluate(q1, v, a, points1[np.isfinite(points1[:, 0])])
-            self._publish_monitor(t1, state)
+            support = self._support_of(points1)
+            state = self.monitor.evaluate(q1, v, a, support)
+            self._publish_monitor(t1, header1, state, support)
             self._check_stability(t1, state)
         self._check_inputs(now_ns)
         if self._last_summary_ns is None:
             self._last_summary_ns = now_ns
         elif (now_ns - self._last_summary_ns) * 1e-9 >= self.params.diagnostics_period_s - 1e-9:
             self._publish_summary(now_ns)
+
+    def _support_of(self, contact_points: np.ndarray) -> Support:
+        """The monitor's :class:`Support` of the simulation's (F, 3) contact points."""
+        if contact_points is not self._support_source:
+            self._support = self.monitor.support(
+                contact_points[np.isfinite(contact_points[:, 0])])
+            self._support_source = contact_points
+        return self._support
 
     def _grid_times_ns(self, period_ns: int) -> list[int]:
         """The grid instants this tick steps through: the next one, and any the timer missed.
@@ -457,20 +530,20 @@ class KinematicSimulator(Node):
     def _account(self, step) -> None:
         window = self._window
         window.ticks += 1
-        saturated = step.actuators.saturated
-        if saturated.any():
+        actuators = step.actuators
+        if actuators.any_saturated:
             window.saturated_ticks += 1
-            ratios = step.actuators.demanded_over_limit
+            ratios = actuators.demanded_over_limit
             window.max_ratio = max(window.max_ratio, float(ratios.max()))
-            for k in np.flatnonzero(saturated):
+            for k in np.flatnonzero(actuators.saturated):
                 name = self.robot.joint_names[k]
                 window.saturated_joints[name] = max(window.saturated_joints.get(name, 0.0),
                                                     float(ratios[k]))
-        clamped = step.actuators.clamped_to_limits
-        if clamped.any():
-            for k in np.flatnonzero(clamped):
+        if actuators.any_clamped:
+            for k in np.flatnonzero(actuators.clamped_to_limits):
                 window.clamped_joints.add(self.robot.joint_names[k])
-        window.max_slip_m = max(window.max_slip_m, step.slip_m)
+        if step.slip_m > window.max_slip_m:
+            window.max_slip_m = step.slip_m
         window.touch_downs += len(step.touched_down)
 
     # -- outputs -------------------------------------------------------------------------------
@@ -481,45 +554,61 @@ class KinematicSimulator(Node):
     # polygon vertices and the markers' unchanging parts are shared between messages rather than
     # copied.
 
-    def _publish_state(self, now_ns: int, q: np.ndarray, velocities: np.ndarray) -> None:
+    def _publish_state(self, now_ns: int, q: np.ndarray, actuators: ActuatorStep):
+        """Publish /joint_states and /tf; return the odom-frame header of ``now_ns``."""
         new = self._new
         stamp = self._stamp(now_ns)
+        # Without continuous joints (cos, sin in q) the joint positions are q's as they were
+        # integrated.
+        positions = self.robot.joint_positions(q) if self._continuous_joints \
+            else actuators.positions_rad
         self._joint_states.publish(new['JointState'](
             new['Header'](stamp, ''), self._joint_names,
-            self.robot.joint_positions(q).tolist(), velocities.tolist(), []))
+            positions.tolist(), actuators.velocities_rad_s.tolist(), []))
         x, y, z, qx, qy, qz, qw = q[:7].tolist()
+        header = new['Header'](stamp, WORLD_FRAME)
         transform = new['TransformStamped'](
-            new['Header'](stamp, WORLD_FRAME), BASE_FRAME,
+            header, BASE_FRAME,
             new['Transform'](new['Vector3'](x, y, z), new['Quaternion'](qx, qy, qz, qw)))
         self._tf.publish(new['TFMessage']([transform]))
+        return header
 
-    def _publish_monitor(self, stamp_ns: int, state: ZmpState) -> None:
+    def _publish_monitor(self, stamp_ns: int, header, state: ZmpState,
+                         support: Support) -> None:
+        """Publish the monitor's view of ``stamp_ns`` (``header``: its odom header, or None)."""
         new = self._new
-        header = new['Header'](self._stamp(stamp_ns), WORLD_FRAME)
+        if header is None:
+            header = new['Header'](self._stamp(stamp_ns), WORLD_FRAME)
         zmp = state.zmp_in_world.tolist()
         zmp_finite = all(map(math.isfinite, zmp))
         com = state.com_in_world.tolist()
         if zmp_finite:
             self._zmp.publish(new['PointStamped'](header, new['Point'](*zmp)))
         self._com.publish(new['PointStamped'](header, new['Point'](*com)))
-        polygon = self.monitor.support_polygon(state.contact_points_in_world)
-        vertices, outline = self._polygon_points(
-            polygon, self.monitor.plane_height_m(state.contact_points_in_world))
+        vertices, outline = self._polygon_points(support)
         self._polygon.publish(new['PolygonStamped'](header, new['Polygon'](vertices)))
         if self.params.publish_markers:
-            self._markers.publish(self._marker_array(
-                header, zmp if zmp_finite else None,
-                com if all(map(math.isfinite, com)) else None, outline))
+            # A visualization topic at a display's rate (markers_rate_hz), not the monitor's:
+            # the samples whose stamps open a new markers period.
+            slot = stamp_ns // self._markers_period_ns
+            if slot != self._markers_slot:
+                self._markers_slot = slot
+                self._markers.publish(self._marker_array(
+                    header, zmp if zmp_finite else None,
+                    com if all(map(math.isfinite, com)) else None, outline))
 
-    def _polygon_points(self, polygon: np.ndarray, z: float) -> tuple[list, list]:
-        """Point32 vertices and closed marker outline at ``z`` [m], rebuilt when they change."""
-        key = (polygon.tobytes(), z)
-        if key != self._polygon_key:
+    def _polygon_points(self, support: Support) -> tuple[list, list]:
+        """Point32 vertices and closed marker outline of the support polygon, once per support.
+
+        At the height of the ZMP's plane [m].
+        """
+        if support is not self._polygon_support:
             point32, point = self._msg['Point32'], self._msg['Point']
-            vertices = [point32(x=float(x), y=float(y), z=z) for x, y in polygon]
-            outline = [point(x=float(x), y=float(y), z=z) for x, y in polygon]
+            z = support.plane_height_m
+            vertices = [point32(x=x, y=y, z=z) for x, y in support.polygon.tolist()]
+            outline = [point(x=x, y=y, z=z) for x, y in support.polygon.tolist()]
             self._polygon_cache = (vertices, outline + outline[:1])
-            self._polygon_key = key
+            self._polygon_support = support
         return self._polygon_cache
 
     def _marker_parts(self) -> dict:
@@ -604,9 +693,22 @@ class KinematicSimulator(Node):
         return f'ZMP {margin:.4f} m inside the support polygon'
 
     def _check_inputs(self, now_ns: int) -> None:
-        self.inputs.timeout_s = self.params.stale_after_s
+        # The watchdog's verdict changes only when a command arrives while it is stale (which
+        # ends the quiet interval), time goes back, or the last command ages past
+        # stale_after_s: until a microsecond before that, update() would answer "unchanged"
+        # and is not asked.
+        checked_ns, quiet_until_ns = self._inputs_quiet_ns
+        if checked_ns <= now_ns < quiet_until_ns:
+            return
         if self.inputs.update(now_ns):
             self.diagnostics.publish([self._input_status(now_ns)])
+        if self.inputs.stale:
+            self._inputs_quiet_ns = (now_ns, math.inf)
+        else:
+            last_ns = self._last_command_ns if self._last_command_ns is not None \
+                else self._started_ns
+            self._inputs_quiet_ns = (
+                now_ns, last_ns + int(self.params.stale_after_s * 1e9) - 1_000)
 
     def _input_status(self, now_ns: int):
         aspect, level, message, values = self.inputs.status(now_ns)

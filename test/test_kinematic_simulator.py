@@ -32,8 +32,9 @@ from gait_nodes.sim.kinematics import (
     PositionActuators,
     fit_base_pose,
     kabsch,
+    svd3,
 )
-from gait_nodes.sim.zmp_monitor import POLYGON_SEGMENTS_PER_FOOT
+from gait_nodes.sim.zmp_monitor import POLYGON_SEGMENTS_PER_FOOT, central_differences
 
 NS = 1_000_000_000
 #: How far the drawn polygon's edges lie outside the foot circles, per metre of radius.
@@ -78,6 +79,8 @@ def test_actuators_respect_velocity_and_position_limits(robot, q_nominal, seed, 
     np.testing.assert_array_equal(step.saturated, ~reachable & (
         np.abs(target - current) > limits * dt * (1 + 1e-9)))
     np.testing.assert_array_equal(step.clamped_to_limits, target != command)
+    assert step.any_saturated == bool(step.saturated.any())
+    assert step.any_clamped == bool(step.clamped_to_limits.any())
 
 
 # -- core: the base on the stance feet -------------------------------------------------------
@@ -106,6 +109,112 @@ def test_base_fit_recovers_the_pose_that_holds_the_feet(robot, q_nominal, seed, 
     if len(stance) >= 3:
         assert kabsch(np.array([f.translation for f in in_base]),
                       np.array([f.translation for f in in_world])) is not None
+
+
+def numpy_kabsch(points_in_base, points_in_world):
+    """The reference: Kabsch with numpy.linalg.svd, as the simulator had it."""
+    if len(points_in_base) < 3:
+        return None
+    centre_base, centre_world = points_in_base.mean(0), points_in_world.mean(0)
+    u, singular, vt = np.linalg.svd((points_in_base - centre_base).T
+                                    @ (points_in_world - centre_world))
+    if singular[1] <= 1e-6 * max(singular[0], 1e-300):
+        return None
+    rotation = vt.T @ np.diag([1.0, 1.0, np.sign(np.linalg.det(vt.T @ u.T))]) @ u.T
+    return pin.SE3(rotation, centre_world - rotation @ centre_base)
+
+
+@st.composite
+def stance_point_sets(draw):
+    """(points in the base, in the world): 1 to 5 feet, noisy, coplanar, collinear, tiny."""
+    rng = np.random.default_rng(draw(st.integers(0, 2**31)))
+    count = draw(st.integers(1, 5))
+    shape = draw(st.sampled_from(['general', 'coplanar', 'collinear', 'nearly collinear']))
+    scale = draw(st.sampled_from([1e-3, 0.3, 1.0, 50.0]))
+    points = rng.uniform(-1.0, 1.0, (count, 3)) * scale
+    if shape == 'coplanar':  # feet on flat ground
+        points[:, 2] = -0.5 * scale
+    elif shape in ('collinear', 'nearly collinear'):
+        points = np.outer(rng.uniform(-1.0, 1.0, count), rng.normal(size=3)) * scale
+        if shape == 'nearly collinear':
+            points += rng.normal(0.0, 1e-5 * scale, points.shape)
+    truth = pin.SE3(pin.rpy.rpyToMatrix(*rng.uniform(-np.pi, np.pi, 3)),
+                    rng.uniform(-2.0, 2.0, 3))
+    noise = draw(st.sampled_from([0.0, 1e-9, 1e-4])) * scale
+    in_world = points @ truth.rotation.T + truth.translation + rng.normal(0.0, noise,
+                                                                             points.shape)
+    return points, in_world
+
+
+@settings(max_examples=300, deadline=None)
+@given(stance_point_sets())
+def test_kabsch_agrees_with_the_numpy_svd_reference(point_sets):
+    """The fit (LAPACK's SVD called directly) is numpy's Kabsch.
+
+    None on 1, 2 or collinear feet, else the same pose to 1e-12 relative (here bit for bit:
+    one LAPACK routine).
+    """
+    in_base, in_world = point_sets
+    fitted, reference = kabsch(in_base, in_world), numpy_kabsch(in_base, in_world)
+    assert (fitted is None) == (reference is None)
+    if fitted is None:
+        return
+    scale = 1.0 + np.abs(in_world).max()
+    np.testing.assert_allclose(fitted.rotation, reference.rotation, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(fitted.translation, reference.translation, rtol=0,
+                               atol=1e-12 * scale)
+    assert np.linalg.det(fitted.rotation) > 0.0
+
+
+@settings(max_examples=200, deadline=None)
+@given(seed=st.integers(0, 2**31), rank=st.integers(0, 3),
+       scale=st.sampled_from([1e-12, 1e-3, 1.0, 1e6]))
+def test_svd3_is_numpys_svd(seed, rank, scale):
+    rng = np.random.default_rng(seed)
+    matrix = (rng.normal(size=(3, rank)) @ rng.normal(size=(rank, 3))) * scale
+    u, singular, vt = svd3(matrix)
+    reference = np.linalg.svd(matrix)
+    np.testing.assert_allclose(singular, reference[1], rtol=0, atol=1e-12 * scale)
+    np.testing.assert_allclose((u * singular) @ vt, matrix, rtol=0, atol=1e-12 * scale)
+    np.testing.assert_allclose(u @ u.T, np.eye(3), atol=1e-12)
+    np.testing.assert_allclose(vt @ vt.T, np.eye(3), atol=1e-12)
+
+
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 2**31), h=st.sampled_from([1e-3, 0.005, 1.0 / 3.0, 0.02]),
+       other=st.sampled_from([None, 0.004, 0.0051]))
+def test_central_differences_with_equal_steps_are_the_general_formula(robot, seed, h, other):
+    """The equal-step shortcut gives the general formula's values to the bit."""
+    rng = np.random.default_rng(seed)
+    model = robot.model
+    q = pin.randomConfiguration(model, -np.ones(model.nq), np.ones(model.nq))
+    q_before = pin.integrate(model, q, -rng.normal(0.0, 0.5, model.nv) * h)
+    q_after = pin.integrate(model, q, rng.normal(0.0, 0.5, model.nv) * h)
+    h2 = h if other is None else other
+    v, a = central_differences(model, q_before, q, q_after, h, h2)
+    d1, d2 = pin.difference(model, q_before, q), pin.difference(model, q, q_after)
+    np.testing.assert_array_equal(v, (d1 * (h2 / h) + d2 * (h / h2)) / (h + h2))
+    np.testing.assert_array_equal(a, 2.0 * (d2 / h2 - d1 / h) / (h + h2))
+
+
+def test_plan_contacts_are_the_plans_at_every_instant(robot):
+    """Looked up once between contact changes, equal to FootstepPlan.contacts_at everywhere."""
+    from gait_nodes.kinematic_simulator import PlanContacts
+
+    feet, yaws = robot.foot_poses(nominal_configuration(robot))
+    rng = np.random.default_rng(3)
+    times = np.cumsum(rng.choice([0.0, 0.25, 0.4], 12))  # repeated instants included
+    positions = np.array([feet + rng.choice([0.0, 0.1], (len(feet), 1)) * [1, 0, 0] * k
+                          for k in range(len(times))])
+    plan = FootstepPlan(0, robot.foot_names, times, positions,
+                        np.tile(yaws, (len(times), 1)))
+    order = np.array([3, 1, 0, 2])
+    contacts = PlanContacts(plan, order)
+    changes = contacts.changes_s
+    instants = [*changes, *(np.array(changes) + 1e-9), *(np.array(changes) - 1e-9),
+                *np.linspace(-1.0, times[-1] + 1.0, 997)]
+    for t in rng.permutation(instants):  # in any order: the cache holds for any query
+        np.testing.assert_array_equal(contacts.at(float(t)), plan.contacts_at(float(t))[order])
 
 
 def test_two_point_feet_keep_the_free_rotation_of_the_previous_pose(robot, q_nominal):
@@ -382,9 +491,32 @@ def test_published_polygon_and_margins_agree_with_the_contacts(crawl):
                  for _, s in collector.statuses('stability summary')]
     # Diagnostic values carry 6 significant digits.
     assert min(summaries) <= min(exact_margins) + 1e-6
+    check_markers(collector, 1.0 / 20.0)
+
+
+def check_markers(collector, period_s):
+    """/gait/markers: one array per markers period, each the monitor's sample of its stamp."""
     markers = collector.messages['/gait/markers']
-    assert len(markers) == len(collector.messages['/gait/support_polygon'])
-    assert {m.ns for m in markers[-1].markers} == {'gait'}
+    stamps = [stamp_ns(m.markers[0]) for m in markers]
+    period_ns = round(period_s * NS)
+    slots = [stamp // period_ns for stamp in stamps]
+    assert slots == sorted(set(slots))  # at most one per period...
+    samples = [stamp_ns(m) for m in collector.messages['/gait/support_polygon']]
+    assert len(markers) == len({stamp // period_ns for stamp in samples})  # ...and every one
+    zmp = {stamp_ns(m): m.point for m in collector.messages['/gait/zmp']}
+    com = {stamp_ns(m): m.point for m in collector.messages['/gait/com']}
+    polygons = {stamp_ns(m): m.polygon.points for m in collector.messages['/gait/support_polygon']}
+    for stamp, array in zip(stamps, markers, strict=True):
+        assert {m.ns for m in array.markers} == {'gait'}
+        zmp_sphere, com_sphere, outline = array.markers
+        assert all(stamp_ns(m) == stamp for m in array.markers)
+        if stamp in zmp:
+            assert zmp_sphere.pose.position == zmp[stamp]
+        else:
+            assert zmp_sphere.action == zmp_sphere.DELETE
+        assert com_sphere.pose.position == com[stamp]
+        vertices = [(p.x, p.y, p.z) for p in polygons[stamp]]
+        assert [(p.x, p.y, p.z) for p in outline.points] == vertices + vertices[:1]
 
 
 # -- the node alone --------------------------------------------------------------------------
@@ -469,6 +601,7 @@ def test_a_gait_that_loses_balance_is_flagged_at_the_first_sample_outside(inproc
     assert first_outside == NS // 2 + NS // 200  # the first tick with the left feet up
     errors = [(t, s) for t, s in collector.statuses('stability') if level_value(s.level) == ERROR]
     assert errors, 'no ERROR reported'
+    check_markers(collector, 1.0 / 20.0)  # the ZMP sphere deleted while the ZMP is undefined
     assert int(values_of(errors[0][1])['sample_stamp_ns']) == first_outside
     assert errors[0][0] - first_outside <= NS // 200  # reported at the next tick at the latest
     before = [s for t, s in collector.statuses() if t < first_outside]
@@ -534,13 +667,27 @@ def test_parameters_are_validated_and_a_rejected_change_changes_nothing(inproc):
     before = simulator.params
     for name, value in (('warn_margin_m', -0.1), ('rate_hz', 0.0), ('stale_after_s', math.nan),
                         ('publish_clock', True), ('robot', 'biped'),
-                        ('contact_height_tolerance_m', 2.0)):
+                        ('contact_height_tolerance_m', 2.0), ('markers_rate_hz', 0.0),
+                        ('markers_rate_hz', 2001.0)):
         result = simulator.set_parameters([Parameter(name, value=value)])[0]
         assert not result.successful
         assert name in result.reason
         assert simulator.params == before
     assert simulator.set_parameters([Parameter('warn_margin_m', value=0.05)])[0].successful
     assert simulator.params.warn_margin_m == 0.05
+
+
+def test_markers_at_the_simulation_rate_are_every_monitor_sample(inproc, robot, q_nominal):
+    hold = joint_command(robot.joint_names, robot.joint_positions(q_nominal))
+    for rate_hz, period_s in ((200.0, 0.005), (1000.0, 0.005), (7.0, 1.0 / 7.0)):
+        simulator, collector = run_simulator(0.6, [(k * NS // 200, hold) for k in range(120)],
+                                             parameters=[('markers_rate_hz', rate_hz)])
+        check_markers(collector, period_s)
+        if rate_hz >= 200.0:
+            assert len(collector.messages['/gait/markers']) == len(
+                collector.messages['/gait/support_polygon'])
+        runtime.shutdown()
+        runtime.init(args=[], runtime='inproc', signal_handlers=False)
 
 
 def test_clock_is_published_every_tick_with_the_simulated_time(inproc):

@@ -196,3 +196,30 @@ def test_margin_matches_the_shared_geometry(robosimian):
     # No contact or no ground force: no support.
     assert monitor.margin(np.zeros(3), np.zeros((0, 3))) == -np.inf
     assert monitor.margin(np.full(3, np.nan), feet) == -np.inf
+
+
+def test_a_kept_support_gives_what_the_contact_points_give(robosimian):
+    """The Support built once per stance gives the same state as the points.
+
+    A new one comes whenever the points or the ground (the plane without contacts) change.
+    """
+    monitor, fresh = (ZmpMonitor(robosimian.model, 0.055) for _ in range(2))
+    rng = np.random.default_rng(5)
+    stances = [np.array([[0.5, 0.5, 0.0], [0.5, -0.5, 0.02], [-0.5, 0.5, 0.01]]),
+               np.array([[0.5, 0.5, 0.1]]), np.zeros((0, 3))]
+    for points in stances:
+        support = monitor.support(points)
+        assert monitor.support(points.copy()) is support
+        assert not support.contact_points_in_world.flags.writeable
+        for _ in range(5):
+            q = random_configuration(robosimian, rng)
+            v, a = rng.normal(0, 0.3, (2, robosimian.model.nv))
+            kept, direct = monitor.evaluate(q, v, a, support), fresh.evaluate(q, v, a, points)
+            np.testing.assert_array_equal(kept.com_in_world, direct.com_in_world)
+            np.testing.assert_array_equal(kept.zmp_in_world, direct.zmp_in_world)
+            assert kept.margin_m == direct.margin_m
+            np.testing.assert_array_equal(kept.contact_points_in_world, points)
+        np.testing.assert_array_equal(support.polygon, fresh.support_polygon(points))
+        assert support.plane_height_m == fresh.plane_height_m(points)
+    monitor.ground_height_m = 0.3
+    assert monitor.support(stances[-1]).plane_height_m == 0.3

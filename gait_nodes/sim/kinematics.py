@@ -29,6 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import pinocchio as pin
+from scipy.linalg import lapack
 
 from gait_nodes.errors import ParameterError
 from gait_nodes.robot.model import RobotModel
@@ -50,6 +51,8 @@ BASE_FIT_ITERATIONS = 10
 #: rotation about the line of the feet into every body translation (that line does not pass
 #: through the base origin), and a trot's base pitched 0.09 rad in 20 s.
 ORIENTATION_PRIOR_M = 1e-3
+#: LAPACK's SVD (divide and conquer), what numpy.linalg.svd runs.
+_DGESDD = lapack.dgesdd
 
 
 def _skew(vectors: np.ndarray) -> np.ndarray:
@@ -64,23 +67,59 @@ def _skew(vectors: np.ndarray) -> np.ndarray:
 class ActuatorStep:
     """One step of the position-controlled joints.
 
+    The step keeps its inputs; the diagnostics (:attr:`demanded_over_limit`, :attr:`saturated`,
+    :attr:`clamped_to_limits`) are computed from them when asked, and :attr:`any_saturated`,
+    :attr:`any_clamped` answer the usual "none" with one comparison of bytes each (np.minimum
+    and np.maximum return an input unchanged, bit for bit, where they do not clip it).
+
     Attributes:
         positions_rad: (J,) joint positions after the step [rad or m].
         velocities_rad_s: (J,) mean joint velocities over the step [rad/s or m/s].
-        demanded_over_limit: (J,) commanded displacement over the displacement the velocity
-            limit allows in the step; above 1 the joint saturated.
-        clamped_to_limits: (J,) booleans: the command was beyond the joint's position limits.
+        commanded_rad: (J,) the command [rad or m].
+        target_rad: (J,) the command clamped to the position limits [rad or m].
+        demanded_rad: (J,) displacement toward the target (the short way round for continuous
+            joints) [rad or m].
+        moved_rad: (J,) the demanded displacement clipped to the velocity limits [rad or m].
+        allowed_rad: (J,) displacement the velocity limits allow in the step [rad or m].
     """
 
     positions_rad: np.ndarray
     velocities_rad_s: np.ndarray
-    demanded_over_limit: np.ndarray
-    clamped_to_limits: np.ndarray
+    commanded_rad: np.ndarray
+    target_rad: np.ndarray
+    demanded_rad: np.ndarray
+    moved_rad: np.ndarray
+    allowed_rad: np.ndarray
+
+    @property
+    def demanded_over_limit(self) -> np.ndarray:
+        """(J,) demanded displacement over the allowed one; above 1 the joint saturated."""
+        return np.abs(self.demanded_rad) / self.allowed_rad
 
     @property
     def saturated(self) -> np.ndarray:
         """(J,) booleans: the joint moved at its velocity limit and still lags its command."""
         return self.demanded_over_limit > 1.0 + 1e-9
+
+    @property
+    def clamped_to_limits(self) -> np.ndarray:
+        """(J,) booleans: the command was beyond the joint's position limits."""
+        return np.abs(self.target_rad - self.commanded_rad) > 1e-12
+
+    @property
+    def any_saturated(self) -> bool:
+        """Whether any joint saturated (``saturated.any()``)."""
+        # A ratio above 1 + 1e-9 means |demanded| > allowed, which the clipping changed: where
+        # every joint moved as demanded, none saturated.
+        return (self.moved_rad.tobytes() != self.demanded_rad.tobytes()
+                and bool(np.count_nonzero(self.saturated)))
+
+    @property
+    def any_clamped(self) -> bool:
+        """Whether any command was beyond its joint's limits (``clamped_to_limits.any()``)."""
+        # A command the limits did not change is not clamped.
+        return (self.target_rad.tobytes() != self.commanded_rad.tobytes()
+                and bool(np.count_nonzero(self.clamped_to_limits)))
 
 
 class PositionActuators:
@@ -111,8 +150,8 @@ class PositionActuators:
         """
         if not dt_s > 0.0:
             raise ParameterError(f'dt_s must be > 0 s, got {dt_s!r}')
+        commanded_rad = np.asarray(commanded_rad, dtype=float)
         target = np.minimum(np.maximum(commanded_rad, self.lower), self.upper)
-        clamped = np.abs(target - commanded_rad) > 1e-12
         delta = target - positions_rad
         if self._any_continuous:
             wrapped = (delta + math.pi) % (2.0 * math.pi) - math.pi
@@ -122,11 +161,10 @@ class PositionActuators:
             allowed = self.velocity_limits_rad_s * dt_s
             minus_allowed = -allowed
             self._allowed = (dt_s, allowed, minus_allowed)
-        ratio = np.abs(delta) / allowed
         moved = np.minimum(np.maximum(delta, minus_allowed), allowed)
         positions = np.minimum(np.maximum(positions_rad + moved, self.lower), self.upper)
         velocities = (positions - positions_rad) / dt_s
-        return ActuatorStep(positions, velocities, ratio, clamped)
+        return ActuatorStep(positions, velocities, commanded_rad, target, delta, moved, allowed)
 
 
 def kabsch(points_in_base: np.ndarray, points_in_world: np.ndarray) -> pin.SE3 | None:
@@ -137,11 +175,19 @@ def kabsch(points_in_base: np.ndarray, points_in_world: np.ndarray) -> pin.SE3 |
     count = len(points_in_base)
     if count < 3:
         return None
-    centre_base = np.add.reduce(points_in_base, 0) / count
     centre_world = np.add.reduce(points_in_world, 0) / count
+    return _kabsch_centred(points_in_base, points_in_world - centre_world, centre_world)
+
+
+def _kabsch_centred(points_in_base: np.ndarray, centred_world: np.ndarray,
+                    centre_world: np.ndarray) -> pin.SE3 | None:
+    """:func:`kabsch` with the world side already centred.
+
+    The simulation keeps the centred world side per stance: the latched feet do not move.
+    """
+    centre_base = np.add.reduce(points_in_base, 0) / len(points_in_base)
     # ndarray.dot: the products of matmul (@) with less overhead per call on 3x3 matrices.
-    u, singular, vt = np.linalg.svd((points_in_base - centre_base).T.dot(
-        points_in_world - centre_world))
+    u, singular, vt = svd3((points_in_base - centre_base).T.dot(centred_world))
     largest, second, _ = singular.tolist()
     if second <= COLLINEAR_TOLERANCE * max(largest, 1e-300):
         return None
@@ -149,8 +195,28 @@ def kabsch(points_in_base: np.ndarray, points_in_world: np.ndarray) -> pin.SE3 |
     v = vt.T
     rotation = v.dot(u.T)
     if _det3(rotation) < 0.0:
-        rotation = v.dot((u * [1.0, 1.0, -1.0]).T)
-    return pin.SE3(rotation, centre_world - rotation.dot(centre_base))
+        u[:, 2] *= -1.0  # u diag(1, 1, -1)
+        rotation = v.dot(u.T)
+    # Identity and assignments: cheaper than SE3(R, t)'s overload resolution, the same pose.
+    pose = pin.SE3.Identity()
+    pose.rotation = rotation
+    pose.translation = centre_world - rotation.dot(centre_base)
+    return pose
+
+
+def svd3(matrix: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``numpy.linalg.svd(matrix)`` of a small matrix by calling LAPACK's ``dgesdd`` directly.
+
+    numpy.linalg.svd runs the same LAPACK routine (``dgesdd``, full U and V^T) behind a
+    wrapper that costs twice the factorization of a 3x3 matrix; scipy's binding skips it.
+    Where numpy and scipy ship the same LAPACK the factors are equal to the bit (they are here:
+    test_kinematic_simulator checks them against numpy's to 1e-12 on random, rank-deficient and
+    scaled matrices). A failure to converge falls back to numpy (which raises LinAlgError).
+    """
+    u, singular, vt, info = _DGESDD(matrix)
+    if info != 0:
+        return np.linalg.svd(matrix)
+    return u, singular, vt
 
 
 def _det3(m: np.ndarray) -> float:
@@ -249,7 +315,7 @@ class SimulationStep:
     """What one step of :class:`KinematicSimulation` produced.
 
     Attributes:
-        q: Pinocchio configuration after the step (base pose and joints).
+        q: Pinocchio configuration after the step (base pose and joints), read-only.
         actuators: The joint step (velocities, saturation, clamping).
         contacts: (F,) booleans: feet in contact after the step.
         contact_points_in_world: (F, 3) contact points; NaN for feet in the air [m].
@@ -283,12 +349,17 @@ class KinematicSimulation:
         self._data = robot.new_data()
         self._flat_feet = robot.foot_orientation == 'yaw'
         self.q = np.array(q_initial, dtype=float)
+        # The configuration of the forward kinematics in the base frame: base at the origin.
+        self._q_in_base = self.q.copy()
+        self._q_in_base[:7] = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0)
         self.joints = robot.joint_positions(self.q)
         self.base = pin.XYZQUATToSE3(self.q[:7])
         feet = self._feet_in_base(self.joints)
         self.latched: list[pin.SE3 | None] = [self.base * foot for foot in feet]
         self._heights: np.ndarray | None = None
-        self._points: np.ndarray | None = None  # contact_points() until a foot lands or lifts
+        # contact_points() and the stance's latched positions, until a foot lands or lifts.
+        self._points: np.ndarray | None = None
+        self._stance: tuple | None = None
 
     @property
     def contacts(self) -> np.ndarray:
@@ -296,13 +367,12 @@ class KinematicSimulation:
         return np.array([foot is not None for foot in self.latched])
 
     def _feet_in_base(self, joints: np.ndarray) -> list[pin.SE3]:
-        q = self.q.copy()
-        q[:7] = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0)
+        """Foot frames in the base frame at ``joints`` (updateFramePlacement returns copies)."""
+        q = self._q_in_base
         self.robot.set_joint_positions(q, joints)
         model, data = self.robot.model, self._data
         pin.forwardKinematics(model, data, q)
-        return [pin.updateFramePlacement(model, data, f).copy()
-                for f in self.robot.foot_frame_ids]
+        return [pin.updateFramePlacement(model, data, f) for f in self.robot.foot_frame_ids]
 
     def _contacts_by_height(self, feet: list[pin.SE3]) -> np.ndarray:
         """Contacts without a schedule, from the foot heights.
@@ -319,15 +389,32 @@ class KinematicSimulation:
         return near & (self.contacts | settled)
 
     def contact_points(self) -> np.ndarray:
-        """(F, 3) contact points of the latched feet; NaN rows for feet in the air [m]."""
+        """(F, 3) contact points of the latched feet; NaN rows for feet in the air [m].
+
+        Read-only, and the same array until a foot lands or lifts: a caller may key what it
+        derives from the contacts on the array's identity.
+        """
         if self._points is None:
             points = np.full((len(self.latched), 3), np.nan)
             for k, foot in enumerate(self.latched):
                 if foot is not None:
                     points[k] = foot.translation
                     points[k, 2] -= self.robot.foot_frame_height_m
+            points.flags.writeable = False
             self._points = points
-        return self._points.copy()
+        return self._points
+
+    def _latched_stance(self, kept: tuple[int, ...]) -> tuple:
+        """``(kept, centred, centre, positions)`` of the latched feet ``kept`` in the world.
+
+        Their positions (F, 3) [m] centred on their ``centre`` (what :func:`kabsch` computes of
+        its world side) and as lists of floats: kept while the stance does not change.
+        """
+        if self._stance is None or self._stance[0] != kept:
+            in_world = np.array([self.latched[k].translation for k in kept])
+            centre = np.add.reduce(in_world, 0) / len(kept)
+            self._stance = (kept, in_world - centre, centre, in_world.tolist())
+        return self._stance
 
     def step(self, commanded_joints: np.ndarray, dt_s: float,
              contacts: np.ndarray | None = None) -> SimulationStep:
@@ -346,15 +433,22 @@ class KinematicSimulation:
         contacts = np.asarray(contacts, dtype=bool)
         down = contacts.tolist()
         latched = self.latched
-        kept = [k for k, d in enumerate(down) if d and latched[k] is not None]
+        kept = tuple(k for k, d in enumerate(down) if d and latched[k] is not None)
         base = self.base
         slip = 0.0
         if kept:
-            base = fit_base_pose(self.base, [feet[k] for k in kept], [latched[k] for k in kept],
-                                 self.settings.rotation_weight_m if self._flat_feet else 0.0)
+            _, centred_world, centre_world, in_world = self._latched_stance(kept)
+            in_base = [feet[k].translation for k in kept]
+            # fit_base_pose's closed form, with the world side of the stance kept.
+            fitted = (_kabsch_centred(np.array(in_base), centred_world, centre_world)
+                      if len(kept) >= 3 else None)
+            base = fitted if fitted is not None else fit_base_pose(
+                self.base, [feet[k] for k in kept], [latched[k] for k in kept],
+                self.settings.rotation_weight_m if self._flat_feet else 0.0)
             squared = []
-            for k in kept:
-                dx, dy, dz = (base.act(feet[k].translation) - latched[k].translation).tolist()
+            for point, (wx, wy, wz) in zip(in_base, in_world, strict=True):
+                x, y, z = base.act(point).tolist()
+                dx, dy, dz = x - wx, y - wy, z - wz
                 squared.append(dx * dx + dy * dy + dz * dz)
             slip = math.sqrt(max(squared))
         touched = []
@@ -362,16 +456,17 @@ class KinematicSimulation:
             if not d:
                 if latched[k] is not None:
                     latched[k] = None
-                    self._points = None
+                    self._points = self._stance = None
             elif latched[k] is None:
                 latched[k] = base * feet[k]
-                self._points = None
+                self._points = self._stance = None
                 touched.append(self.robot.foot_names[k])
         self.base = base
         self.joints = actuators.positions_rad
         q = self.q.copy()
         q[:7] = pin.SE3ToXYZQUAT(base)
         self.robot.set_joint_positions(q, self.joints)
+        q.flags.writeable = False
         self.q = q
-        return SimulationStep(q.copy(), actuators, contacts.copy(), self.contact_points(), slip,
+        return SimulationStep(q, actuators, contacts.copy(), self.contact_points(), slip,
                               tuple(touched))

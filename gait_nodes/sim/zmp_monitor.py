@@ -75,9 +75,35 @@ def central_differences(model: pin.Model, q_before: np.ndarray, q: np.ndarray,
     h2 = h1 if dt_after_s is None else float(dt_after_s)
     d1 = pin.difference(model, q_before, q)
     d2 = pin.difference(model, q, q_after)
+    if h1 == h2:
+        # The same values with a third fewer array operations (a fixed-rate simulation's case):
+        # h2 / h1 is exactly 1 and 2 x / (h1 + h2) exactly x / h1 (scaling by 2 is exact).
+        return (d1 + d2) / (h1 + h2), (d2 / h2 - d1 / h1) / h1
     v = (d1 * (h2 / h1) + d2 * (h1 / h2)) / (h1 + h2)
     a = 2.0 * (d2 / h2 - d1 / h1) / (h1 + h2)
     return v, a
+
+
+@dataclass(frozen=True)
+class Support:
+    """The feet in contact at one instant and what the monitor derives from them.
+
+    Built by :meth:`ZmpMonitor.support` once per set of contacts (they change at touch-downs
+    and lift-offs, not every tick).
+
+    Attributes:
+        contact_points_in_world: (C, 3) contact points of the feet in contact [m].
+        plane_height_m: Height of the ZMP's plane [m]: the lowest contact, else the ground.
+        polygon: (M, 2) hull of the contact discs, CCW (empty without contacts) [m].
+        centres_hull: (H, 2) hull of the contact centres, CCW (empty without contacts) [m].
+        centres_hull_edges: :func:`gait_nodes.geometry.polygon_edge_list` of ``centres_hull``.
+    """
+
+    contact_points_in_world: np.ndarray
+    plane_height_m: float
+    polygon: np.ndarray
+    centres_hull: np.ndarray
+    centres_hull_edges: list
 
 
 @dataclass(frozen=True)
@@ -126,9 +152,8 @@ class ZmpMonitor:
         self.ground_height_m = float(ground_height_m)
         self.gravity = np.array([0.0, 0.0, -gravity_m_s2])
         self._weight = (self.mass_kg * self.gravity).tolist()
-        self._hull_key = None
-        self._hull_cache = (np.zeros((0, 2)), np.zeros((0, 2)))
-        self._hull_edges: list = []
+        self._support_key = None
+        self._support: Support | None = None
 
     def plane_height_m(self, contact_points_in_world: np.ndarray) -> float:
         """Height [m] of the ZMP's plane: the lowest contact, else ``ground_height_m``."""
@@ -144,11 +169,11 @@ class ZmpMonitor:
         """
         plane = self.ground_height_m if plane_height_m is None else float(plane_height_m)
         data = self.data
-        pin.computeCentroidalMomentumTimeVariation(self.model, data, q, v, a)
+        dhg = pin.computeCentroidalMomentumTimeVariation(self.model, data, q, v, a)
         com = data.com[0].copy()
         # Scalars: numpy's per-call cost exceeds the arithmetic of three components.
         weight_x, weight_y, weight_z = self._weight
-        linear_x, linear_y, linear_z, lx, ly, _ = data.dhg.vector.tolist()
+        linear_x, linear_y, linear_z, lx, ly, _ = dhg.vector.tolist()
         fx, fy, fz = linear_x - weight_x, linear_y - weight_y, linear_z - weight_z
         cx, cy, cz = com.tolist()
         cz -= plane
@@ -159,37 +184,48 @@ class ZmpMonitor:
             return com, np.full(3, np.nan), fz
         return com, np.array([-tau_y / fz, tau_x / fz, plane]), fz
 
-    def _hulls(self, contact_points_in_world: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def support(self, contact_points_in_world: np.ndarray) -> Support:
+        """The :class:`Support` of these contact points (C, 3) [m], kept while they stay."""
         points = np.asarray(contact_points_in_world, dtype=float).reshape(-1, 3)
-        key = points[:, :2].tobytes()
-        if key != self._hull_key:
+        key = (points.tobytes(), self.ground_height_m)
+        if key != self._support_key:
             if len(points) == 0:
-                self._hull_cache = (np.zeros((0, 2)), np.zeros((0, 2)))
-                self._hull_edges = []
+                centres_hull = polygon = np.zeros((0, 2))
             else:
-                self._hull_cache = (convex_hull(points[:, :2]),
-                                    foot_discs_polygon(points[:, :2], self.foot_radius_m,
-                                                       POLYGON_SEGMENTS_PER_FOOT))
-                self._hull_edges = polygon_edge_list(self._hull_cache[0])
-            self._hull_key = key
-        return self._hull_cache
+                centres_hull = convex_hull(points[:, :2])
+                polygon = foot_discs_polygon(points[:, :2], self.foot_radius_m,
+                                             POLYGON_SEGMENTS_PER_FOOT)
+            points = points.copy()
+            points.flags.writeable = False
+            self._support = Support(points, self.plane_height_m(points), polygon, centres_hull,
+                                    polygon_edge_list(centres_hull) if len(points) else [])
+            self._support_key = key
+        return self._support
 
     def support_polygon(self, contact_points_in_world: np.ndarray) -> np.ndarray:
         """(M, 2) hull of the contact discs, CCW (empty without contacts) [m]."""
-        return self._hulls(contact_points_in_world)[1]
+        return self.support(contact_points_in_world).polygon
 
     def margin(self, zmp_in_world: np.ndarray, contact_points_in_world: np.ndarray) -> float:
         """Exact signed margin [m] of the ZMP in the hull of the contact discs."""
-        centres_hull = self._hulls(contact_points_in_world)[0]
+        return self._margin(zmp_in_world, self.support(contact_points_in_world))
+
+    def _margin(self, zmp_in_world: np.ndarray, support: Support) -> float:
         x, y = zmp_in_world[0], zmp_in_world[1]
-        if len(centres_hull) == 0 or not (math.isfinite(x) and math.isfinite(y)):
+        if len(support.centres_hull) == 0 or not (math.isfinite(x) and math.isfinite(y)):
             return -math.inf
         # geometry.disc_support_margin, with the centres' hull kept between calls.
-        return point_signed_distance(float(x), float(y), self._hull_edges) + self.foot_radius_m
+        return (point_signed_distance(float(x), float(y), support.centres_hull_edges)
+                + self.foot_radius_m)
 
     def evaluate(self, q: np.ndarray, v: np.ndarray, a: np.ndarray,
-                 contact_points_in_world: np.ndarray) -> ZmpState:
-        """COM, ZMP and margin at ``(q, v, a)`` with the feet at ``contact_points_in_world``."""
-        points = np.asarray(contact_points_in_world, dtype=float).reshape(-1, 3)
-        com, zmp, fz = self.com_and_zmp(q, v, a, self.plane_height_m(points))
-        return ZmpState(com, zmp, fz, self.margin(zmp, points), points)
+                 contact_points_in_world: np.ndarray | Support) -> ZmpState:
+        """COM, ZMP and margin at ``(q, v, a)`` with the feet at ``contact_points_in_world``.
+
+        The contacts may be given as their :class:`Support` (what :meth:`support` made of them).
+        """
+        support = contact_points_in_world if isinstance(contact_points_in_world, Support) \
+            else self.support(contact_points_in_world)
+        com, zmp, fz = self.com_and_zmp(q, v, a, support.plane_height_m)
+        return ZmpState(com, zmp, fz, self._margin(zmp, support),
+                        support.contact_points_in_world)
