@@ -25,6 +25,7 @@ no swing trajectory is there for a foot in swing (:func:`fallback_swing_pose`).
 
 from __future__ import annotations
 
+import bisect
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -172,12 +173,11 @@ class WholeBodyIkSolver:
                 len(self._frames), self._rows_per_foot, self.model.nv, self._v_idx, free_base)
         return work
 
-    def _rotation_targets_for(self, yaws_rad: np.ndarray) -> np.ndarray:
-        yaws = yaws_rad.tolist()
-        if yaws != self._rotation_yaws:
-            for k, yaw in enumerate(yaws):
+    def _rotation_targets_for(self, yaws_rad: list[float]) -> np.ndarray:
+        if yaws_rad != self._rotation_yaws:
+            for k, yaw in enumerate(yaws_rad):
                 self._rotation_targets[k] = yaw_rotation(yaw) @ self._offsets[k]
-            self._rotation_yaws = yaws
+            self._rotation_yaws = list(yaws_rad)
         return self._rotation_targets
 
     def warm_start(self, solutions: Sequence[np.ndarray],
@@ -212,29 +212,46 @@ class WholeBodyIkSolver:
         Never returns NaN: a target out of reach gives the least-squares best effort with the
         residuals in the result.
         """
-        model, data = self.model, self.data
-        frames = self._frames
-        feet_count = len(frames)
+        feet_count = len(self._frames)
         if targets.feet_in_world.shape != (feet_count, 3):
             raise ValueError(f'{self.robot.name} has {feet_count} feet, targets give '
                              f'{len(targets.feet_in_world)}')
+        return self.solve_trusted(targets.feet_in_world, targets.foot_yaws_rad.tolist(),
+                                  targets.base_yaw_rad, q_start, targets.com_in_world,
+                                  targets.base_position_in_world)
+
+    def solve_trusted(self, feet_in_world, foot_yaws_rad: list[float], base_yaw_rad: float,
+                      q_start: np.ndarray, com_in_world=None,
+                      base_position_in_world=None) -> IkResult:
+        """:meth:`solve` for the fields of an :class:`IkTargets` that nobody checks here.
+
+        For a caller that validated its references once, where they entered (the
+        whole_body_ik node: contract-checked messages), and would otherwise pay the checks
+        of a new :class:`IkTargets` at every tick. The caller vouches for what
+        :class:`IkTargets` checks: ``feet_in_world`` (F, 3) [m] (an array or nested lists)
+        and ``foot_yaws_rad`` (F,) [rad] as a list, all finite, and exactly one of
+        ``com_in_world`` and ``base_position_in_world`` (3,) [m].
+        """
+        model, data = self.model, self.data
+        frames = self._frames
+        feet_count = len(frames)
         settings = self.settings
         q = np.array(q_start, dtype=float)
         if not math.isfinite(q @ q) and not np.isfinite(q).all():  # (q @ q: one cheap test)
             raise ValueError('q_start holds a NaN or infinite value')
-        half = 0.5 * targets.base_yaw_rad
+        half = 0.5 * base_yaw_rad
         q[3:7] = (0.0, 0.0, math.sin(half), math.cos(half))
-        free_base = targets.com_in_world is not None
+        free_base = com_in_world is not None
         if not free_base:
-            q[:3] = targets.base_position_in_world
+            q[:3] = base_position_in_world
         work = self._workspace(free_base)
         if work.settings is not settings:
             work.weigh(settings)
-        frame_targets = targets.feet_in_world + self._frame_offset
+        frame_targets = np.add(feet_in_world, self._frame_offset)
         orient = self._orient
         if orient:
-            rotation_targets = self._rotation_targets_for(targets.foot_yaws_rad)
-        com_target = targets.com_in_world
+            rotation_targets = self._rotation_targets_for(foot_yaws_rad)
+        com_target = com_in_world
         error, full, placements = work.error, work.full, work.placements
         positions, positions_error, com_error = work.positions, work.positions_error, \
             work.com_error
@@ -504,27 +521,48 @@ def limit_joint_velocity(robot: RobotModel, q_previous: np.ndarray, q_target: np
         base included, scaled by the largest demanded/limit ratio when above 1), the joint
         vector velocities [rad/s] (never above the limits) and the saturation report.
     """
+    q, _, velocities, saturation = limit_joint_step(
+        robot, q_previous, robot.joint_positions(q_previous), q_target, dt_s)
+    return q, velocities, saturation
+
+
+def limit_joint_step(robot: RobotModel, q_previous: np.ndarray, previous_joints: np.ndarray,
+                     q_target: np.ndarray, dt_s: float
+                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, VelocitySaturation]:
+    """:func:`limit_joint_velocity` for a caller that keeps its last command's joint vector.
+
+    Args:
+        robot: The robot (joint velocity limits from its YAML).
+        q_previous: Configuration commanded at the previous tick.
+        previous_joints: ``robot.joint_positions(q_previous)`` [rad].
+        q_target: Configuration the IK asks for now.
+        dt_s: Time since the previous tick [s].
+
+    Returns:
+        ``(q, joints, joint_velocities, saturation)`` as :func:`limit_joint_velocity`, with
+        ``joints = robot.joint_positions(q)`` [rad] (the next call's ``previous_joints``).
+    """
     if not dt_s > 0:
         raise ValueError(f'dt_s must be > 0, got {dt_s}')
-    previous = robot.joint_positions(q_previous)
-    step = robot.joint_positions(q_target) - previous
+    target = robot.joint_positions(q_target)
+    step = target - previous_joints
     limits = robot.velocity_limits_rad_s
     demanded = np.abs(step) / (limits * dt_s)
     ratio = max(demanded.tolist(), default=0.0)
     if ratio <= 1.0:
-        return np.array(q_target, dtype=float), step / dt_s, VelocitySaturation(ratio)
+        return np.array(q_target, dtype=float), target, step / dt_s, VelocitySaturation(ratio)
     # Scale a hair more than needed so that rounding never leaves a joint above its limit.
     scale = (1.0 - 1e-12) / ratio
     q = np.array(q_previous, dtype=float)
     q[:3] += scale * (q_target[:3] - q_previous[:3])
     q[3:7] = q_target[3:7]
-    joints = previous + scale * step
+    joints = previous_joints + scale * step
     robot.set_joint_positions(q, joints)
     over = np.flatnonzero(demanded > 1.0)
     order = over[np.argsort(-demanded[over])]
     report = VelocitySaturation(ratio, tuple(robot.joint_names[k] for k in order),
                                 tuple(float(demanded[k]) for k in order))
-    return q, scale * step / dt_s, report
+    return q, robot.joint_positions(q), scale * step / dt_s, report
 
 
 # -- references at one instant ----------------------------------------------------------------
@@ -541,21 +579,8 @@ def com_state_at(states: Sequence[ComState], stamp_ns: int,
     Linear between the message's points; before the first point, the first; after the last,
     extrapolated with its velocity for at most ``max_extrapolation_s``, then held.
     """
-    if not states:
-        raise ValueError('no COM states')
-    first, last = states[0], states[-1]
-    if stamp_ns <= first.stamp_ns:
-        return np.array(first.position_in_world), float(first.yaw_rad)
-    if stamp_ns >= last.stamp_ns:
-        dt = min((stamp_ns - last.stamp_ns) * 1e-9, max_extrapolation_s)
-        return (last.position_in_world + dt * last.velocity_in_world,
-                float(last.yaw_rad + dt * last.yaw_rate_rad_s))
-    stamps = np.array([s.stamp_ns for s in states], dtype=np.int64)
-    k = int(np.searchsorted(stamps, stamp_ns, side='right')) - 1
-    a, b = states[k], states[k + 1]
-    w = (stamp_ns - a.stamp_ns) / max(b.stamp_ns - a.stamp_ns, 1)
-    yaw = a.yaw_rad + w * float(_wrap(b.yaw_rad - a.yaw_rad))
-    return (1 - w) * a.position_in_world + w * b.position_in_world, float(yaw)
+    position, yaw = ComTrack.from_states(states).at(stamp_ns, max_extrapolation_s)
+    return np.array(position), yaw
 
 
 def swing_pose_at(trajectory: SwingTrajectory, stamp_ns: int) -> tuple[np.ndarray, float]:
@@ -564,19 +589,8 @@ def swing_pose_at(trajectory: SwingTrajectory, stamp_ns: int) -> tuple[np.ndarra
     Before the first waypoint, the first; after the last, the last. The yaw turns the short
     way round between two waypoints (it is defined modulo 2 pi).
     """
-    t = (stamp_ns - trajectory.start_ns) * 1e-9
-    times = trajectory.times_s
-    positions, yaws = trajectory.positions_in_world, trajectory.yaws_rad
-    k = int(np.searchsorted(times, t, side='right')) - 1
-    if k < 0:
-        return positions[0].copy(), float(yaws[0])
-    if k >= len(times) - 1:
-        return positions[-1].copy(), float(yaws[-1])
-    # times[k] <= t < times[k + 1]: a segment of positive duration.
-    w = (t - times[k]) / (times[k + 1] - times[k])
-    yaw = float(yaws[k])
-    return (positions[k] + w * (positions[k + 1] - positions[k]),
-            yaw + w * math.remainder(float(yaws[k + 1]) - yaw, 2.0 * math.pi))
+    position, yaw = SwingPath(trajectory).pose_at(stamp_ns)
+    return np.array(position), yaw
 
 
 def _smoothstep(s: float) -> float:
@@ -599,14 +613,194 @@ def fallback_swing_pose(swing: Swing, t_s: float, step_height_m: float
         t_s: Time from the plan start [s].
         step_height_m: Peak lift [m].
     """
-    duration = swing.duration_s
-    s = (t_s - swing.lift_off_s) / duration if duration > 0 else 1.0
-    s = min(max(s, 0.0), 1.0)
-    blend = _smoothstep(s)
-    position = swing.start_in_world + blend * (swing.end_in_world - swing.start_in_world)
-    position[2] += step_height_m * math.sin(math.pi * s) ** 2
-    yaw = swing.start_yaw_rad + blend * float(_wrap(swing.end_yaw_rad - swing.start_yaw_rad))
-    return position, yaw
+    position, yaw = _FallbackSwing(swing).pose_at(t_s, step_height_m)
+    return np.array(position), yaw
+
+
+# -- references prepared for sampling at every tick -------------------------------------------
+#
+# The node samples its references 200 times a second and each message many times: these
+# classes convert a message's arrays to Python floats once, so that a sample is a few float
+# operations (numpy costs about a microsecond per call on a 3-vector). Every sample is the
+# same IEEE-754 double arithmetic, in the same order, as the numpy formulas they replace
+# (elementwise float64 add/multiply/divide round exactly like Python floats): the public
+# functions above are these classes, and test_whole_body_ik checks them bit for bit against
+# straightforward numpy versions.
+
+
+class SwingPath:
+    """A :class:`SwingTrajectory`, ready to be sampled by :meth:`pose_at` at every tick.
+
+    Args:
+        trajectory: The swing trajectory (validated by the contract: finite, times sorted).
+    """
+
+    __slots__ = ('start_ns', 'end_ns', '_times', '_positions', '_yaws')
+
+    def __init__(self, trajectory: SwingTrajectory):
+        self.start_ns = trajectory.start_ns
+        #: Touch-down [ns]: the trajectory covers ``start_ns <= t <= end_ns``.
+        self.end_ns = trajectory.start_ns + int(round(trajectory.duration_s * 1e9))
+        self._times = trajectory.times_s.tolist()
+        self._positions = trajectory.positions_in_world.tolist()
+        self._yaws = trajectory.yaws_rad.tolist()
+
+    def covers(self, stamp_ns: int) -> bool:
+        """Whether ``stamp_ns`` is within the swing (lift-off to touch-down, both included)."""
+        return self.start_ns <= stamp_ns <= self.end_ns
+
+    def pose_at(self, stamp_ns: int) -> tuple[list[float], float]:
+        """Foot position [m] and yaw [rad] at ``stamp_ns`` (see :func:`swing_pose_at`)."""
+        t = (stamp_ns - self.start_ns) * 1e-9
+        times, positions, yaws = self._times, self._positions, self._yaws
+        k = bisect.bisect_right(times, t) - 1
+        if k < 0:
+            return list(positions[0]), yaws[0]
+        if k >= len(times) - 1:
+            return list(positions[-1]), yaws[-1]
+        # times[k] <= t < times[k + 1]: a segment of positive duration.
+        w = (t - times[k]) / (times[k + 1] - times[k])
+        (ax, ay, az), (bx, by, bz) = positions[k], positions[k + 1]
+        yaw = yaws[k]
+        return ([ax + w * (bx - ax), ay + w * (by - ay), az + w * (bz - az)],
+                yaw + w * math.remainder(yaws[k + 1] - yaw, 2.0 * math.pi))
+
+
+class _FallbackSwing:
+    """A plan's :class:`Swing`, ready for :func:`fallback_swing_pose` at every tick."""
+
+    __slots__ = ('lift_off_s', 'touch_down_s', '_duration_s', '_start', '_delta', '_yaw',
+                 '_turn')
+
+    def __init__(self, swing: Swing):
+        self.lift_off_s = swing.lift_off_s
+        self.touch_down_s = swing.touch_down_s
+        self._duration_s = swing.duration_s
+        self._start = [float(x) for x in swing.start_in_world]
+        # end - start and the short-way yaw turn, as the per-sample formula computed them.
+        self._delta = (np.asarray(swing.end_in_world, dtype=float)
+                       - np.asarray(swing.start_in_world, dtype=float)).tolist()
+        self._yaw = swing.start_yaw_rad
+        self._turn = float(_wrap(swing.end_yaw_rad - swing.start_yaw_rad))
+
+    def pose_at(self, t_s: float, step_height_m: float) -> tuple[list[float], float]:
+        """Foot position [m] and yaw [rad] at ``t_s`` from the plan start."""
+        duration = self._duration_s
+        s = (t_s - self.lift_off_s) / duration if duration > 0 else 1.0
+        s = min(max(s, 0.0), 1.0)
+        blend = _smoothstep(s)
+        (x, y, z), (dx, dy, dz) = self._start, self._delta
+        return ([x + blend * dx, y + blend * dy,
+                 z + blend * dz + step_height_m * math.sin(math.pi * s) ** 2],
+                self._yaw + blend * self._turn)
+
+
+class ComTrack:
+    """The states of one COM reference message, ready for :meth:`at` at every tick.
+
+    Args:
+        stamps_ns: (N,) state times [ns], non-decreasing, at least one.
+        positions_in_world: (N, 3) COM positions [m].
+        velocities_in_world: (N, 3) COM velocities [m/s].
+        yaws_rad: (N,) body yaws [rad].
+        yaw_rates_rad_s: (N,) body yaw rates [rad/s].
+    """
+
+    __slots__ = ('_stamps', '_positions', '_velocities', '_yaws', '_yaw_rates')
+
+    def __init__(self, stamps_ns: Sequence[int], positions_in_world: Sequence[Sequence[float]],
+                 velocities_in_world: Sequence[Sequence[float]], yaws_rad: Sequence[float],
+                 yaw_rates_rad_s: Sequence[float]):
+        if len(stamps_ns) == 0:
+            raise ValueError('no COM states')
+        # Kept as given (read, never written).
+        self._stamps = stamps_ns
+        self._positions = positions_in_world
+        self._velocities = velocities_in_world
+        self._yaws = yaws_rad
+        self._yaw_rates = yaw_rates_rad_s
+
+    @classmethod
+    def from_states(cls, states: Sequence[ComState]) -> ComTrack:
+        """The track of the :class:`ComState` list of a /gait/com_reference message."""
+        if not states:
+            raise ValueError('no COM states')
+        return cls([s.stamp_ns for s in states],
+                   [np.asarray(s.position_in_world, dtype=float).tolist() for s in states],
+                   [np.asarray(s.velocity_in_world, dtype=float).tolist() for s in states],
+                   [s.yaw_rad for s in states], [s.yaw_rate_rad_s for s in states])
+
+    def at(self, stamp_ns: int, max_extrapolation_s: float = 0.05) -> tuple[list[float], float]:
+        """COM position [m] and body yaw [rad] at ``stamp_ns`` (see :func:`com_state_at`)."""
+        stamps = self._stamps
+        if stamp_ns <= stamps[0]:
+            return list(self._positions[0]), float(self._yaws[0])
+        if stamp_ns >= stamps[-1]:
+            dt = min((stamp_ns - stamps[-1]) * 1e-9, max_extrapolation_s)
+            (x, y, z), (vx, vy, vz) = self._positions[-1], self._velocities[-1]
+            return ([x + dt * vx, y + dt * vy, z + dt * vz],
+                    float(self._yaws[-1] + dt * self._yaw_rates[-1]))
+        k = bisect.bisect_right(stamps, stamp_ns) - 1
+        w = (stamp_ns - stamps[k]) / max(stamps[k + 1] - stamps[k], 1)
+        yaw = self._yaws[k] + w * float(_wrap(self._yaws[k + 1] - self._yaws[k]))
+        (ax, ay, az), (bx, by, bz) = self._positions[k], self._positions[k + 1]
+        return [(1 - w) * ax + w * bx, (1 - w) * ay + w * by, (1 - w) * az + w * bz], float(yaw)
+
+
+class FootTargets:
+    """The feet's targets from one footstep plan, in the robot's foot order, at every tick.
+
+    Stance feet stand where the plan puts them; a foot in swing follows its swing trajectory
+    while one covers the instant (:class:`SwingPath`), else the fallback swing
+    (:func:`fallback_swing_pose`).
+
+    Args:
+        plan: The footstep plan (its feet are the robot's, in any order).
+        foot_names: The robot's foot names, in its order.
+    """
+
+    def __init__(self, plan: FootstepPlan, foot_names: Sequence[str]):
+        order = [plan.foot_names.index(name) for name in foot_names]
+        self.plan = plan
+        self._start_ns = plan.start_ns
+        self._times = plan.times_s.tolist()
+        self._positions = plan.positions_in_world[:, order].tolist()  # [K][F][3]
+        self._yaws = plan.yaws_rad[:, order].tolist()  # [K][F]
+        feet = {name: k for k, name in enumerate(foot_names)}
+        self._swings = [(swing.lift_off_s, swing.touch_down_s, feet[swing.foot],
+                         _FallbackSwing(swing)) for swing in plan.swings()]
+
+    def at(self, stamp_ns: int, swing_paths: Sequence[SwingPath | None],
+           step_height_m: float) -> tuple[list[list[float]], list[float], int]:
+        """Foot positions [m] and yaws [rad] at ``stamp_ns``, and how many feet fell back.
+
+        Args:
+            stamp_ns: The instant [ns].
+            swing_paths: The latest swing trajectory of each foot (robot order), or None.
+            step_height_m: Peak lift of the fallback swing [m].
+
+        Returns:
+            ``(feet, yaws, fallbacks)``: (F, 3) positions and (F,) yaws as new lists, and the
+            number of feet in swing that followed the fallback swing.
+        """
+        t_plan = (stamp_ns - self._start_ns) * 1e-9
+        # FootstepPlan.index_at: the last point at or before t_plan (0 before the start).
+        index = max(bisect.bisect_right(self._times, t_plan) - 1, 0)
+        feet = [list(p) for p in self._positions[index]]
+        yaws = list(self._yaws[index])
+        under_way = {}  # swings_under_way: the later swing of a foot wins
+        for lift_off_s, touch_down_s, k, swing in self._swings:
+            if lift_off_s < t_plan < touch_down_s:
+                under_way[k] = swing
+        fallbacks = 0
+        for k, swing in under_way.items():
+            path = swing_paths[k]
+            if path is not None and path.covers(stamp_ns):
+                feet[k], yaws[k] = path.pose_at(stamp_ns)
+            else:
+                feet[k], yaws[k] = swing.pose_at(t_plan, step_height_m)
+                fallbacks += 1
+        return feet, yaws, fallbacks
 
 
 def current_swing(plan: FootstepPlan, foot: str, t_s: float) -> Swing | None:
