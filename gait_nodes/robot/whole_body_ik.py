@@ -259,11 +259,12 @@ class WholeBodyIkSolver:
         q_idx, lower, upper = self._q_idx, self._lower, self._upper
         joints = q[q_idx]
         world = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
+        placement, frame_jacobian = pin.updateFramePlacement, pin.getFrameJacobian
+        foot_rows = work.foot_rows
         iteration = 0
         while True:
             pin.forwardKinematics(model, data, q)
-            for k, frame in enumerate(frames):
-                placements[k] = pin.updateFramePlacement(model, data, frame).homogeneous
+            placements[:] = [placement(model, data, frame).homogeneous for frame in frames]
             np.subtract(frame_targets, positions, out=positions_error)
             if orient:
                 self._orientation_errors(rotation_targets, work)
@@ -277,16 +278,14 @@ class WholeBodyIkSolver:
                 break
             iteration += 1
             pin.computeJointJacobians(model, data)
-            for k, frame in enumerate(frames):
-                r = k * rows_per_foot
-                full[r:r + rows_per_foot, :-3] = \
-                    pin.getFrameJacobian(model, data, frame, world)[:rows_per_foot]
+            for rows, frame in zip(foot_rows, frames, strict=True):
+                full[rows] = frame_jacobian(model, data, frame, world)[:rows_per_foot]
             if free_base:
                 full[-3:, :-3] = pin.jacobianCenterOfMass(model, data, False)
             jacobian = full[:, work.columns]
             # Levenberg-Marquardt step (J^T J + lambda I) dx = J^T e, by Cholesky.
             normal = jacobian.T @ jacobian
-            normal.flat[::len(normal) + 1] += error @ error + DAMPING_BIAS
+            normal.reshape(-1)[::len(normal) + 1] += error @ error + DAMPING_BIAS  # (a view)
             _, step, info = lapack.dposv(normal, jacobian.T @ error, overwrite_a=True,
                                          overwrite_b=True)
             if info != 0:  # not reached with lambda > 0; keep the iteration defined anyway
@@ -322,11 +321,11 @@ class WholeBodyIkSolver:
         """
         np.matmul(rotation_targets, work.rotations_transposed, out=work.relative)
         np.matmul(work.relative_flat, VEE_AND_TRACE, out=work.vee_and_trace)
-        if min(work.vee_and_trace[:, 3].tolist()) > SMALL_ANGLE_TRACE:
-            work.per_foot[:, 3:] = work.vee_and_trace[:, :3]
+        if min(work.traces.tolist()) > SMALL_ANGLE_TRACE:
+            work.orientations_error[:] = work.vees
         else:
             for k, relative in enumerate(work.relative):
-                work.per_foot[k, 3:] = pin.log3(relative)
+                work.orientations_error[k] = pin.log3(relative)
 
 
 #: Maps a row-major flattened rotation E to (vee(E - E^T) / 2, trace(E)).
@@ -351,6 +350,9 @@ class _Workspace:
         rows = feet_count * rows_per_foot + (3 if free_base else 0)
         self.rows_per_foot = rows_per_foot
         self.full = np.zeros((rows, nv + 3))
+        # Each foot's block of the Pinocchio columns of ``full``.
+        self.foot_rows = [(slice(k * rows_per_foot, (k + 1) * rows_per_foot), slice(0, nv))
+                          for k in range(feet_count)]
         self.base_cols = 3 if free_base else 0
         if free_base:
             for k in range(feet_count):
@@ -372,6 +374,8 @@ class _Workspace:
         self.relative = np.zeros((feet_count, 3, 3))
         self.relative_flat = self.relative.reshape(feet_count, 9)
         self.vee_and_trace = np.zeros((feet_count, 4))
+        self.vees, self.traces = self.vee_and_trace[:, :3], self.vee_and_trace[:, 3]
+        self.orientations_error = self.per_foot[:, 3:]  # (empty for 3-row feet)
         # Sums the squared errors into norms: each foot's position, each foot's orientation
         # (6-row feet), the COM (free base); ``weights`` divides them by their tolerances.
         orientation = rows_per_foot == 6
