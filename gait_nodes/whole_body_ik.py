@@ -315,16 +315,16 @@ class WholeBodyIk(Node):
     def _targets_at(self, now_ns: int):
         """IK targets at ``now_ns``: feet, foot yaws, COM, body yaw, fallback feet count.
 
-        Plain floats from references checked where they entered (contract-validated
-        messages, finite): the tick hands them to :meth:`WholeBodyIkSolver.solve_trusted`.
+        From references checked where they entered (contract-validated messages, finite):
+        the tick hands them to :meth:`WholeBodyIkSolver.solve_trusted` unchecked.
         """
         feet, yaws, fallbacks = self._feet.at(now_ns, self._swing_paths,
                                               self.params.fallback_step_height_m)
         com, yaw = self._com_track.at(now_ns, self.params.com_extrapolation_s)
-        # Interpolations of finite references are finite (short of an overflow, which
-        # IkTargets would have refused too): one sum tells.
-        if not math.isfinite(sum(com) + yaw + sum(yaws) + sum(map(sum, feet))):
-            raise ValueError('targets hold a NaN or infinite value')
+        # Interpolations of finite references are finite, short of an overflow (IkTargets
+        # refused that too; FootTargets checks the swing feet): one sum tells.
+        if not math.isfinite(sum(com) + yaw):
+            raise ValueError(f'the COM target is not finite: {com}, {yaw}')
         return feet, yaws, com, yaw, fallbacks
 
     def _warm_start(self, now_ns: int) -> np.ndarray:
@@ -366,8 +366,7 @@ class WholeBodyIk(Node):
             window.fallback_ticks += fallbacks > 0
             if self._reseed:
                 self._q_solution = seed_configuration(
-                    self.robot, IkTargets(np.array(feet), np.array(yaws), yaw,
-                                          com_in_world=np.array(com)),
+                    self.robot, IkTargets(feet, np.array(yaws), yaw, com_in_world=np.array(com)),
                     self._family, self._q_solution[:3])
                 self._reseed = False
                 self._solutions.clear()

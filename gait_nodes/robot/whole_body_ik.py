@@ -236,14 +236,21 @@ class WholeBodyIkSolver:
         frames = self._frames
         feet_count = len(frames)
         settings = self.settings
+        # Small-array numpy calls are what a solve costs (about 1 us each; pinocchio's are
+        # cheaper): np.dot rather than @ for products (the same BLAS call, less dispatch),
+        # views made once, scalars set one by one. None changes a float.
+        dot = np.dot
         q = np.array(q_start, dtype=float)
-        if not math.isfinite(q @ q) and not np.isfinite(q).all():  # (q @ q: one cheap test)
+        if not math.isfinite(dot(q, q)) and not np.isfinite(q).all():  # (one cheap test)
             raise ValueError('q_start holds a NaN or infinite value')
         half = 0.5 * base_yaw_rad
-        q[3:7] = (0.0, 0.0, math.sin(half), math.cos(half))
+        q[3] = q[4] = 0.0
+        q[5] = math.sin(half)
+        q[6] = math.cos(half)
         free_base = com_in_world is not None
+        base = q[:3]
         if not free_base:
-            q[:3] = base_position_in_world
+            base[:] = base_position_in_world
         work = self._workspace(free_base)
         if work.settings is not settings:
             work.weigh(settings)
@@ -251,7 +258,7 @@ class WholeBodyIkSolver:
         orient = self._orient
         if orient:
             rotation_targets = self._rotation_targets_for(foot_yaws_rad)
-        com_target = com_in_world
+        com_target = np.asarray(com_in_world, dtype=float) if free_base else None
         error, full, placements = work.error, work.full, work.placements
         positions, positions_error, com_error = work.positions, work.positions_error, \
             work.com_error
@@ -261,10 +268,12 @@ class WholeBodyIkSolver:
         world = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
         placement, frame_jacobian = pin.updateFramePlacement, pin.getFrameJacobian
         foot_rows = work.foot_rows
+        point_feet = rows_per_foot != 6
         iteration = 0
         while True:
             pin.forwardKinematics(model, data, q)
-            placements[:] = [placement(model, data, frame).homogeneous for frame in frames]
+            for k, frame in enumerate(frames):
+                placements[k] = placement(model, data, frame).homogeneous
             np.subtract(frame_targets, positions, out=positions_error)
             if orient:
                 self._orientation_errors(rotation_targets, work)
@@ -273,20 +282,22 @@ class WholeBodyIkSolver:
                     model, data, pin.KinematicLevel.POSITION, False), out=com_error)
             squares = error * error
             # Every foot's and the COM's squared error over its squared tolerance, at most 1.
-            converged = max((squares @ work.weights).tolist()) <= 1.0
+            converged = max(dot(squares, work.weights).tolist()) <= 1.0
             if converged or iteration >= settings.max_iterations:
                 break
             iteration += 1
             pin.computeJointJacobians(model, data)
             for rows, frame in zip(foot_rows, frames, strict=True):
-                full[rows] = frame_jacobian(model, data, frame, world)[:rows_per_foot]
+                block = frame_jacobian(model, data, frame, world)
+                full[rows] = block[:3] if point_feet else block
             if free_base:
                 full[-3:, :-3] = pin.jacobianCenterOfMass(model, data, False)
             jacobian = full[:, work.columns]
+            transposed = jacobian.T
             # Levenberg-Marquardt step (J^T J + lambda I) dx = J^T e, by Cholesky.
-            normal = jacobian.T @ jacobian
-            normal.reshape(-1)[::len(normal) + 1] += error @ error + DAMPING_BIAS  # (a view)
-            _, step, info = lapack.dposv(normal, jacobian.T @ error, overwrite_a=True,
+            normal = transposed @ jacobian  # (matmul's syrk: cheaper here than np.dot's)
+            normal.reshape(-1)[::len(normal) + 1] += dot(error, error) + DAMPING_BIAS  # (a view)
+            _, step, info = lapack.dposv(normal, dot(transposed, error), overwrite_a=True,
                                          overwrite_b=True)
             if info != 0:  # not reached with lambda > 0; keep the iteration defined anyway
                 step = np.linalg.lstsq(jacobian, error, rcond=None)[0]
@@ -295,12 +306,12 @@ class WholeBodyIkSolver:
             if largest > MAX_NEWTON_STEP_RAD:
                 step *= MAX_NEWTON_STEP_RAD / largest
             if free_base:
-                q[:3] += step[:3]
+                np.add(base, step[:3], out=base)
             joints += joint_step
             np.maximum(joints, lower, out=joints)
             np.minimum(joints, upper, out=joints)
             q[q_idx] = joints
-        norms = np.sqrt(squares @ work.groups)  # feet positions, orientations, COM
+        norms = np.sqrt(dot(squares, work.groups))  # feet positions, orientations, COM
         margins = np.minimum(joints - lower, upper - joints).tolist()
         at_limit = () if min(margins, default=1.0) > 1e-9 else tuple(
             name for name, margin in zip(self.joint_names, margins, strict=True)
@@ -768,14 +779,14 @@ class FootTargets:
         self.plan = plan
         self._start_ns = plan.start_ns
         self._times = plan.times_s.tolist()
-        self._positions = plan.positions_in_world[:, order].tolist()  # [K][F][3]
+        self._positions = list(plan.positions_in_world[:, order])  # K arrays (F, 3)
         self._yaws = plan.yaws_rad[:, order].tolist()  # [K][F]
         feet = {name: k for k, name in enumerate(foot_names)}
         self._swings = [(swing.lift_off_s, swing.touch_down_s, feet[swing.foot],
                          _FallbackSwing(swing)) for swing in plan.swings()]
 
     def at(self, stamp_ns: int, swing_paths: Sequence[SwingPath | None],
-           step_height_m: float) -> tuple[list[list[float]], list[float], int]:
+           step_height_m: float) -> tuple[np.ndarray, list[float], int]:
         """Foot positions [m] and yaws [rad] at ``stamp_ns``, and how many feet fell back.
 
         Args:
@@ -784,13 +795,17 @@ class FootTargets:
             step_height_m: Peak lift of the fallback swing [m].
 
         Returns:
-            ``(feet, yaws, fallbacks)``: (F, 3) positions and (F,) yaws as new lists, and the
-            number of feet in swing that followed the fallback swing.
+            ``(feet, yaws, fallbacks)``: (F, 3) positions (a new array) and (F,) yaws (a new
+            list), and the number of feet in swing that followed the fallback swing.
+
+        Raises:
+            ValueError: A swing pose is not finite (only an overflow can make one so: the
+                plan and the swing trajectories are finite, checked by the contract).
         """
         t_plan = (stamp_ns - self._start_ns) * 1e-9
         # FootstepPlan.index_at: the last point at or before t_plan (0 before the start).
         index = max(bisect.bisect_right(self._times, t_plan) - 1, 0)
-        feet = [list(p) for p in self._positions[index]]
+        feet = self._positions[index].copy()
         yaws = list(self._yaws[index])
         under_way = {}  # swings_under_way: the later swing of a foot wins
         for lift_off_s, touch_down_s, k, swing in self._swings:
@@ -800,10 +815,14 @@ class FootTargets:
         for k, swing in under_way.items():
             path = swing_paths[k]
             if path is not None and path.covers(stamp_ns):
-                feet[k], yaws[k] = path.pose_at(stamp_ns)
+                position, yaws[k] = path.pose_at(stamp_ns)
             else:
-                feet[k], yaws[k] = swing.pose_at(t_plan, step_height_m)
+                position, yaws[k] = swing.pose_at(t_plan, step_height_m)
                 fallbacks += 1
+            if not math.isfinite(sum(position) + yaws[k]):
+                raise ValueError(f'the swing pose of foot {k} is not finite: {position}, '
+                                 f'{yaws[k]}')
+            feet[k] = position
         return feet, yaws, fallbacks
 
 
