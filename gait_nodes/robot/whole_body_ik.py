@@ -297,8 +297,8 @@ class WholeBodyIkSolver:
             # Levenberg-Marquardt step (J^T J + lambda I) dx = J^T e, by Cholesky.
             normal = transposed @ jacobian  # (matmul's syrk: cheaper here than np.dot's)
             normal.reshape(-1)[::len(normal) + 1] += dot(error, error) + DAMPING_BIAS  # (a view)
-            _, step, info = lapack.dposv(normal, dot(transposed, error), overwrite_a=True,
-                                         overwrite_b=True)
+            # (lower=0, overwrite_a=1, overwrite_b=1 positionally: f2py parses keywords slowly)
+            _, step, info = lapack.dposv(normal, dot(transposed, error), 0, 1, 1)
             if info != 0:  # not reached with lambda > 0; keep the iteration defined anyway
                 step = np.linalg.lstsq(jacobian, error, rcond=None)[0]
             joint_step = step[base_cols:]
@@ -331,7 +331,7 @@ class WholeBodyIkSolver:
         rotation vector to a relative 2e-9: sin(a) = a); beyond, Pinocchio's log3 foot by foot.
         """
         np.matmul(rotation_targets, work.rotations_transposed, out=work.relative)
-        np.matmul(work.relative_flat, VEE_AND_TRACE, out=work.vee_and_trace)
+        np.dot(work.relative_flat, VEE_AND_TRACE, out=work.vee_and_trace)  # (matmul's gemm)
         if min(work.traces.tolist()) > SMALL_ANGLE_TRACE:
             work.orientations_error[:] = work.vees
         else:
