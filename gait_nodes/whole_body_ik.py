@@ -28,6 +28,7 @@ reference. The step is scaled down to the joint velocity limits and published on
 
 from __future__ import annotations
 
+import math
 import sys
 from dataclasses import dataclass
 
@@ -35,10 +36,15 @@ import numpy as np
 
 from gait_nodes.cli import run_node
 from gait_nodes.contract import (
+    COM_JOINT_NAME,
+    WORLD_FRAME,
     ContractError,
     com_reference_from_msg,
+    duration_msg_to_seconds,
     footsteps_from_msg,
+    quaternion_to_yaw,
     swing_trajectory_from_msg,
+    time_msg_to_ns,
 )
 from gait_nodes.diagnostics import OK, WARN, DiagnosticsReporter
 from gait_nodes.errors import GaitNodesError, ParameterError
@@ -46,18 +52,17 @@ from gait_nodes.interfaces import get_constructor, get_message
 from gait_nodes.paths import node_defaults as shipped_node_defaults
 from gait_nodes.robot.model import load_robot_model
 from gait_nodes.robot.whole_body_ik import (
+    ComTrack,
+    FootTargets,
     IkSettings,
     IkTargets,
+    SwingPath,
     WholeBodyIkSolver,
-    com_state_at,
-    fallback_swing_pose,
     limb_ik_family,
-    limit_joint_velocity,
+    limit_joint_step,
     nominal_configuration,
     robosimian_limb_ik,
     seed_configuration,
-    swing_pose_at,
-    swings_under_way,
 )
 from gait_nodes.runtime import Node, QoSProfile, SetParametersResult, qos_profile_latched
 from gait_nodes.settings import checked_number as _number
@@ -157,15 +162,17 @@ class WholeBodyIk(Node):
         self.q_nominal = nominal_configuration(self.robot, self._family)
         self._q_solution = self.q_nominal.copy()
         self._q_command = self.q_nominal.copy()
+        self._joints_command = self.robot.joint_positions(self._q_command)
         # Solutions of the last consecutive solved ticks (oldest first): the warm start.
         self._solutions: list[np.ndarray] = []
         self._solution_times_s: list[int] = []  # their tick times [ns]
         self._reseed = False
         self._plan = None
-        self._plan_order = None
-        self._com_states = None
+        self._feet: FootTargets | None = None  # the plan's foot targets
+        self._com_track: ComTrack | None = None
         self._com_received_ns = None
-        self._swings: dict = {}
+        # The latest swing trajectory of each foot (robot order).
+        self._swing_paths: list[SwingPath | None] = [None] * len(self.robot.foot_names)
         self._last_tick_ns = None
         self._window = _Window()
         self._last_summary_ns = None
@@ -238,11 +245,11 @@ class WholeBodyIk(Node):
 
     def _on_com_reference(self, msg) -> None:
         try:
-            states = com_reference_from_msg(msg)
+            track = com_track_from_msg(msg)
         except ContractError as exc:
             self.diagnostics.drop('/gait/com_reference', str(exc))
             return
-        self._com_states = states
+        self._com_track = track
         self._com_received_ns = self.get_clock().now().nanoseconds
         self.inputs.heard('/gait/com_reference', self._com_received_ns)
 
@@ -256,7 +263,7 @@ class WholeBodyIk(Node):
             self.diagnostics.drop('/gait/footsteps', str(exc))
             return
         self._plan = plan
-        self._plan_order = [plan.foot_names.index(name) for name in self.robot.foot_names]
+        self._feet = FootTargets(plan, self.robot.foot_names)
 
     def _on_swing(self, msg) -> None:
         try:
@@ -267,7 +274,7 @@ class WholeBodyIk(Node):
         except ContractError as exc:
             self.diagnostics.drop('/gait/swing_trajectory', str(exc))
             return
-        self._swings[swing.foot] = swing
+        self._swing_paths[self.robot.foot_names.index(swing.foot)] = SwingPath(swing)
 
     def _on_tf(self, msg) -> None:
         if self._moving:
@@ -300,34 +307,25 @@ class WholeBodyIk(Node):
         self.robot.set_joint_positions(self._q_solution, joints)
         if self._base_pose is not None:
             self._q_solution[:7] = self._q_command[:7] = self._base_pose
+        self._joints_command = self.robot.joint_positions(self._q_command)
         self._joined = True
 
     # -- tick ----------------------------------------------------------------------------------
 
-    def _targets_at(self, now_ns: int) -> tuple[IkTargets, int]:
-        """IK targets at ``now_ns`` and how many feet follow the fallback swing."""
-        plan = self._plan
-        t_plan = (now_ns - plan.start_ns) * 1e-9
-        index = plan.index_at(t_plan)
-        order = self._plan_order
-        feet = plan.positions_in_world[index][order]
-        yaws = plan.yaws_rad[index][order]
-        fallbacks = 0
-        swings = swings_under_way(plan, t_plan)
-        for k, name in enumerate(self.robot.foot_names):
-            swing = swings.get(name)
-            if swing is None:
-                continue
-            trajectory = self._swings.get(name)
-            if trajectory is not None and trajectory.start_ns <= now_ns <= (
-                    trajectory.start_ns + int(round(trajectory.duration_s * 1e9))):
-                feet[k], yaws[k] = swing_pose_at(trajectory, now_ns)
-            else:
-                feet[k], yaws[k] = fallback_swing_pose(swing, t_plan,
-                                                       self.params.fallback_step_height_m)
-                fallbacks += 1
-        com, yaw = com_state_at(self._com_states, now_ns, self.params.com_extrapolation_s)
-        return IkTargets(feet, yaws, yaw, com_in_world=com), fallbacks
+    def _targets_at(self, now_ns: int):
+        """IK targets at ``now_ns``: feet, foot yaws, COM, body yaw, fallback feet count.
+
+        From references checked where they entered (contract-validated messages, finite):
+        the tick hands them to :meth:`WholeBodyIkSolver.solve_trusted` unchecked.
+        """
+        feet, yaws, fallbacks = self._feet.at(now_ns, self._swing_paths,
+                                              self.params.fallback_step_height_m)
+        com, yaw = self._com_track.at(now_ns, self.params.com_extrapolation_s)
+        # Interpolations of finite references are finite, short of an overflow (IkTargets
+        # refused that too; FootTargets checks the swing feet): one sum tells.
+        if not math.isfinite(sum(com) + yaw):
+            raise ValueError(f'the COM target is not finite: {com}, {yaw}')
+        return feet, yaws, com, yaw, fallbacks
 
     def _warm_start(self, now_ns: int) -> np.ndarray:
         """The solver's start from the last solutions, extrapolated to ``now_ns``.
@@ -335,9 +333,9 @@ class WholeBodyIk(Node):
         Ticks one period apart (inproc, an idle machine) use the equal-spacing formula; late or
         early ticks (a loaded machine) extrapolate with their real times.
         """
-        stamps = self._solution_times_s + [now_ns]
-        steps = {b - a for a, b in zip(stamps, stamps[1:], strict=False)}
-        if len(steps) == 1:
+        times = self._solution_times_s
+        step = now_ns - times[-1]
+        if all(b - a == step for a, b in zip(times, times[1:], strict=False)):
             return self.solver.warm_start(self._solutions)
         return self.solver.warm_start(self._solutions,
                                       [(t - now_ns) * 1e-9 for t in self._solution_times_s], 0.0)
@@ -362,18 +360,20 @@ class WholeBodyIk(Node):
             target = self._q_command
             self._solutions.clear()
             self._solution_times_s.clear()
-        elif self._com_states is not None and self._plan is not None:
+        elif self._com_track is not None and self._plan is not None:
             self._moving = True
-            targets, fallbacks = self._targets_at(now_ns)
+            feet, yaws, com, yaw, fallbacks = self._targets_at(now_ns)
             window.fallback_ticks += fallbacks > 0
             if self._reseed:
-                self._q_solution = seed_configuration(self.robot, targets, self._family,
-                                                      self._q_solution[:3])
+                self._q_solution = seed_configuration(
+                    self.robot, IkTargets(feet, np.array(yaws), yaw, com_in_world=np.array(com)),
+                    self._family, self._q_solution[:3])
                 self._reseed = False
                 self._solutions.clear()
                 self._solution_times_s.clear()
-            result = self.solver.solve(targets, self._warm_start(now_ns)
-                                       if self._solutions else self._q_solution)
+            result = self.solver.solve_trusted(
+                feet, yaws, yaw, self._warm_start(now_ns) if self._solutions
+                else self._q_solution, com)
             self._q_solution = result.q
             self._solutions.append(result.q)
             self._solution_times_s.append(now_ns)
@@ -391,9 +391,9 @@ class WholeBodyIk(Node):
             target = result.q
         else:
             target = self._q_command  # the current posture (the nominal stance before any)
-        q, velocities, saturation = limit_joint_velocity(self.robot, self._q_command, target,
-                                                         dt_s)
-        self._q_command = q
+        q, joints, velocities, saturation = limit_joint_step(
+            self.robot, self._q_command, self._joints_command, target, dt_s)
+        self._q_command, self._joints_command = q, joints
         if saturation.saturated:
             window.saturated_ticks += 1
             window.max_ratio = max(window.max_ratio, saturation.ratio)
@@ -401,20 +401,19 @@ class WholeBodyIk(Node):
                                     strict=True):
                 window.saturated_joints[joint] = max(window.saturated_joints.get(joint, 0.0),
                                                      ratio)
-        self._publish(now_ns, q, velocities)
+        self._publish(now_ns, joints, velocities)
         if self._last_summary_ns is None:
             self._last_summary_ns = now_ns
         elif (now_ns - self._last_summary_ns) * 1e-9 >= self.params.diagnostics_period_s - 1e-9:
             self._publish_summary(now_ns)
 
-    def _publish(self, now_ns: int, q: np.ndarray, velocities: np.ndarray) -> None:
+    def _publish(self, now_ns: int, joints: np.ndarray, velocities: np.ndarray) -> None:
         new = self._new
         # Stamped with the instant the targets were taken at, not the end of the solve: the
         # simulator follows the setpoints by their stamps.
         stamp = new['Time'](*divmod(now_ns, 1_000_000_000))
         self.publisher.publish(new['JointState'](
-            new['Header'](stamp, ''), self._joint_names,
-            self.robot.joint_positions(q).tolist(), np.asarray(velocities, dtype=float).tolist(),
+            new['Header'](stamp, ''), self._joint_names, joints.tolist(), velocities.tolist(),
             []))
 
     def _publish_summary(self, now_ns: int) -> None:
@@ -451,7 +450,7 @@ class WholeBodyIk(Node):
             self.get_logger().warning(statuses[0][2])
 
     def _input_status(self, now_ns: int, window: _Window):
-        waiting = [topic for topic, value in (('/gait/com_reference', self._com_states),
+        waiting = [topic for topic, value in (('/gait/com_reference', self._com_track),
                                               ('/gait/footsteps', self._plan)) if value is None]
         aspect, level, message, values = self.inputs.status(now_ns)
         if waiting:
@@ -478,6 +477,55 @@ class WholeBodyIk(Node):
                 else f'every limb in family {self._family}',
                 {'family': self._family, **{f'{name}_family': family
                                             for name, family in families.items()}})
+
+
+def com_track_from_msg(msg) -> ComTrack:
+    """The :class:`ComTrack` of a /gait/com_reference message; ContractError if malformed.
+
+    Equal to ``ComTrack.from_states(com_reference_from_msg(msg))`` (test_whole_body_ik checks
+    it on good and bad messages): the well-formed message of every tick is read straight into
+    floats, five times cheaper than building a validated ComState per point; a message this
+    fast path does not take as it is (a bad frame, a NaN, an odd shape or type) goes through
+    the contract's reader, which accepts it the same or names what is wrong.
+    """
+    try:
+        track = _com_track_as_expected(msg)
+    except (AttributeError, TypeError, ValueError, IndexError):
+        track = None
+    return track if track is not None else ComTrack.from_states(com_reference_from_msg(msg))
+
+
+def _com_track_as_expected(msg) -> ComTrack | None:
+    """The track of a /gait/com_reference message that is exactly as expected, else None."""
+    names = msg.joint_names
+    if msg.header.frame_id != WORLD_FRAME or len(names) != 1 or names[0] != COM_JOINT_NAME \
+            or not msg.points:
+        return None
+    start_ns = time_msg_to_ns(msg.header.stamp)
+    stamps, positions, velocities, yaws, yaw_rates = [], [], [], [], []
+    total = 0.0  # every value: finite if and only if each is (short of an overflow)
+    for point in msg.points:
+        transforms, twists, accelerations = point.transforms, point.velocities, \
+            point.accelerations
+        if len(transforms) != 1 or len(twists) != 1 or len(accelerations) != 1:
+            return None
+        t, r = transforms[0].translation, transforms[0].rotation
+        v, a = twists[0].linear, accelerations[0].linear
+        position = [float(t.x), float(t.y), float(t.z)]
+        velocity = [float(v.x), float(v.y), float(v.z)]
+        yaw = quaternion_to_yaw(r.x, r.y, r.z, r.w)
+        yaw_rate = float(twists[0].angular.z)
+        total += (sum(position) + sum(velocity) + float(a.x) + float(a.y) + float(a.z) + yaw
+                  + yaw_rate)
+        stamps.append(start_ns + int(round(duration_msg_to_seconds(point.time_from_start)
+                                           * 1e9)))
+        positions.append(position)
+        velocities.append(velocity)
+        yaws.append(yaw)
+        yaw_rates.append(yaw_rate)
+    if not math.isfinite(total):
+        return None
+    return ComTrack(stamps, positions, velocities, yaws, yaw_rates)
 
 
 def main(args: list[str] | None = None) -> int:

@@ -25,6 +25,7 @@ no swing trajectory is there for a foot in swing (:func:`fallback_swing_pose`).
 
 from __future__ import annotations
 
+import bisect
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -172,12 +173,11 @@ class WholeBodyIkSolver:
                 len(self._frames), self._rows_per_foot, self.model.nv, self._v_idx, free_base)
         return work
 
-    def _rotation_targets_for(self, yaws_rad: np.ndarray) -> np.ndarray:
-        yaws = yaws_rad.tolist()
-        if yaws != self._rotation_yaws:
-            for k, yaw in enumerate(yaws):
+    def _rotation_targets_for(self, yaws_rad: list[float]) -> np.ndarray:
+        if yaws_rad != self._rotation_yaws:
+            for k, yaw in enumerate(yaws_rad):
                 self._rotation_targets[k] = yaw_rotation(yaw) @ self._offsets[k]
-            self._rotation_yaws = yaws
+            self._rotation_yaws = list(yaws_rad)
         return self._rotation_targets
 
     def warm_start(self, solutions: Sequence[np.ndarray],
@@ -212,29 +212,53 @@ class WholeBodyIkSolver:
         Never returns NaN: a target out of reach gives the least-squares best effort with the
         residuals in the result.
         """
-        model, data = self.model, self.data
-        frames = self._frames
-        feet_count = len(frames)
+        feet_count = len(self._frames)
         if targets.feet_in_world.shape != (feet_count, 3):
             raise ValueError(f'{self.robot.name} has {feet_count} feet, targets give '
                              f'{len(targets.feet_in_world)}')
+        return self.solve_trusted(targets.feet_in_world, targets.foot_yaws_rad.tolist(),
+                                  targets.base_yaw_rad, q_start, targets.com_in_world,
+                                  targets.base_position_in_world)
+
+    def solve_trusted(self, feet_in_world, foot_yaws_rad: list[float], base_yaw_rad: float,
+                      q_start: np.ndarray, com_in_world=None,
+                      base_position_in_world=None) -> IkResult:
+        """:meth:`solve` for the fields of an :class:`IkTargets` that nobody checks here.
+
+        For a caller that validated its references once, where they entered (the
+        whole_body_ik node: contract-checked messages), and would otherwise pay the checks
+        of a new :class:`IkTargets` at every tick. The caller vouches for what
+        :class:`IkTargets` checks: ``feet_in_world`` (F, 3) [m] (an array or nested lists)
+        and ``foot_yaws_rad`` (F,) [rad] as a list, all finite, and exactly one of
+        ``com_in_world`` and ``base_position_in_world`` (3,) [m].
+        """
+        model, data = self.model, self.data
+        frames = self._frames
+        feet_count = len(frames)
         settings = self.settings
+        # Small-array numpy calls are what a solve costs (about 1 us each; pinocchio's are
+        # cheaper): np.dot rather than @ for products (the same BLAS call, less dispatch),
+        # views made once, scalars set one by one. None changes a float.
+        dot = np.dot
         q = np.array(q_start, dtype=float)
-        if not math.isfinite(q @ q) and not np.isfinite(q).all():  # (q @ q: one cheap test)
+        if not math.isfinite(dot(q, q)) and not np.isfinite(q).all():  # (one cheap test)
             raise ValueError('q_start holds a NaN or infinite value')
-        half = 0.5 * targets.base_yaw_rad
-        q[3:7] = (0.0, 0.0, math.sin(half), math.cos(half))
-        free_base = targets.com_in_world is not None
+        half = 0.5 * base_yaw_rad
+        q[3] = q[4] = 0.0
+        q[5] = math.sin(half)
+        q[6] = math.cos(half)
+        free_base = com_in_world is not None
+        base = q[:3]
         if not free_base:
-            q[:3] = targets.base_position_in_world
+            base[:] = base_position_in_world
         work = self._workspace(free_base)
         if work.settings is not settings:
             work.weigh(settings)
-        frame_targets = targets.feet_in_world + self._frame_offset
+        frame_targets = np.add(feet_in_world, self._frame_offset)
         orient = self._orient
         if orient:
-            rotation_targets = self._rotation_targets_for(targets.foot_yaws_rad)
-        com_target = targets.com_in_world
+            rotation_targets = self._rotation_targets_for(foot_yaws_rad)
+        com_target = np.asarray(com_in_world, dtype=float) if free_base else None
         error, full, placements = work.error, work.full, work.placements
         positions, positions_error, com_error = work.positions, work.positions_error, \
             work.com_error
@@ -242,11 +266,14 @@ class WholeBodyIkSolver:
         q_idx, lower, upper = self._q_idx, self._lower, self._upper
         joints = q[q_idx]
         world = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
+        placement, frame_jacobian = pin.updateFramePlacement, pin.getFrameJacobian
+        foot_rows = work.foot_rows
+        point_feet = rows_per_foot != 6
         iteration = 0
         while True:
             pin.forwardKinematics(model, data, q)
             for k, frame in enumerate(frames):
-                placements[k] = pin.updateFramePlacement(model, data, frame).homogeneous
+                placements[k] = placement(model, data, frame).homogeneous
             np.subtract(frame_targets, positions, out=positions_error)
             if orient:
                 self._orientation_errors(rotation_targets, work)
@@ -255,23 +282,23 @@ class WholeBodyIkSolver:
                     model, data, pin.KinematicLevel.POSITION, False), out=com_error)
             squares = error * error
             # Every foot's and the COM's squared error over its squared tolerance, at most 1.
-            converged = max((squares @ work.weights).tolist()) <= 1.0
+            converged = max(dot(squares, work.weights).tolist()) <= 1.0
             if converged or iteration >= settings.max_iterations:
                 break
             iteration += 1
             pin.computeJointJacobians(model, data)
-            for k, frame in enumerate(frames):
-                r = k * rows_per_foot
-                full[r:r + rows_per_foot, :-3] = \
-                    pin.getFrameJacobian(model, data, frame, world)[:rows_per_foot]
+            for rows, frame in zip(foot_rows, frames, strict=True):
+                block = frame_jacobian(model, data, frame, world)
+                full[rows] = block[:3] if point_feet else block
             if free_base:
                 full[-3:, :-3] = pin.jacobianCenterOfMass(model, data, False)
             jacobian = full[:, work.columns]
+            transposed = jacobian.T
             # Levenberg-Marquardt step (J^T J + lambda I) dx = J^T e, by Cholesky.
-            normal = jacobian.T @ jacobian
-            normal.flat[::len(normal) + 1] += error @ error + DAMPING_BIAS
-            _, step, info = lapack.dposv(normal, jacobian.T @ error, overwrite_a=True,
-                                         overwrite_b=True)
+            normal = transposed @ jacobian  # (matmul's syrk: cheaper here than np.dot's)
+            normal.reshape(-1)[::len(normal) + 1] += dot(error, error) + DAMPING_BIAS  # (a view)
+            # (lower=0, overwrite_a=1, overwrite_b=1 positionally: f2py parses keywords slowly)
+            _, step, info = lapack.dposv(normal, dot(transposed, error), 0, 1, 1)
             if info != 0:  # not reached with lambda > 0; keep the iteration defined anyway
                 step = np.linalg.lstsq(jacobian, error, rcond=None)[0]
             joint_step = step[base_cols:]
@@ -279,12 +306,12 @@ class WholeBodyIkSolver:
             if largest > MAX_NEWTON_STEP_RAD:
                 step *= MAX_NEWTON_STEP_RAD / largest
             if free_base:
-                q[:3] += step[:3]
+                np.add(base, step[:3], out=base)
             joints += joint_step
             np.maximum(joints, lower, out=joints)
             np.minimum(joints, upper, out=joints)
             q[q_idx] = joints
-        norms = np.sqrt(squares @ work.groups)  # feet positions, orientations, COM
+        norms = np.sqrt(dot(squares, work.groups))  # feet positions, orientations, COM
         margins = np.minimum(joints - lower, upper - joints).tolist()
         at_limit = () if min(margins, default=1.0) > 1e-9 else tuple(
             name for name, margin in zip(self.joint_names, margins, strict=True)
@@ -304,12 +331,12 @@ class WholeBodyIkSolver:
         rotation vector to a relative 2e-9: sin(a) = a); beyond, Pinocchio's log3 foot by foot.
         """
         np.matmul(rotation_targets, work.rotations_transposed, out=work.relative)
-        np.matmul(work.relative_flat, VEE_AND_TRACE, out=work.vee_and_trace)
-        if min(work.vee_and_trace[:, 3].tolist()) > SMALL_ANGLE_TRACE:
-            work.per_foot[:, 3:] = work.vee_and_trace[:, :3]
+        np.dot(work.relative_flat, VEE_AND_TRACE, out=work.vee_and_trace)  # (matmul's gemm)
+        if min(work.traces.tolist()) > SMALL_ANGLE_TRACE:
+            work.orientations_error[:] = work.vees
         else:
             for k, relative in enumerate(work.relative):
-                work.per_foot[k, 3:] = pin.log3(relative)
+                work.orientations_error[k] = pin.log3(relative)
 
 
 #: Maps a row-major flattened rotation E to (vee(E - E^T) / 2, trace(E)).
@@ -334,6 +361,9 @@ class _Workspace:
         rows = feet_count * rows_per_foot + (3 if free_base else 0)
         self.rows_per_foot = rows_per_foot
         self.full = np.zeros((rows, nv + 3))
+        # Each foot's block of the Pinocchio columns of ``full``.
+        self.foot_rows = [(slice(k * rows_per_foot, (k + 1) * rows_per_foot), slice(0, nv))
+                          for k in range(feet_count)]
         self.base_cols = 3 if free_base else 0
         if free_base:
             for k in range(feet_count):
@@ -355,6 +385,8 @@ class _Workspace:
         self.relative = np.zeros((feet_count, 3, 3))
         self.relative_flat = self.relative.reshape(feet_count, 9)
         self.vee_and_trace = np.zeros((feet_count, 4))
+        self.vees, self.traces = self.vee_and_trace[:, :3], self.vee_and_trace[:, 3]
+        self.orientations_error = self.per_foot[:, 3:]  # (empty for 3-row feet)
         # Sums the squared errors into norms: each foot's position, each foot's orientation
         # (6-row feet), the COM (free base); ``weights`` divides them by their tolerances.
         orientation = rows_per_foot == 6
@@ -504,27 +536,48 @@ def limit_joint_velocity(robot: RobotModel, q_previous: np.ndarray, q_target: np
         base included, scaled by the largest demanded/limit ratio when above 1), the joint
         vector velocities [rad/s] (never above the limits) and the saturation report.
     """
+    q, _, velocities, saturation = limit_joint_step(
+        robot, q_previous, robot.joint_positions(q_previous), q_target, dt_s)
+    return q, velocities, saturation
+
+
+def limit_joint_step(robot: RobotModel, q_previous: np.ndarray, previous_joints: np.ndarray,
+                     q_target: np.ndarray, dt_s: float
+                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, VelocitySaturation]:
+    """:func:`limit_joint_velocity` for a caller that keeps its last command's joint vector.
+
+    Args:
+        robot: The robot (joint velocity limits from its YAML).
+        q_previous: Configuration commanded at the previous tick.
+        previous_joints: ``robot.joint_positions(q_previous)`` [rad].
+        q_target: Configuration the IK asks for now.
+        dt_s: Time since the previous tick [s].
+
+    Returns:
+        ``(q, joints, joint_velocities, saturation)`` as :func:`limit_joint_velocity`, with
+        ``joints = robot.joint_positions(q)`` [rad] (the next call's ``previous_joints``).
+    """
     if not dt_s > 0:
         raise ValueError(f'dt_s must be > 0, got {dt_s}')
-    previous = robot.joint_positions(q_previous)
-    step = robot.joint_positions(q_target) - previous
+    target = robot.joint_positions(q_target)
+    step = target - previous_joints
     limits = robot.velocity_limits_rad_s
     demanded = np.abs(step) / (limits * dt_s)
     ratio = max(demanded.tolist(), default=0.0)
     if ratio <= 1.0:
-        return np.array(q_target, dtype=float), step / dt_s, VelocitySaturation(ratio)
+        return np.array(q_target, dtype=float), target, step / dt_s, VelocitySaturation(ratio)
     # Scale a hair more than needed so that rounding never leaves a joint above its limit.
     scale = (1.0 - 1e-12) / ratio
     q = np.array(q_previous, dtype=float)
     q[:3] += scale * (q_target[:3] - q_previous[:3])
     q[3:7] = q_target[3:7]
-    joints = previous + scale * step
+    joints = previous_joints + scale * step
     robot.set_joint_positions(q, joints)
     over = np.flatnonzero(demanded > 1.0)
     order = over[np.argsort(-demanded[over])]
     report = VelocitySaturation(ratio, tuple(robot.joint_names[k] for k in order),
                                 tuple(float(demanded[k]) for k in order))
-    return q, scale * step / dt_s, report
+    return q, robot.joint_positions(q), scale * step / dt_s, report
 
 
 # -- references at one instant ----------------------------------------------------------------
@@ -541,21 +594,8 @@ def com_state_at(states: Sequence[ComState], stamp_ns: int,
     Linear between the message's points; before the first point, the first; after the last,
     extrapolated with its velocity for at most ``max_extrapolation_s``, then held.
     """
-    if not states:
-        raise ValueError('no COM states')
-    first, last = states[0], states[-1]
-    if stamp_ns <= first.stamp_ns:
-        return np.array(first.position_in_world), float(first.yaw_rad)
-    if stamp_ns >= last.stamp_ns:
-        dt = min((stamp_ns - last.stamp_ns) * 1e-9, max_extrapolation_s)
-        return (last.position_in_world + dt * last.velocity_in_world,
-                float(last.yaw_rad + dt * last.yaw_rate_rad_s))
-    stamps = np.array([s.stamp_ns for s in states], dtype=np.int64)
-    k = int(np.searchsorted(stamps, stamp_ns, side='right')) - 1
-    a, b = states[k], states[k + 1]
-    w = (stamp_ns - a.stamp_ns) / max(b.stamp_ns - a.stamp_ns, 1)
-    yaw = a.yaw_rad + w * float(_wrap(b.yaw_rad - a.yaw_rad))
-    return (1 - w) * a.position_in_world + w * b.position_in_world, float(yaw)
+    position, yaw = ComTrack.from_states(states).at(stamp_ns, max_extrapolation_s)
+    return np.array(position), yaw
 
 
 def swing_pose_at(trajectory: SwingTrajectory, stamp_ns: int) -> tuple[np.ndarray, float]:
@@ -564,19 +604,8 @@ def swing_pose_at(trajectory: SwingTrajectory, stamp_ns: int) -> tuple[np.ndarra
     Before the first waypoint, the first; after the last, the last. The yaw turns the short
     way round between two waypoints (it is defined modulo 2 pi).
     """
-    t = (stamp_ns - trajectory.start_ns) * 1e-9
-    times = trajectory.times_s
-    positions, yaws = trajectory.positions_in_world, trajectory.yaws_rad
-    k = int(np.searchsorted(times, t, side='right')) - 1
-    if k < 0:
-        return positions[0].copy(), float(yaws[0])
-    if k >= len(times) - 1:
-        return positions[-1].copy(), float(yaws[-1])
-    # times[k] <= t < times[k + 1]: a segment of positive duration.
-    w = (t - times[k]) / (times[k + 1] - times[k])
-    yaw = float(yaws[k])
-    return (positions[k] + w * (positions[k + 1] - positions[k]),
-            yaw + w * math.remainder(float(yaws[k + 1]) - yaw, 2.0 * math.pi))
+    position, yaw = SwingPath(trajectory).pose_at(stamp_ns)
+    return np.array(position), yaw
 
 
 def _smoothstep(s: float) -> float:
@@ -599,14 +628,202 @@ def fallback_swing_pose(swing: Swing, t_s: float, step_height_m: float
         t_s: Time from the plan start [s].
         step_height_m: Peak lift [m].
     """
-    duration = swing.duration_s
-    s = (t_s - swing.lift_off_s) / duration if duration > 0 else 1.0
-    s = min(max(s, 0.0), 1.0)
-    blend = _smoothstep(s)
-    position = swing.start_in_world + blend * (swing.end_in_world - swing.start_in_world)
-    position[2] += step_height_m * math.sin(math.pi * s) ** 2
-    yaw = swing.start_yaw_rad + blend * float(_wrap(swing.end_yaw_rad - swing.start_yaw_rad))
-    return position, yaw
+    position, yaw = _FallbackSwing(swing).pose_at(t_s, step_height_m)
+    return np.array(position), yaw
+
+
+# -- references prepared for sampling at every tick -------------------------------------------
+#
+# The node samples its references 200 times a second and each message many times: these
+# classes convert a message's arrays to Python floats once, so that a sample is a few float
+# operations (numpy costs about a microsecond per call on a 3-vector). Every sample is the
+# same IEEE-754 double arithmetic, in the same order, as the numpy formulas they replace
+# (elementwise float64 add/multiply/divide round exactly like Python floats): the public
+# functions above are these classes, and test_whole_body_ik checks them bit for bit against
+# straightforward numpy versions.
+
+
+class SwingPath:
+    """A :class:`SwingTrajectory`, ready to be sampled by :meth:`pose_at` at every tick.
+
+    Args:
+        trajectory: The swing trajectory (validated by the contract: finite, times sorted).
+    """
+
+    __slots__ = ('start_ns', 'end_ns', '_times', '_positions', '_yaws')
+
+    def __init__(self, trajectory: SwingTrajectory):
+        self.start_ns = trajectory.start_ns
+        #: Touch-down [ns]: the trajectory covers ``start_ns <= t <= end_ns``.
+        self.end_ns = trajectory.start_ns + int(round(trajectory.duration_s * 1e9))
+        self._times = trajectory.times_s.tolist()
+        self._positions = trajectory.positions_in_world.tolist()
+        self._yaws = trajectory.yaws_rad.tolist()
+
+    def covers(self, stamp_ns: int) -> bool:
+        """Whether ``stamp_ns`` is within the swing (lift-off to touch-down, both included)."""
+        return self.start_ns <= stamp_ns <= self.end_ns
+
+    def pose_at(self, stamp_ns: int) -> tuple[list[float], float]:
+        """Foot position [m] and yaw [rad] at ``stamp_ns`` (see :func:`swing_pose_at`)."""
+        t = (stamp_ns - self.start_ns) * 1e-9
+        times, positions, yaws = self._times, self._positions, self._yaws
+        k = bisect.bisect_right(times, t) - 1
+        if k < 0:
+            return list(positions[0]), yaws[0]
+        if k >= len(times) - 1:
+            return list(positions[-1]), yaws[-1]
+        # times[k] <= t < times[k + 1]: a segment of positive duration.
+        w = (t - times[k]) / (times[k + 1] - times[k])
+        (ax, ay, az), (bx, by, bz) = positions[k], positions[k + 1]
+        yaw = yaws[k]
+        return ([ax + w * (bx - ax), ay + w * (by - ay), az + w * (bz - az)],
+                yaw + w * math.remainder(yaws[k + 1] - yaw, 2.0 * math.pi))
+
+
+class _FallbackSwing:
+    """A plan's :class:`Swing`, ready for :func:`fallback_swing_pose` at every tick."""
+
+    __slots__ = ('lift_off_s', 'touch_down_s', '_duration_s', '_start', '_delta', '_yaw',
+                 '_turn')
+
+    def __init__(self, swing: Swing):
+        self.lift_off_s = swing.lift_off_s
+        self.touch_down_s = swing.touch_down_s
+        self._duration_s = swing.duration_s
+        self._start = [float(x) for x in swing.start_in_world]
+        # end - start and the short-way yaw turn, as the per-sample formula computed them.
+        self._delta = (np.asarray(swing.end_in_world, dtype=float)
+                       - np.asarray(swing.start_in_world, dtype=float)).tolist()
+        self._yaw = swing.start_yaw_rad
+        self._turn = float(_wrap(swing.end_yaw_rad - swing.start_yaw_rad))
+
+    def pose_at(self, t_s: float, step_height_m: float) -> tuple[list[float], float]:
+        """Foot position [m] and yaw [rad] at ``t_s`` from the plan start."""
+        duration = self._duration_s
+        s = (t_s - self.lift_off_s) / duration if duration > 0 else 1.0
+        s = min(max(s, 0.0), 1.0)
+        blend = _smoothstep(s)
+        (x, y, z), (dx, dy, dz) = self._start, self._delta
+        return ([x + blend * dx, y + blend * dy,
+                 z + blend * dz + step_height_m * math.sin(math.pi * s) ** 2],
+                self._yaw + blend * self._turn)
+
+
+class ComTrack:
+    """The states of one COM reference message, ready for :meth:`at` at every tick.
+
+    Args:
+        stamps_ns: (N,) state times [ns], non-decreasing, at least one.
+        positions_in_world: (N, 3) COM positions [m].
+        velocities_in_world: (N, 3) COM velocities [m/s].
+        yaws_rad: (N,) body yaws [rad].
+        yaw_rates_rad_s: (N,) body yaw rates [rad/s].
+    """
+
+    __slots__ = ('_stamps', '_positions', '_velocities', '_yaws', '_yaw_rates')
+
+    def __init__(self, stamps_ns: Sequence[int], positions_in_world: Sequence[Sequence[float]],
+                 velocities_in_world: Sequence[Sequence[float]], yaws_rad: Sequence[float],
+                 yaw_rates_rad_s: Sequence[float]):
+        if len(stamps_ns) == 0:
+            raise ValueError('no COM states')
+        # Kept as given (read, never written).
+        self._stamps = stamps_ns
+        self._positions = positions_in_world
+        self._velocities = velocities_in_world
+        self._yaws = yaws_rad
+        self._yaw_rates = yaw_rates_rad_s
+
+    @classmethod
+    def from_states(cls, states: Sequence[ComState]) -> ComTrack:
+        """The track of the :class:`ComState` list of a /gait/com_reference message."""
+        if not states:
+            raise ValueError('no COM states')
+        return cls([s.stamp_ns for s in states],
+                   [np.asarray(s.position_in_world, dtype=float).tolist() for s in states],
+                   [np.asarray(s.velocity_in_world, dtype=float).tolist() for s in states],
+                   [s.yaw_rad for s in states], [s.yaw_rate_rad_s for s in states])
+
+    def at(self, stamp_ns: int, max_extrapolation_s: float = 0.05) -> tuple[list[float], float]:
+        """COM position [m] and body yaw [rad] at ``stamp_ns`` (see :func:`com_state_at`)."""
+        stamps = self._stamps
+        if stamp_ns <= stamps[0]:
+            return list(self._positions[0]), float(self._yaws[0])
+        if stamp_ns >= stamps[-1]:
+            dt = min((stamp_ns - stamps[-1]) * 1e-9, max_extrapolation_s)
+            (x, y, z), (vx, vy, vz) = self._positions[-1], self._velocities[-1]
+            return ([x + dt * vx, y + dt * vy, z + dt * vz],
+                    float(self._yaws[-1] + dt * self._yaw_rates[-1]))
+        k = bisect.bisect_right(stamps, stamp_ns) - 1
+        w = (stamp_ns - stamps[k]) / max(stamps[k + 1] - stamps[k], 1)
+        yaw = self._yaws[k] + w * float(_wrap(self._yaws[k + 1] - self._yaws[k]))
+        (ax, ay, az), (bx, by, bz) = self._positions[k], self._positions[k + 1]
+        return [(1 - w) * ax + w * bx, (1 - w) * ay + w * by, (1 - w) * az + w * bz], float(yaw)
+
+
+class FootTargets:
+    """The feet's targets from one footstep plan, in the robot's foot order, at every tick.
+
+    Stance feet stand where the plan puts them; a foot in swing follows its swing trajectory
+    while one covers the instant (:class:`SwingPath`), else the fallback swing
+    (:func:`fallback_swing_pose`).
+
+    Args:
+        plan: The footstep plan (its feet are the robot's, in any order).
+        foot_names: The robot's foot names, in its order.
+    """
+
+    def __init__(self, plan: FootstepPlan, foot_names: Sequence[str]):
+        order = [plan.foot_names.index(name) for name in foot_names]
+        self.plan = plan
+        self._start_ns = plan.start_ns
+        self._times = plan.times_s.tolist()
+        self._positions = list(plan.positions_in_world[:, order])  # K arrays (F, 3)
+        self._yaws = plan.yaws_rad[:, order].tolist()  # [K][F]
+        feet = {name: k for k, name in enumerate(foot_names)}
+        self._swings = [(swing.lift_off_s, swing.touch_down_s, feet[swing.foot],
+                         _FallbackSwing(swing)) for swing in plan.swings()]
+
+    def at(self, stamp_ns: int, swing_paths: Sequence[SwingPath | None],
+           step_height_m: float) -> tuple[np.ndarray, list[float], int]:
+        """Foot positions [m] and yaws [rad] at ``stamp_ns``, and how many feet fell back.
+
+        Args:
+            stamp_ns: The instant [ns].
+            swing_paths: The latest swing trajectory of each foot (robot order), or None.
+            step_height_m: Peak lift of the fallback swing [m].
+
+        Returns:
+            ``(feet, yaws, fallbacks)``: (F, 3) positions (a new array) and (F,) yaws (a new
+            list), and the number of feet in swing that followed the fallback swing.
+
+        Raises:
+            ValueError: A swing pose is not finite (only an overflow can make one so: the
+                plan and the swing trajectories are finite, checked by the contract).
+        """
+        t_plan = (stamp_ns - self._start_ns) * 1e-9
+        # FootstepPlan.index_at: the last point at or before t_plan (0 before the start).
+        index = max(bisect.bisect_right(self._times, t_plan) - 1, 0)
+        feet = self._positions[index].copy()
+        yaws = list(self._yaws[index])
+        under_way = {}  # swings_under_way: the later swing of a foot wins
+        for lift_off_s, touch_down_s, k, swing in self._swings:
+            if lift_off_s < t_plan < touch_down_s:
+                under_way[k] = swing
+        fallbacks = 0
+        for k, swing in under_way.items():
+            path = swing_paths[k]
+            if path is not None and path.covers(stamp_ns):
+                position, yaws[k] = path.pose_at(stamp_ns)
+            else:
+                position, yaws[k] = swing.pose_at(t_plan, step_height_m)
+                fallbacks += 1
+            if not math.isfinite(sum(position) + yaws[k]):
+                raise ValueError(f'the swing pose of foot {k} is not finite: {position}, '
+                                 f'{yaws[k]}')
+            feet[k] = position
+        return feet, yaws, fallbacks
 
 
 def current_swing(plan: FootstepPlan, foot: str, t_s: float) -> Swing | None:
