@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import math
 import operator
+import weakref
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from itertools import compress, count, repeat
@@ -321,6 +322,62 @@ class ZmpReference:
         object.__setattr__(self, 'zmp_in_world', zmp)
         object.__setattr__(self, 'plane_heights_m', heights)
 
+    def followed_by(self, shift: int, stamps_ns: np.ndarray, zmp_in_world: np.ndarray,
+                    plane_heights_m: np.ndarray | None = None) -> ZmpReference:
+        """This reference from its sample ``shift`` on, followed by new samples (a window slid).
+
+        Equal to ``ZmpReference`` of the concatenated arrays (this reference's plane heights,
+        zeros for new samples without heights), but only the new samples and their junction
+        are checked (the kept ones were checked when this reference was made), and the arrays
+        are read-only views of a buffer the successive windows fill (:class:`_WindowBuffer`):
+        a few samples written per window, not the whole window copied. The result remembers
+        where it came from, so that :meth:`ZmpReferenceMessages.to_msg` reuses the kept
+        samples' poses without comparing them.
+
+        Args:
+            shift: Samples dropped at the start, in [0, N].
+            stamps_ns: (M,) stamps of the new samples [ns].
+            zmp_in_world: (M, 2) their ZMP reference in odom [m].
+            plane_heights_m: (M,) their plane heights [m]; None: zeros.
+        """
+        count = len(self.stamps_ns)
+        stamps = [int(stamp) for stamp in np.asarray(stamps_ns, dtype=np.int64).tolist()]
+        zmp = np.asarray(zmp_in_world, dtype=float)
+        heights = (np.zeros(len(stamps)) if plane_heights_m is None
+                   else np.asarray(plane_heights_m, dtype=float))
+        if not 0 <= shift <= count or (shift == count and not stamps):
+            raise ContractError(f'a ZMP reference of {count} samples slid by {shift} with '
+                                f'{len(stamps)} new samples')
+        if zmp.shape != (len(stamps), 2) or heights.shape != (len(stamps),):
+            raise ContractError(f'new ZMP reference samples of shapes {zmp.shape} and '
+                                f'{heights.shape} for {len(stamps)} stamps')
+        previous = [int(self.stamps_ns[-1])] if shift < count else []
+        joined = previous + stamps
+        if any(b <= a for a, b in zip(joined, joined[1:], strict=False)):
+            raise ContractError('ZMP reference stamps are not strictly increasing')
+        if not all(map(math.isfinite, zmp.ravel().tolist())):
+            raise ContractError('the ZMP reference holds a NaN or infinite value')
+        if not all(map(math.isfinite, heights.tolist())):
+            raise ContractError('the ZMP reference plane heights holds a NaN or infinite value')
+        window = self.__dict__.get('_window')
+        if window is None or not window[0].can_append(window[2], len(stamps)):
+            buffer = _WindowBuffer(4 * (count - shift + len(stamps)))
+            buffer.append(self.stamps_ns[shift:], self.zmp_in_world[shift:],
+                          self.plane_heights_m[shift:])
+            start = 0
+        else:
+            buffer, start, _ = window
+            start += shift
+        stop = buffer.append(stamps, zmp, heights)
+        result = object.__new__(ZmpReference)
+        object.__setattr__(result, 'stamps_ns', buffer.view(buffer.stamps_ns, start, stop))
+        object.__setattr__(result, 'zmp_in_world', buffer.view(buffer.zmp_in_world, start, stop))
+        object.__setattr__(result, 'plane_heights_m',
+                           buffer.view(buffer.plane_heights_m, start, stop))
+        object.__setattr__(result, '_window', (buffer, start, stop))
+        object.__setattr__(result, '_slid_from', (weakref.ref(self), shift))
+        return result
+
     @property
     def horizon_s(self) -> float:
         """Time from the first to the last sample [s]."""
@@ -336,6 +393,45 @@ class ZmpReference:
         result = np.empty((len(t), 2))  # (the columns of np.stack, for fewer numpy calls)
         result[:, 0] = np.interp(t, known, self.zmp_in_world[:, 0])
         result[:, 1] = np.interp(t, known, self.zmp_in_world[:, 1])
+        return result
+
+
+class _WindowBuffer:
+    """Storage of successive windows of a ZMP reference (:meth:`ZmpReference.followed_by`).
+
+    Each window is a read-only view of a stretch of these arrays; new samples are written past
+    the last window's end, which no earlier window covers, so no window ever changes. A window
+    that does not end where the filled part ends (a second slide of the same window) or does
+    not fit starts a new buffer.
+
+    Args:
+        size: Samples it holds.
+    """
+
+    def __init__(self, size: int):
+        self.stamps_ns = np.empty(size, dtype=np.int64)
+        self.zmp_in_world = np.empty((size, 2))
+        self.plane_heights_m = np.empty(size)
+        self.end = 0  # samples written
+
+    def can_append(self, stop: int, count: int) -> bool:
+        """Whether ``count`` samples fit after a window ending at ``stop`` (the filled end)."""
+        return stop == self.end and self.end + count <= len(self.stamps_ns)
+
+    def append(self, stamps_ns, zmp_in_world, plane_heights_m) -> int:
+        """Write samples at the filled end; the new end."""
+        start, stop = self.end, self.end + len(stamps_ns)
+        self.stamps_ns[start:stop] = stamps_ns
+        self.zmp_in_world[start:stop] = zmp_in_world
+        self.plane_heights_m[start:stop] = plane_heights_m
+        self.end = stop
+        return stop
+
+    @staticmethod
+    def view(array: np.ndarray, start: int, stop: int) -> np.ndarray:
+        """Read-only ``array[start:stop]``."""
+        result = array[start:stop]
+        result.setflags(write=False)
         return result
 
 
@@ -356,9 +452,8 @@ class ZmpReferenceMessages:
 
     def __init__(self):
         self._constructors = (None,)
-        self._stamps = np.zeros(0, dtype=np.int64)
-        self._bits = np.zeros((0, 3), dtype=np.int64)
-        self._poses: list = []
+        self._reference: ZmpReference | None = None  # the last message's reference
+        self._poses: list = []  # and its poses
 
     def to_msg(self, reference: ZmpReference):
         """nav_msgs/Path for ``reference`` (layout in the module docstring)."""
@@ -368,31 +463,44 @@ class ZmpReferenceMessages:
                 'geometry_msgs/msg/PoseStamped', 'std_msgs/msg/Header',
                 'builtin_interfaces/msg/Time', 'geometry_msgs/msg/Pose',
                 'geometry_msgs/msg/Point', 'geometry_msgs/msg/Quaternion')))
-            self._stamps = self._stamps[:0]
+            self._reference = None
         _, pose_stamped, header, time, pose, point, quaternion = self._constructors
         stamps = reference.stamps_ns
-        zmp = np.column_stack((reference.zmp_in_world, reference.plane_heights_m))
-        bits = zmp.view(np.int64)  # exact comparison: 0.0 and -0.0 are different samples
-        # Samples equal to the previous message's from the same stamp on (stamps increase).
-        reused = np.zeros(len(stamps), dtype=bool)
-        offset = int(np.searchsorted(self._stamps, stamps[0]))
-        if offset < len(self._stamps):
-            count = min(len(self._stamps) - offset, len(stamps))
-            window = slice(offset, offset + count)
-            reused[:count] = ((self._stamps[window] == stamps[:count])
-                              & (self._bits[window] == bits[:count]).all(axis=1))
-        # The leading run of reused samples is one slice of the previous list.
-        run = len(reused) if reused.all() else int(np.argmin(reused))
-        poses = self._poses[offset:offset + run]
-        for k in range(run, len(stamps)):
-            if reused[k]:
+        last = self._reference
+        slid = reference.__dict__.get('_slid_from')
+        reused = None
+        if last is not None and slid is not None and slid[0]() is last:
+            # Slid from the last message's reference (ZmpReference.followed_by): its samples
+            # from ``shift`` on are this one's first samples, the same values.
+            poses = self._poses[slid[1]:]
+        elif last is not None:
+            # Samples equal to the previous message's from the same stamp on (stamps increase),
+            # bit for bit (0.0 and -0.0 are different samples).
+            bits = np.column_stack((reference.zmp_in_world, reference.plane_heights_m))
+            last_bits = np.column_stack((last.zmp_in_world, last.plane_heights_m))
+            reused = np.zeros(len(stamps), dtype=bool)
+            offset = int(np.searchsorted(last.stamps_ns, stamps[0]))
+            if offset < len(last.stamps_ns):
+                count = min(len(last.stamps_ns) - offset, len(stamps))
+                window = slice(offset, offset + count)
+                reused[:count] = ((last.stamps_ns[window] == stamps[:count])
+                                  & (last_bits[window].view(np.int64)
+                                     == bits[:count].view(np.int64)).all(axis=1))
+            # The leading run of reused samples is one slice of the previous list.
+            run = len(reused) if reused.all() else int(np.argmin(reused))
+            poses = self._poses[offset:offset + run]
+        else:
+            poses = []
+        zmp, heights = reference.zmp_in_world, reference.plane_heights_m
+        for k in range(len(poses), len(stamps)):
+            if reused is not None and reused[k]:
                 poses.append(self._poses[offset + k])
-            else:
-                x, y, z = zmp[k].tolist()
-                poses.append(pose_stamped(
-                    header(time(*divmod(int(stamps[k]), _NS_PER_S)), WORLD_FRAME),
-                    pose(point(x, y, z), quaternion(0.0, 0.0, 0.0, 1.0))))
-        self._stamps, self._bits, self._poses = stamps.copy(), bits.copy(), poses
+                continue
+            x, y = zmp[k].tolist()
+            poses.append(pose_stamped(
+                header(time(*divmod(int(stamps[k]), _NS_PER_S)), WORLD_FRAME),
+                pose(point(x, y, float(heights[k])), quaternion(0.0, 0.0, 0.0, 1.0))))
+        self._reference, self._poses = reference, poses
         return path(header(time(*divmod(int(stamps[0]), _NS_PER_S)), WORLD_FRAME), poses)
 
 

@@ -55,6 +55,8 @@ WARN on the 'velocity' diagnostic.
 
 from __future__ import annotations
 
+import bisect
+import itertools
 import json
 import math
 import sys
@@ -278,6 +280,7 @@ class FootstepPlanner(Node):
         self._join_start_ns: int | None = None
         self._swings_heard: set[tuple[str, int]] = set()
         self._swings_checked: set[tuple[str, int]] = set()
+        self._swings_pruned_ns = -NS_PER_S
         self.swing_inputs = InputWatchdog([], 1.0, self.origin_ns, events=[SWING_TOPIC],
                                           holding='the whole-body IK follows its fallback swing')
         self._last_now_s = 0.0
@@ -632,9 +635,13 @@ class FootstepPlanner(Node):
             if key not in self._swings_heard and now_ns - lift_ns < 2 * grace_ns + NS_PER_S:
                 self.swing_inputs.missed(SWING_TOPIC, f'the swing of {foot} lifting off '
                                                       f'at {lift_ns * 1e-9:.3f} s')
-        old = now_ns - 60 * NS_PER_S
-        self._swings_checked = {k for k in self._swings_checked if k[1] > old}
-        self._swings_heard = {k for k in self._swings_heard if k[1] > old}
+        if not 0 <= now_ns - self._swings_pruned_ns < NS_PER_S:
+            # Swings a minute old forgotten, once a second (what is kept longer is never asked:
+            # a swing that old is past its checks).
+            old = now_ns - 60 * NS_PER_S
+            self._swings_checked = {k for k in self._swings_checked if k[1] > old}
+            self._swings_heard = {k for k in self._swings_heard if k[1] > old}
+            self._swings_pruned_ns = now_ns
         if self.swing_inputs.update(now_ns):
             aspect, level, message, values = self.swing_inputs.status(now_ns)
             self.diagnostics.report('swing inputs', level, message if level != OK else
@@ -736,15 +743,18 @@ class FootstepPlanner(Node):
     def tick(self) -> None:
         """Extend the plan, publish the footsteps if they changed and the ZMP reference."""
         now_ns, now_s = self.now_s()
-        if not self._joined and not self._join(now_ns):
-            return
-        now_ns, now_s = self.now_s()
+        if not self._joined:
+            if not self._join(now_ns):
+                return
+            now_ns, now_s = self.now_s()
         now_s = self._restart_if_clock_jumped(now_ns, now_s)
         self._last_now_s = now_s
         self._check_cmd_vel(now_ns, now_s)
+        origin_ns, pause = self.origin_ns, self._pause
         if self._paused(now_ns, now_s):
             return
-        now_ns, now_s = self.now_s()
+        if pause is not None or origin_ns != self.origin_ns:  # resumed: the time read anew
+            now_ns, now_s = self.now_s()
         horizon = self.settings['zmp_horizon_s']
         self.planner.advance(now_s + horizon + self.planner.params.step_period_s)
         self.planner.prune(now_s)
@@ -807,31 +817,35 @@ class _HorizonCut:
 
     def __init__(self):
         self._plan = None
-        self._swings: list[tuple[float, float]] = []
+        self._lifts_s: list[float] = []  # the swings' lift-offs, sorted [s]
+        self._landings_s: list[float] = []  # latest touch-down of the swings up to each lift
         self._times_ns: list[int] = []
-        self._all_down: list[bool] = []
+        self._last_down: list[int] = []  # last point up to each with every foot down
         self._cuts: dict[int, FootstepPlan] = {}
 
     def __call__(self, plan: FootstepPlan, now_ns: int, until_ns: int) -> FootstepPlan:
         if plan is not self._plan:
-            swings = [(s.lift_off_s, s.touch_down_s) for s in plan.swings()]
+            swings = sorted((s.lift_off_s, s.touch_down_s) for s in plan.swings())
+            self._lifts_s = [lift for lift, _ in swings]
+            self._landings_s = list(itertools.accumulate((touch for _, touch in swings), max))
+            # (the plan's times never decrease: the points up to a time are a leading run)
             self._times_ns = (plan.start_ns + np.round(plan.times_s * NS_PER_S).astype(
                 np.int64)).tolist()
-            self._all_down = [not any(lift < t_s < touch for lift, touch in swings)
-                              for t_s in plan.times_s]
-            self._plan, self._swings, self._cuts = plan, swings, {}
+            self._last_down, last = [], 0
+            for k, t_s in enumerate(plan.times_s.tolist()):
+                if not any(lift < t_s < touch for lift, touch in swings):
+                    last = k
+                self._last_down.append(last)
+            self._plan, self._cuts = plan, {}
         now_s = (now_ns - plan.start_ns) * 1e-9
         until_s = max(now_s, (until_ns - plan.start_ns) * 1e-9)
         # Every swing lifting off within the horizon goes out whole: a swing longer than the
         # horizon (the crawl's value-table swings) must reach the IK before its lift-off.
-        landing_s = max((touch for lift, touch in self._swings if lift <= until_s), default=0.0)
+        lifted = bisect.bisect_right(self._lifts_s, until_s)
+        landing_s = self._landings_s[lifted - 1] if lifted else 0.0
         until_ns = max(until_ns, plan.start_ns + int(round(landing_s * NS_PER_S)))
-        last = 0
-        for k, time_ns in enumerate(self._times_ns):
-            if time_ns > until_ns:
-                break
-            if self._all_down[k]:
-                last = k
+        reached = bisect.bisect_right(self._times_ns, until_ns)
+        last = self._last_down[reached - 1] if reached else 0
         if last == len(plan.times_s) - 1:
             return plan
         if last not in self._cuts:

@@ -306,3 +306,72 @@ def test_swing_trajectory_to_msg_is_the_transform_composition_to_the_byte(start_
          for t, p, y in zip(times, swing.positions_in_world, swing.yaws_rad, strict=True)])
     assert serialize_message(contract.swing_trajectory_to_msg(swing)) == \
         serialize_message(expected)
+
+
+def _bits(reference):
+    return (reference.stamps_ns.tolist(),
+            np.ascontiguousarray(reference.zmp_in_world).view(np.int64).tolist(),
+            np.ascontiguousarray(reference.plane_heights_m).view(np.int64).tolist())
+
+
+@settings(max_examples=80, deadline=None)
+@given(st.lists(st.tuples(st.integers(0, 12), st.integers(0, 12), st.booleans(),
+                          st.integers(0, 3)), min_size=1, max_size=30),
+       st.booleans())
+def test_zmp_reference_followed_by_is_the_concatenation(slides, heights):
+    """A slid window is the reference of the concatenated arrays, bit for bit.
+
+    Its message (built from the kept poses) has the bytes of an independent message; a window
+    slid twice (a branch) or a buffer full of windows leaves every earlier window as it was.
+    """
+    rng = np.random.default_rng(len(slides))
+    count = 10
+    stamps = np.arange(count, dtype=np.int64) * 7 + 1_000
+    zmp = rng.normal(size=(count, 2))
+    plane = rng.normal(size=count) if heights else None
+    start = ZmpReference(stamps, zmp, plane)
+    windows = [(start, _bits(start))]
+    builder = contract.ZmpReferenceMessages()
+    builder.to_msg(start)
+    for shift, new, negative_zero, branch in slides:
+        # Mostly the last window; sometimes an older one (its buffer is filled further on).
+        base = windows[-4][0] if branch == 3 and len(windows) >= 4 else windows[-1][0]
+        shift = min(shift, len(base.stamps_ns))
+        if shift == len(base.stamps_ns) and new == 0:
+            with pytest.raises(ContractError):
+                base.followed_by(shift, [], np.zeros((0, 2)))
+            continue
+        new_stamps = int(base.stamps_ns[-1]) + 1 + 5 * np.arange(new, dtype=np.int64)
+        new_zmp = rng.normal(size=(new, 2))
+        if negative_zero and new:
+            new_zmp[0] = (-0.0, 0.0)
+        new_plane = rng.normal(size=new) if heights else None
+        slid = base.followed_by(shift, new_stamps, new_zmp, new_plane)
+        whole = ZmpReference(
+            np.concatenate((base.stamps_ns[shift:], new_stamps)),
+            np.concatenate((base.zmp_in_world[shift:], new_zmp)),
+            np.concatenate((base.plane_heights_m[shift:],
+                            np.zeros(new) if new_plane is None else new_plane)))
+        assert _bits(slid) == _bits(whole)
+        assert not slid.stamps_ns.flags.writeable and not slid.zmp_in_world.flags.writeable
+        assert not slid.plane_heights_m.flags.writeable
+        assert serialize_message(builder.to_msg(slid)) == serialize_message(
+            contract.zmp_reference_to_msg(whole))
+        windows.append((slid, _bits(slid)))
+        assert all(_bits(window) == bits for window, bits in windows)
+
+
+def test_zmp_reference_followed_by_checks_the_new_samples():
+    reference = ZmpReference([0, 10, 20], np.zeros((3, 2)))
+    bad = [([20], [[0.0, 0.0]], None),                  # not after the kept samples
+           ([30, 30], np.zeros((2, 2)), None),          # not increasing
+           ([30], [[math.nan, 0.0]], None),             # not finite
+           ([30], [[0.0, 0.0]], [math.inf]),            # height not finite
+           ([30], np.zeros((1, 3)), None),              # shape
+           ([30, 40], np.zeros((2, 2)), [0.0])]         # heights shape
+    for stamps, zmp, heights in bad:
+        with pytest.raises(ContractError):
+            reference.followed_by(1, stamps, zmp, heights)
+    with pytest.raises(ContractError):
+        reference.followed_by(4, [30], [[0.0, 0.0]])
+    assert reference.followed_by(3, [20], [[1.0, 2.0]]).stamps_ns.tolist() == [20]

@@ -311,3 +311,43 @@ def test_published_footsteps_carry_every_swing_that_lifts_off_within_the_horizon
         kept, fresh = _within(plan, *args), _HorizonCut()(plan, *args)
         np.testing.assert_array_equal(kept.times_s, fresh.times_s)
         np.testing.assert_array_equal(kept.positions_in_world, fresh.positions_in_world)
+
+
+def _cut_by_scanning(plan, now_ns: int, until_ns: int) -> int:
+    """Points _HorizonCut keeps, by scanning every swing and point (its first form)."""
+    ns = 1_000_000_000
+    swings = [(s.lift_off_s, s.touch_down_s) for s in plan.swings()]
+    until_s = max((now_ns - plan.start_ns) * 1e-9, (until_ns - plan.start_ns) * 1e-9)
+    landing_s = max((touch for lift, touch in swings if lift <= until_s), default=0.0)
+    until_ns = max(until_ns, plan.start_ns + int(round(landing_s * ns)))
+    last = 0
+    for k, t_s in enumerate(plan.times_s):
+        if plan.start_ns + int(round(t_s * ns)) > until_ns:
+            break
+        if not any(lift < t_s < touch for lift, touch in swings):
+            last = k
+    return last + 1
+
+
+def test_horizon_cut_by_bisection_keeps_what_a_scan_keeps():
+    """The cut found by bisection on the plan's sorted times equals the scan's, over a walk."""
+    from gait_nodes.footstep_planner import _HorizonCut
+    from gait_nodes.planning.footsteps import GaitPlanner, Twist2D
+    from gait_nodes.robot.description import load_robot_description
+
+    rng = np.random.default_rng(11)
+    cut = _HorizonCut()
+    for robot in (QUADRUPED, BIPED):
+        planner = GaitPlanner(load_robot_description(robot))
+        planner.set_velocity(Twist2D(0.05, 0.01, 0.05), 0.0)
+        planner.advance(30.0)
+        for start_s in (0.0, 3.0, 7.5):
+            plan = planner.footstep_plan(start_s, 1_000)
+            for now_s in np.sort(rng.uniform(start_s, start_s + 20.0, 60)):
+                now_ns = 1_000 + int(now_s * 1e9)
+                for horizon_ns in (0, int(0.5e9), int(2e9), int(rng.uniform(0, 6e9))):
+                    kept = cut(plan, now_ns, now_ns + horizon_ns)
+                    assert len(kept.times_s) == _cut_by_scanning(plan, now_ns,
+                                                                 now_ns + horizon_ns)
+                    assert np.array_equal(kept.positions_in_world,
+                                          plan.positions_in_world[:len(kept.times_s)])

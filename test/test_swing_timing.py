@@ -279,3 +279,26 @@ def test_lattice_interpolation_in_floats_is_the_numpy_form_to_the_bit():
     for x, y, turn in points.tolist():
         got = timing._lattice_s(np.array([x, y]), turn)
         assert got == _lattice_s_numpy(timing, (x, y), turn)
+
+
+def test_swing_s_in_floats_and_looked_up_is_the_numpy_form_to_the_bit():
+    """swing_s (plain-float mirroring, steps asked again looked up) equals the array form."""
+    from gait_nodes.swing.timing import BODY_MOTION_MARGIN
+
+    timing = object.__new__(PolynomialSwingTiming)
+    rng = np.random.default_rng(7)
+    timing._cache, timing._swing_s = {}, {}
+    timing.raw_s = lambda node, turn: 0.5 + float(np.hypot(*node)) + 0.3 * abs(turn)
+    timing._mirrors = [np.array(m, dtype=float) for m in
+                       ([1, 1, 1], [1, -1, 1], [-1, 1, 1], [-1, -1, 1])]
+    timing._mirror_floats = [(float(m[0]), float(m[1])) for m in timing._mirrors]
+    steps = np.concatenate([rng.normal(0.0, 0.1, (500, 3)),
+                            np.round(rng.normal(0.0, 0.1, (100, 3)) / 0.02) * 0.02,
+                            [[0.0, -0.0, 0.0], [-0.0, 0.0, -0.0], [0.1, 0.0, 0.0]]])
+    for _ in range(2):  # the second pass is looked up
+        for x, y, turn in steps.tolist():
+            for foot, mirror in enumerate(timing._mirrors):
+                step = np.array([x, y]) * mirror[:2]
+                expected = (1.0 + BODY_MOTION_MARGIN) * timing._lattice_s(
+                    step, float(mirror[0] * mirror[1]) * turn)
+                assert timing.swing_s(foot, np.array([x, y]), turn) == expected

@@ -899,10 +899,10 @@ class GaitPlanner:
         """
         period_ns = int(round(period_s * NS_PER_S))
         count = int(math.ceil(horizon_s * NS_PER_S / period_ns - 1e-9)) + 1
-        stamps = first_ns + period_ns * np.arange(count, dtype=np.int64)
-        times_s = (stamps - origin_ns) * 1e-9
         knots = self.zmp_knots()
-        plan = None if self._terrain.flat else self.footstep_plan(float(times_s[0]), origin_ns)
+        # (the float times of the samples are (stamp - origin) * 1e-9, as numpy works them out)
+        plan = None if self._terrain.flat else self.footstep_plan(
+            (first_ns - origin_ns) * 1e-9, origin_ns)
         # The node asks every tick for a window slid by a few samples of the same plan: the
         # samples at the stamps the last window already had are its values (np.interp works
         # sample by sample: the same knots and time give the same bits), only the new tail
@@ -914,17 +914,18 @@ class GaitPlanner:
                 and last[0][2:] == key[2:] and (first_ns - last[1]) % period_ns == 0:
             shift = (first_ns - last[1]) // period_ns
         if 0 <= shift < count:
-            _, _, zmp, heights = last
-            fresh = times_s[count - shift:]
-            zmp = np.concatenate((zmp[shift:], self.zmp(fresh)))
-            if plan is not None:
-                heights = np.concatenate((heights[shift:],
-                                          self._plane_heights(fresh, origin_ns, plan)))
+            stamps = first_ns + period_ns * np.arange(count - shift, count, dtype=np.int64)
         else:
-            zmp = self.zmp(times_s)
-            heights = None if plan is None else self._plane_heights(times_s, origin_ns, plan)
-        self._last_zmp_reference = (key, first_ns, zmp, heights)
-        return ZmpReference(stamps, zmp, heights)
+            stamps = first_ns + period_ns * np.arange(count, dtype=np.int64)
+        times_s = (stamps - origin_ns) * 1e-9
+        zmp = zmp_reference.sample(*knots, times_s)
+        heights = None if plan is None else self._plane_heights(times_s, origin_ns, plan)
+        if 0 <= shift < count:
+            reference = last[2].followed_by(shift, stamps, zmp, heights)
+        else:
+            reference = ZmpReference(stamps, zmp, heights)
+        self._last_zmp_reference = (key, first_ns, reference)
+        return reference
 
     def _plane_heights(self, times_s: np.ndarray, origin_ns: int, plan: FootstepPlan
                        ) -> np.ndarray:

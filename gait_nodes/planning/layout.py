@@ -60,13 +60,22 @@ class FootLayout:
         return len(self.names)
 
     def offsets(self, step_width_m: float) -> np.ndarray:
-        """(F, 2) foot positions in the base frame for a stance ``step_width_m`` wide [m]."""
-        y = self.nominal_xy[:, 1]
-        nominal_width = y[self.left].mean() - y[~self.left].mean()
-        shift = 0.5 * (step_width_m - nominal_width)
-        result = self.nominal_xy.copy()
-        result[:, 1] += np.where(self.left, shift, -shift)
-        return result
+        """(F, 2) foot positions in the base frame for a stance ``step_width_m`` wide [m].
+
+        A new array each call (the caller may edit it), copied from the one worked out for that
+        width (the planner asks for the same width hundreds of times per velocity it times).
+        """
+        known = self.__dict__.setdefault('_offsets', {})
+        if step_width_m not in known:
+            if len(known) > 64:
+                known.clear()
+            y = self.nominal_xy[:, 1]
+            nominal_width = y[self.left].mean() - y[~self.left].mean()
+            shift = 0.5 * (step_width_m - nominal_width)
+            result = self.nominal_xy.copy()
+            result[:, 1] += np.where(self.left, shift, -shift)
+            known[step_width_m] = result
+        return known[step_width_m].copy()
 
     def swing_groups(self, gait: str) -> tuple[tuple[tuple[int, ...], ...], ...]:
         """The gait's steps in cycle order, each a sequence of swing slots (sets of feet).

@@ -151,6 +151,8 @@ class SwingTiming:
         self._mirrors = [np.asarray(ik.mirrors[ik.foot_index[foot.name]], dtype=float)
                          for foot in feet]
         self._reference = next(k for k, m in enumerate(self._mirrors) if (m == 1).all())
+        self._mirror_floats = [(float(m[0]), float(m[1])) for m in self._mirrors]
+        self._swing_s: dict[tuple[float, float, float], float] = {}  # see swing_s
         self._solver = WholeBodyIkSolver(robot, IkSettings(max_iterations=50))
         self._seed_solver = WholeBodyIkSolver(robot, IkSettings(max_iterations=200))
         self._q_nominal = nominal_configuration(robot, family)
@@ -258,17 +260,25 @@ class SwingTiming:
         point = [value / spacing for value, spacing in zip(point, LATTICE, strict=True)]
         low = [math.floor(value) for value in point]
         weight = [value - corner for value, corner in zip(point, low, strict=True)]
-        factors = [(1.0 - w, w) for w in weight]
+        fx, fy, fz = [(1.0 - w, w) for w in weight]
         total = 0.0
-        for i, j, k in _CORNER_TUPLES:
-            w = factors[0][i] * factors[1][j] * factors[2][k]
-            if w == 0.0:
+        # The corners in _CORNER_TUPLES' order (i fastest), those with a zero factor skipped
+        # (a straight walk has no y and no turn: 2 corners of 8): their weight is 0.
+        for k in (0, 1):
+            if fz[k] == 0.0:
                 continue
-            key = (low[0] + i, low[1] + j, low[2] + k)
-            if key not in self._cache:
-                node = np.array(key, dtype=float) * LATTICE
-                self._cache[key] = self.raw_s(node[:2], float(node[2]))
-            total += w * self._cache[key]
+            for j in (0, 1):
+                if fy[j] == 0.0:
+                    continue
+                for i in (0, 1):
+                    w = fx[i] * fy[j] * fz[k]
+                    if w == 0.0:
+                        continue
+                    key = (low[0] + i, low[1] + j, low[2] + k)
+                    if key not in self._cache:
+                        node = np.array(key, dtype=float) * LATTICE
+                        self._cache[key] = self.raw_s(node[:2], float(node[2]))
+                    total += w * self._cache[key]
         return total
 
     def swing_s(self, foot: int, step_in_base: np.ndarray, turn_rad: float = 0.0) -> float:
@@ -279,10 +289,18 @@ class SwingTiming:
             step_in_base: (2,) landing minus lift-off in the base frame [m].
             turn_rad: Landing yaw minus lift-off yaw [rad].
         """
-        mirror = self._mirrors[foot]
-        step = np.asarray(step_in_base, dtype=float)[:2] * mirror[:2]
-        turn = float(mirror[0] * mirror[1]) * float(turn_rad)
-        return (1.0 + BODY_MOTION_MARGIN) * self._lattice_s(step, turn)
+        # In plain floats (the rhythm's fixed point asks thousands of times): the products are
+        # numpy's to the bit (one IEEE multiplication each), and a step asked again (the feet
+        # of a straight walk mirror each other) is looked up.
+        mx, my = self._mirror_floats[foot]
+        x, y = float(step_in_base[0]), float(step_in_base[1])
+        key = (x * mx, y * my, (mx * my) * float(turn_rad))
+        known = self._swing_s
+        if key not in known:
+            if len(known) > 4096:
+                known.clear()
+            known[key] = (1.0 + BODY_MOTION_MARGIN) * self._lattice_s(key[:2], key[2])
+        return known[key]
 
     def lift_and_lower_s(self) -> float:
         """Swing time [s] of a step in place (the lift and the lowering), with the margin."""
