@@ -267,8 +267,10 @@ def fit_base_pose(base_guess: pin.SE3, feet_in_base: list[pin.SE3], feet_in_worl
 
 
 def _pose(rotation: np.ndarray, p_mean: np.ndarray, w_mean: np.ndarray) -> pin.SE3:
-    """The pose of ``rotation`` that puts the mean of the feet on theirs: the least-squares
-    translation of any rotation (the orientation residuals do not depend on it).
+    """The pose of ``rotation`` that puts the mean of the feet on theirs.
+
+    The least-squares translation of any rotation (the orientation residuals do not depend on
+    it).
     """
     pose = pin.SE3.Identity()
     pose.rotation = rotation
@@ -335,30 +337,51 @@ def _fit_two_flat_feet(guess_rotation: np.ndarray, p: np.ndarray, w: np.ndarray,
     ``rotation_weight_m``): the same minimiser as the 6-dof reference with 3x3 normal
     equations, damped and stopped alike.
     """
-    d = p[0] - p[1]
-    e = w[0] - w[1]
     half = math.sqrt(0.5)
-    skew_d = pin.skew(d * half)
-    soles = [(foot_world.rotation.T, foot_base.rotation, rotation_weight_m * foot_base.rotation.T)
-             for foot_base, foot_world in zip(feet_in_base, feet_in_world, strict=True)]
-    damping = STEP_DAMPING * np.eye(3)
+    # Residuals r = (R d - e, log3(E_1), log3(E_2)) * weights, E_k = W_k^T R F_k; their
+    # Jacobian for R exp(step): (-R [d]x, Jlog3(E_k) F_k^T) * weights, stacked (9, 3).
+    d_half = (p[0] - p[1]) * half
+    e_half = (w[0] - w[1]) * half
+    skew_d = pin.skew(d_half)
+    weights = np.array([1.0] * 3 + [rotation_weight_m] * 6)
+    column_weights = weights[:, None]
+    (world_t0, base_r0, base_t0), (world_t1, base_r1, base_t1) = [
+        (foot_world.rotation.T, foot_base.rotation, foot_base.rotation.T)
+        for foot_base, foot_world in zip(feet_in_base, feet_in_world, strict=True)]
     rotation = guess_rotation
     for _ in range(BASE_FIT_ITERATIONS):
-        # Position residual (R d - e) / sqrt(2), its Jacobian -R [d]x / sqrt(2).
-        residual = (rotation.dot(d) - e) * half
-        jacobian = -rotation.dot(skew_d)
-        hessian = jacobian.T.dot(jacobian) + damping
-        gradient = jacobian.T.dot(residual)
-        for world_t, base_r, weighted_base_t in soles:
-            error = world_t.dot(rotation).dot(base_r)
-            jacobian = pin.Jlog3(error).dot(weighted_base_t)
-            hessian += jacobian.T.dot(jacobian)
-            gradient += jacobian.T.dot(rotation_weight_m * pin.log3(error))
-        step = -np.linalg.solve(hessian, gradient)
-        rotation = rotation.dot(pin.exp3(step))
-        if np.max(np.abs(step)) < BASE_FIT_TOLERANCE:
+        error0 = world_t0.dot(rotation).dot(base_r0)
+        error1 = world_t1.dot(rotation).dot(base_r1)
+        residual = np.concatenate((rotation.dot(d_half) - e_half, pin.log3(error0),
+                                   pin.log3(error1))) * weights
+        jacobian = np.vstack((-rotation.dot(skew_d), pin.Jlog3(error0).dot(base_t0),
+                              pin.Jlog3(error1).dot(base_t1))) * column_weights
+        jacobian_t = jacobian.T
+        step = _solve_damped3(jacobian_t.dot(jacobian).tolist(),
+                              jacobian_t.dot(residual).tolist())
+        rotation = rotation.dot(pin.exp3(np.array(step)))
+        if max(map(abs, step)) < BASE_FIT_TOLERANCE:
             break
     return _pose(rotation, (p[0] + p[1]) * 0.5, (w[0] + w[1]) * 0.5)
+
+
+def _solve_damped3(hessian: list, gradient: list) -> list:
+    """``-(H + STEP_DAMPING I)^-1 g`` for a symmetric positive semi-definite 3x3 ``H``.
+
+    Cramer's rule on floats (the reference's np.linalg.solve is LU with pivoting: the same
+    step to rounding for the well-conditioned normal equations of a fit).
+    """
+    (a, b, c), (_, d, e), (_, _, f) = hessian
+    a += STEP_DAMPING
+    d += STEP_DAMPING
+    f += STEP_DAMPING
+    # Cofactors of the symmetric matrix [[a, b, c], [b, d, e], [c, e, f]].
+    c00, c01, c02 = d * f - e * e, c * e - b * f, b * e - c * d
+    c11, c12, c22 = a * f - c * c, b * c - a * e, a * d - b * b
+    det = a * c00 + b * c01 + c * c02
+    gx, gy, gz = gradient
+    return [-(c00 * gx + c01 * gy + c02 * gz) / det, -(c01 * gx + c11 * gy + c12 * gz) / det,
+            -(c02 * gx + c12 * gy + c22 * gz) / det]
 
 
 def fit_base_pose_gauss_newton(base_guess: pin.SE3, feet_in_base: list[pin.SE3],
