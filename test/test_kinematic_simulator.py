@@ -817,15 +817,17 @@ def test_base_fit_forms_for_one_and_two_feet_agree_with_gauss_newton(seed):
 
     The closed forms (one flat foot, two point feet) and the rotation-only Gauss-Newton
     (two flat feet) against the 6-dof reference: on consistent feet (what a walk gives, the
-    latched feet a rigid motion away up to 1e-6) the same pose to 1e-9; on any feet, near
-    coincident ones and centimetres of inconsistency included, never a higher cost (the
-    reference can stop on a flat valley or diverge where two point feet nearly coincide):
-    the residual norm at most 1e-15 m (rounding) above the reference's.
+    latched feet a rigid motion away up to 1e-6, any spread) the same pose to 1e-9; on any
+    feet, near coincident ones and centimetres of inconsistency included, never a higher cost
+    (the reference can stop on a flat valley or diverge where two point feet nearly coincide):
+    the residual norm at most 1e-15 m (rounding) above the reference's. Not asked: a
+    near-zero sole weight on inconsistent, near-coincident feet, where the two iterations may
+    stop in different local minima.
     """
     rng = np.random.default_rng(seed)
     for _ in range(250):
         count = int(rng.choice([1, 2]))
-        weight = float(rng.choice([0.0, 0.1, 1.0])) if count == 2 else float(
+        weight = float(rng.choice([0.0, 1e-4, 0.1, 1.0])) if count == 2 else float(
             rng.choice([0.1, 0.5]))
         spread_m = 10 ** rng.uniform(-6, 0)
         in_base = [pin.SE3(pin.rpy.rpyToMatrix(*rng.uniform(-0.3, 0.3, 3)),
@@ -840,8 +842,9 @@ def test_base_fit_forms_for_one_and_two_feet_agree_with_gauss_newton(seed):
         reference = fit_base_pose_gauss_newton(guess, in_base, in_world, weight)
         fast_cost = base_fit_cost(fast, in_base, in_world, weight, guess)
         reference_cost = base_fit_cost(reference, in_base, in_world, weight, guess)
-        assert math.sqrt(fast_cost) <= math.sqrt(reference_cost) + 1e-15
-        if noise <= 1e-6 and spread_m >= 1e-2:
+        if weight == 0.0 or weight >= 0.1:
+            assert math.sqrt(fast_cost) <= math.sqrt(reference_cost) + 1e-15
+        if noise <= 1e-6:
             np.testing.assert_allclose(fast.homogeneous, reference.homogeneous, atol=1e-9)
 
 

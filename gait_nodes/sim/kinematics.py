@@ -335,7 +335,9 @@ def _fit_two_flat_feet(guess_rotation: np.ndarray, p: np.ndarray, w: np.ndarray,
     so the fit is ``min_R |R d - e|^2 / 2 + mu^2 sum_k |log3(W_k^T R F_k)|^2`` (``d``, ``e``
     as in :func:`_fit_two_point_feet`, ``F_k``, ``W_k`` the sole orientations, ``mu`` =
     ``rotation_weight_m``): the same minimiser as the 6-dof reference with 3x3 normal
-    equations, damped and stopped alike.
+    equations, damped and stopped alike (on feet a rigid motion apart, as a walk's are; with
+    a near-zero sole weight on feet millimetres apart and millimetres inconsistent, the
+    problem has several local minima and the two iterations may stop in different ones).
     """
     half = math.sqrt(0.5)
     # Residuals r = (R d - e, log3(E_1), log3(E_2)) * weights, E_k = W_k^T R F_k; their
