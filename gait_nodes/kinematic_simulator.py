@@ -64,7 +64,7 @@ from gait_nodes.runtime import (
 )
 from gait_nodes.settings import checked_number as _number
 from gait_nodes.sim.kinematics import ActuatorStep, KinematicSimulation, SimulationSettings
-from gait_nodes.sim.zmp_monitor import Support, ZmpMonitor, ZmpState, central_differences
+from gait_nodes.sim.zmp_monitor import SlidingDifferences, Support, ZmpMonitor, ZmpState
 from gait_nodes.watchdog import InputWatchdog
 
 NODE_NAME = 'kinematic_simulator'
@@ -251,6 +251,8 @@ class KinematicSimulator(Node):
                                               self.params.simulation_settings())
         self.monitor = ZmpMonitor(self.robot.model, self.robot.description.foot_radius_m,
                                   self.params.ground_height_m)
+        # The monitor's finite differences, each configuration difference computed once.
+        self._differences = SlidingDifferences(self.robot.model)
         self._command = self.robot.joint_positions(q_initial)
         self._command_velocity = np.zeros(len(self._command))
         self._command_stamp_ns: int | None = None
@@ -435,6 +437,10 @@ class KinematicSimulator(Node):
         period_ns = 1e9 / self.params.rate_hz
         ahead_ns = min(max(at_ns - self._command_stamp_ns, 0), MAX_EXTRAPOLATION_PERIODS
                        * period_ns)
+        if ahead_ns == 0:
+            # At the newest setpoint (every tick under inproc): command + velocity * 0 is the
+            # command itself (up to the sign of a zero, which no joint position sees).
+            return self._command
         return self._command + self._command_velocity * (ahead_ns * 1e-9)
 
     def _on_footsteps(self, msg) -> None:
@@ -491,8 +497,7 @@ class KinematicSimulator(Node):
 
         (t0, q0, _, _), (t1, q1, points1, header1), (t2, q2, _, _) = self._history
         if t0 < t1 < t2:
-            v, a = central_differences(self.robot.model, q0, q1, q2, (t1 - t0) * 1e-9,
-                                       (t2 - t1) * 1e-9)
+            v, a = self._differences.at(q0, q1, q2, (t1 - t0) * 1e-9, (t2 - t1) * 1e-9)
             support = self._support_of(points1)
             state = self.monitor.evaluate(q1, v, a, support)
             self._publish_monitor(t1, header1, state, support)

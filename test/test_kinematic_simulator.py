@@ -28,9 +28,11 @@ from gait_nodes.robot.whole_body_ik import (
 )
 from gait_nodes.runtime import Parameter, qos_profile_latched
 from gait_nodes.sim.kinematics import (
+    ORIENTATION_PRIOR_M,
     KinematicSimulation,
     PositionActuators,
     fit_base_pose,
+    fit_base_pose_gauss_newton,
     kabsch,
     svd3,
 )
@@ -795,3 +797,63 @@ def test_a_jittery_command_stream_gives_the_commanded_motion_not_its_arrival_tim
     assert len(moving) > 100
     for msg in moving:
         assert msg.velocity[k] == pytest.approx(rate, abs=1e-9)
+
+
+def base_fit_cost(base, in_base, in_world, rotation_weight_m, guess):
+    """What fit_base_pose minimises (its module docstring), evaluated independently."""
+    cost = sum(float(np.sum(((base * f).translation - w.translation) ** 2))
+               for f, w in zip(in_base, in_world, strict=True))
+    if rotation_weight_m == 0.0:
+        return cost + ORIENTATION_PRIOR_M ** 2 * float(
+            np.sum(pin.log3(guess.rotation.T @ base.rotation) ** 2))
+    return cost + rotation_weight_m ** 2 * sum(
+        float(np.sum(pin.log3(w.rotation.T @ base.rotation @ f.rotation) ** 2))
+        for f, w in zip(in_base, in_world, strict=True))
+
+
+@pytest.mark.parametrize('seed', range(4))
+def test_base_fit_forms_for_one_and_two_feet_agree_with_gauss_newton(seed):
+    """The base fit's cheaper forms agree with the 6-dof Gauss-Newton reference.
+
+    The closed forms (one flat foot, two point feet) and the rotation-only Gauss-Newton
+    (two flat feet) against the 6-dof reference: on consistent feet (what a walk gives, the
+    latched feet a rigid motion away up to 1e-6, any spread) the same pose to 1e-9; on any
+    feet, near coincident ones and centimetres of inconsistency included, never a higher cost
+    (the reference can stop on a flat valley or diverge where two point feet nearly coincide):
+    the residual norm at most 1e-15 m (rounding) above the reference's. Not asked: a
+    near-zero sole weight on inconsistent, near-coincident feet, where the two iterations may
+    stop in different local minima.
+    """
+    rng = np.random.default_rng(seed)
+    for _ in range(250):
+        count = int(rng.choice([1, 2]))
+        weight = float(rng.choice([0.0, 1e-4, 0.1, 1.0])) if count == 2 else float(
+            rng.choice([0.1, 0.5]))
+        spread_m = 10 ** rng.uniform(-6, 0)
+        in_base = [pin.SE3(pin.rpy.rpyToMatrix(*rng.uniform(-0.3, 0.3, 3)),
+                           rng.normal(0, spread_m, 3) + [0, 0, -0.6]) for _ in range(count)]
+        truth = pin.SE3(pin.rpy.rpyToMatrix(*rng.uniform(-0.5, 0.5, 3)), rng.uniform(-1, 1, 3))
+        noise = 10 ** rng.uniform(-12, -2)
+        in_world = [truth * f * pin.exp6(rng.normal(0, noise, 6)) for f in in_base]
+        if rng.uniform() < 0.1:  # the feet's line exactly where the guess has it
+            in_world = [truth * f for f in in_base]
+        guess = truth * pin.exp6(rng.normal(0, 10 ** rng.uniform(-8, -1), 6))
+        fast = fit_base_pose(guess, in_base, in_world, weight)
+        reference = fit_base_pose_gauss_newton(guess, in_base, in_world, weight)
+        fast_cost = base_fit_cost(fast, in_base, in_world, weight, guess)
+        reference_cost = base_fit_cost(reference, in_base, in_world, weight, guess)
+        if weight == 0.0 or weight >= 0.1:
+            assert math.sqrt(fast_cost) <= math.sqrt(reference_cost) + 1e-15
+        if noise <= 1e-6:
+            np.testing.assert_allclose(fast.homogeneous, reference.homogeneous, atol=1e-9)
+
+
+def test_two_point_feet_pointing_against_the_guess_fall_back_to_gauss_newton(robot,
+                                                                            q_nominal):
+    in_base = [feet_in_base(robot, q_nominal)[k] for k in (0, 3)]
+    truth = pin.SE3(pin.rpy.rpyToMatrix(0.0, 0.0, 3.0), np.array([0.1, 0.2, 0.6]))
+    in_world = [truth * f for f in in_base]
+    guess = pin.SE3(np.eye(3), truth.translation)  # the feet's line turned by 3 rad
+    np.testing.assert_array_equal(
+        fit_base_pose(guess, in_base, in_world, 0.0).homogeneous,
+        fit_base_pose_gauss_newton(guess, in_base, in_world, 0.0).homogeneous)

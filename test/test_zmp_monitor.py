@@ -14,6 +14,7 @@ from gait_nodes.robot.whole_body_ik import nominal_configuration
 from gait_nodes.sim.zmp_monitor import (
     POLYGON_SEGMENTS_PER_FOOT,
     STANDARD_GRAVITY_M_S2,
+    SlidingDifferences,
     ZmpMonitor,
     central_differences,
 )
@@ -174,6 +175,30 @@ def test_central_differences_on_the_free_flyer_are_exact_for_constant_twist(robo
     v, a = central_differences(model, *qs, dt)
     np.testing.assert_allclose(v, v_true, atol=1e-12)
     np.testing.assert_allclose(a, 0.0, atol=1e-9)
+
+
+def test_sliding_differences_are_central_differences_bit_for_bit(robosimian):
+    """SlidingDifferences gives central_differences' values, bytes included.
+
+    Along a stream (the kept difference reused), after a break in it (recomputed), with
+    equal and unequal steps and a configuration repeated (a start at rest).
+    """
+    model = robosimian.model
+    rng = np.random.default_rng(4)
+    q0 = nominal_configuration(robosimian)
+    qs = [q0, q0]
+    for _ in range(12):
+        qs.append(pin.integrate(model, qs[-1], rng.normal(0.0, 0.01, model.nv)))
+    steps = [0.005, 0.005, 0.004, 0.005, 0.006, 0.005, 0.005, 0.005, 0.005, 0.003, 0.005, 0.005,
+             0.005]
+    sliding = SlidingDifferences(model)
+    calls = [*range(11), 3, 4, 8, 9, 10]  # in order, then jumps back and forth
+    for k in calls:
+        expected = central_differences(model, qs[k], qs[k + 1], qs[k + 2], steps[k],
+                                       steps[k + 1])
+        for got, want in zip(sliding.at(qs[k], qs[k + 1], qs[k + 2], steps[k], steps[k + 1]),
+                             expected, strict=True):
+            assert got.tobytes() == want.tobytes()
 
 
 def test_margin_matches_the_shared_geometry(robosimian):

@@ -231,9 +231,12 @@ def fit_base_pose(base_guess: pin.SE3, feet_in_base: list[pin.SE3], feet_in_worl
     Three or more non-collinear feet fix the pose from their positions alone: least squares in
     closed form (:func:`kabsch`). Fewer feet: least squares over the positions and, for flat
     feet (``rotation_weight_m`` [m/rad] > 0), the sole orientations, for point feet a weak pull
-    (:data:`ORIENTATION_PRIOR_M`) towards the orientation of ``base_guess``; damped
-    Gauss-Newton on SE(3) from ``base_guess``. What point feet leave free (the rotation about
-    the line of two of them) thus keeps its value in ``base_guess``.
+    (:data:`ORIENTATION_PRIOR_M`) towards the orientation of ``base_guess``: the minimiser
+    nearest ``base_guess`` (what :func:`fit_base_pose_gauss_newton`, the reference, finds by
+    damped Gauss-Newton on SE(3) from it). What point feet leave free (the rotation about the
+    line of two of them) thus keeps its value in ``base_guess``. The cases of a walk have
+    cheaper forms, equal to the reference to its convergence tolerance (tested): one flat foot
+    and two point feet in closed form, two flat feet by Gauss-Newton on the rotation alone.
 
     Args:
         base_guess: The previous base pose.
@@ -251,6 +254,148 @@ def fit_base_pose(base_guess: pin.SE3, feet_in_base: list[pin.SE3], feet_in_worl
     closed_form = kabsch(p, w)
     if closed_form is not None:
         return closed_form
+    fitted = None
+    if count == 1 and rotation_weight_m > 0.0:
+        fitted = _fit_one_flat_foot(feet_in_base[0], feet_in_world[0])
+    elif count == 2 and rotation_weight_m == 0.0:
+        fitted = _fit_two_point_feet(base_guess.rotation, p, w)
+    elif count == 2:
+        fitted = _fit_two_flat_feet(base_guess.rotation, p, w, feet_in_base, feet_in_world,
+                                    rotation_weight_m)
+    return fitted if fitted is not None else fit_base_pose_gauss_newton(
+        base_guess, feet_in_base, feet_in_world, rotation_weight_m)
+
+
+def _pose(rotation: np.ndarray, p_mean: np.ndarray, w_mean: np.ndarray) -> pin.SE3:
+    """The pose of ``rotation`` that puts the mean of the feet on theirs.
+
+    The least-squares translation of any rotation (the orientation residuals do not depend on
+    it).
+    """
+    pose = pin.SE3.Identity()
+    pose.rotation = rotation
+    pose.translation = w_mean - rotation.dot(p_mean)
+    return pose
+
+
+def _fit_one_flat_foot(foot_in_base: pin.SE3, foot_in_world: pin.SE3) -> pin.SE3:
+    """One flat foot fixes the pose: ``B = W F^-1`` puts both residuals at zero."""
+    return foot_in_world * foot_in_base.inverse()
+
+
+def _fit_two_point_feet(guess_rotation: np.ndarray, p: np.ndarray,
+                        w: np.ndarray) -> pin.SE3 | None:
+    """The base fit on two point feet, in closed form up to one scalar equation.
+
+    With ``t`` at its least-squares value the cost is ``|R d - e|^2 / 2 + mu^2 theta^2`` where
+    ``d = p_1 - p_2`` (base frame), ``e = w_1 - w_2`` (world), ``mu`` =
+    :data:`ORIENTATION_PRIOR_M` and ``theta`` the angle of ``S = R_g^T R`` (the prior's
+    residual is ``mu log3(S)``). A rotation of angle ``theta`` turns ``d`` by at most
+    ``theta``, so among those of one angle the rotation in the plane of ``d`` and
+    ``f = R_g^T e`` (axis ``d x f``) brings ``d`` closest to ``f``; along it the cost is
+    ``-|d||f| cos(alpha - theta) + mu^2 theta^2`` (+ const), ``alpha`` the angle from ``d``
+    to ``f``, stationary where ``|d||f| sin(alpha - theta) = 2 mu^2 theta``: one root in
+    ``[0, alpha]``, found by Newton from the linearised one. None (the caller falls back to
+    Gauss-Newton) when the feet coincide or ``d`` points against ``f``.
+    """
+    d = (p[0] - p[1]).tolist()
+    f = guess_rotation.T.dot(w[0] - w[1]).tolist()
+    dx, dy, dz = d
+    fx, fy, fz = f
+    ax, ay, az = dy * fz - dz * fy, dz * fx - dx * fz, dx * fy - dy * fx
+    sine = math.sqrt(ax * ax + ay * ay + az * az)  # |d||f| sin(alpha)
+    cosine = dx * fx + dy * fy + dz * fz  # |d||f| cos(alpha)
+    k = math.hypot(sine, cosine)  # |d||f|
+    if not k > 0.0 or cosine <= 0.0:
+        return None
+    p_mean = (p[0] + p[1]) * 0.5
+    w_mean = (w[0] + w[1]) * 0.5
+    if sine == 0.0:
+        return _pose(guess_rotation, p_mean, w_mean)
+    alpha = math.atan2(sine, cosine)
+    mu2 = 2.0 * ORIENTATION_PRIOR_M * ORIENTATION_PRIOR_M
+    theta = alpha * k / (k + mu2)
+    for _ in range(BASE_FIT_ITERATIONS):
+        residual = k * math.sin(alpha - theta) - mu2 * theta
+        change = residual / (k * math.cos(alpha - theta) + mu2)
+        theta += change
+        if abs(change) <= 1e-17:
+            break
+    scale = theta / sine
+    axis_angle = np.array([ax * scale, ay * scale, az * scale])
+    return _pose(guess_rotation.dot(pin.exp3(axis_angle)), p_mean, w_mean)
+
+
+def _fit_two_flat_feet(guess_rotation: np.ndarray, p: np.ndarray, w: np.ndarray,
+                       feet_in_base: list[pin.SE3], feet_in_world: list[pin.SE3],
+                       rotation_weight_m: float) -> pin.SE3:
+    """The base fit on two flat feet: Gauss-Newton on the rotation alone.
+
+    The translation's least-squares value ``t = w_mean - R p_mean`` is exact for every ``R``,
+    so the fit is ``min_R |R d - e|^2 / 2 + mu^2 sum_k |log3(W_k^T R F_k)|^2`` (``d``, ``e``
+    as in :func:`_fit_two_point_feet`, ``F_k``, ``W_k`` the sole orientations, ``mu`` =
+    ``rotation_weight_m``): the same minimiser as the 6-dof reference with 3x3 normal
+    equations, damped and stopped alike (on feet a rigid motion apart, as a walk's are; with
+    a near-zero sole weight on feet millimetres apart and millimetres inconsistent, the
+    problem has several local minima and the two iterations may stop in different ones).
+    """
+    half = math.sqrt(0.5)
+    # Residuals r = (R d - e, log3(E_1), log3(E_2)) * weights, E_k = W_k^T R F_k; their
+    # Jacobian for R exp(step): (-R [d]x, Jlog3(E_k) F_k^T) * weights, stacked (9, 3).
+    d_half = (p[0] - p[1]) * half
+    e_half = (w[0] - w[1]) * half
+    skew_d = pin.skew(d_half)
+    weights = np.array([1.0] * 3 + [rotation_weight_m] * 6)
+    column_weights = weights[:, None]
+    (world_t0, base_r0, base_t0), (world_t1, base_r1, base_t1) = [
+        (foot_world.rotation.T, foot_base.rotation, foot_base.rotation.T)
+        for foot_base, foot_world in zip(feet_in_base, feet_in_world, strict=True)]
+    rotation = guess_rotation
+    for _ in range(BASE_FIT_ITERATIONS):
+        error0 = world_t0.dot(rotation).dot(base_r0)
+        error1 = world_t1.dot(rotation).dot(base_r1)
+        residual = np.concatenate((rotation.dot(d_half) - e_half, pin.log3(error0),
+                                   pin.log3(error1))) * weights
+        jacobian = np.vstack((-rotation.dot(skew_d), pin.Jlog3(error0).dot(base_t0),
+                              pin.Jlog3(error1).dot(base_t1))) * column_weights
+        jacobian_t = jacobian.T
+        step = _solve_damped3(jacobian_t.dot(jacobian).tolist(),
+                              jacobian_t.dot(residual).tolist())
+        rotation = rotation.dot(pin.exp3(np.array(step)))
+        if max(map(abs, step)) < BASE_FIT_TOLERANCE:
+            break
+    return _pose(rotation, (p[0] + p[1]) * 0.5, (w[0] + w[1]) * 0.5)
+
+
+def _solve_damped3(hessian: list, gradient: list) -> list:
+    """``-(H + STEP_DAMPING I)^-1 g`` for a symmetric positive semi-definite 3x3 ``H``.
+
+    Cramer's rule on floats (the reference's np.linalg.solve is LU with pivoting: the same
+    step to rounding for the well-conditioned normal equations of a fit).
+    """
+    (a, b, c), (_, d, e), (_, _, f) = hessian
+    a += STEP_DAMPING
+    d += STEP_DAMPING
+    f += STEP_DAMPING
+    # Cofactors of the symmetric matrix [[a, b, c], [b, d, e], [c, e, f]].
+    c00, c01, c02 = d * f - e * e, c * e - b * f, b * e - c * d
+    c11, c12, c22 = a * f - c * c, b * c - a * e, a * d - b * b
+    det = a * c00 + b * c01 + c * c02
+    gx, gy, gz = gradient
+    return [-(c00 * gx + c01 * gy + c02 * gz) / det, -(c01 * gx + c11 * gy + c12 * gz) / det,
+            -(c02 * gx + c12 * gy + c22 * gz) / det]
+
+
+def fit_base_pose_gauss_newton(base_guess: pin.SE3, feet_in_base: list[pin.SE3],
+                               feet_in_world: list[pin.SE3],
+                               rotation_weight_m: float = 0.0) -> pin.SE3:
+    """:func:`fit_base_pose` by damped Gauss-Newton on SE(3) from ``base_guess`` (any count).
+
+    The reference of the closed forms, and the fit of the cases without one.
+    """
+    count = len(feet_in_base)
+    p = np.array([f.translation for f in feet_in_base]).reshape(count, 3)
+    w = np.array([f.translation for f in feet_in_world]).reshape(count, 3)
     skews = _skew(p)
     pose = pin.SE3(base_guess)
     for _ in range(BASE_FIT_ITERATIONS):

@@ -71,10 +71,15 @@ def central_differences(model: pin.Model, q_before: np.ndarray, q: np.ndarray,
     ``v = (d1 h2 / h1 + d2 h1 / h2) / (h1 + h2)``, ``a = 2 (d2 / h2 - d1 / h1) / (h1 + h2)``,
     second-order accurate, exact for joint motions of constant acceleration.
     """
+    return _from_differences(pin.difference(model, q_before, q),
+                             pin.difference(model, q, q_after), dt_before_s, dt_after_s)
+
+
+def _from_differences(d1: np.ndarray, d2: np.ndarray, dt_before_s: float,
+                      dt_after_s: float | None) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`central_differences` from its two configuration differences."""
     h1 = float(dt_before_s)
     h2 = h1 if dt_after_s is None else float(dt_after_s)
-    d1 = pin.difference(model, q_before, q)
-    d2 = pin.difference(model, q, q_after)
     if h1 == h2:
         # The same values with a third fewer array operations (a fixed-rate simulation's case):
         # h2 / h1 is exactly 1 and 2 x / (h1 + h2) exactly x / h1 (scaling by 2 is exact).
@@ -82,6 +87,34 @@ def central_differences(model: pin.Model, q_before: np.ndarray, q: np.ndarray,
     v = (d1 * (h2 / h1) + d2 * (h1 / h2)) / (h1 + h2)
     a = 2.0 * (d2 / h2 - d1 / h1) / (h1 + h2)
     return v, a
+
+
+class SlidingDifferences:
+    """:func:`central_differences` along a stream of configurations (a simulation's ticks).
+
+    Consecutive instants share a difference: the ``q_after (-) q`` of one call is the
+    ``q (-) q_before`` of the next, kept and not computed again when the next call's
+    ``q_before`` and ``q`` are the very same arrays (callers must not modify them in place).
+    The values are :func:`central_differences`'s, bit for bit.
+
+    Args:
+        model: Pinocchio model of the configurations.
+    """
+
+    def __init__(self, model: pin.Model):
+        self.model = model
+        # (q, q_after, q_after (-) q) of the last call.
+        self._last: tuple = (None, None, None)
+
+    def at(self, q_before: np.ndarray, q: np.ndarray, q_after: np.ndarray, dt_before_s: float,
+           dt_after_s: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Velocity and acceleration at ``q`` (:func:`central_differences`)."""
+        start, end, difference = self._last
+        if start is not q_before or end is not q:
+            difference = pin.difference(self.model, q_before, q)
+        after = pin.difference(self.model, q, q_after)
+        self._last = (q, q_after, after)
+        return _from_differences(difference, after, dt_before_s, dt_after_s)
 
 
 @dataclass(frozen=True)
