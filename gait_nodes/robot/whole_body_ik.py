@@ -260,7 +260,8 @@ class WholeBodyIkSolver:
         placements_flat, error_map, mapped = work.placements_flat, work.error_map, work.mapped
         traces, com_error = work.traces, work.com_error
         jacobian, transposed, normal = work.jacobian, work.transposed, work.normal
-        normal_diagonal, columns = work.normal_diagonal, work.columns
+        normal_fortran, normal_diagonal, columns = work.normal.T, work.normal_diagonal, \
+            work.columns
         base_cols, x_idx = work.base_cols, work.x_idx
         x_lower, x_upper, weights = work.x_lower, work.x_upper, work.weights
         unknowns = q[x_idx]  # base translation (free base), then the IK joints
@@ -299,8 +300,9 @@ class WholeBodyIkSolver:
             # Levenberg-Marquardt step (J^T J + lambda I) dx = J^T e, by Cholesky.
             np.matmul(transposed, jacobian, out=normal)  # (matmul's syrk)
             normal_diagonal += damping + DAMPING_BIAS
-            # (lower=0, overwrite_a=1, overwrite_b=1 positionally: f2py parses keywords slowly)
-            _, step, info = lapack.dposv(normal, dot(transposed, error), 0, 1, 1)
+            # (lower=0, overwrite_a=1, overwrite_b=1 positionally: f2py parses keywords slowly;
+            # the symmetric matrix passed as its Fortran-ordered transpose: factored in place)
+            _, step, info = lapack.dposv(normal_fortran, dot(transposed, error), 0, 1, 1)
             if info != 0:  # not reached with lambda > 0; keep the iteration defined anyway
                 step = np.linalg.lstsq(jacobian, error, rcond=None)[0]
             values = step.tolist()
