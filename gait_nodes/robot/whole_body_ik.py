@@ -296,7 +296,7 @@ class WholeBodyIkSolver:
                 full[rows] = block[:3] if point_feet else block
             if free_base:
                 full[-3:, :-3] = pin.jacobianCenterOfMass(model, data, False)
-            np.take(full, columns, 1, jacobian, 'clip')  # the unknowns' columns (valid)
+            full.take(columns, 1, jacobian, 'clip')  # the unknowns' columns (all valid)
             # Levenberg-Marquardt step (J^T J + lambda I) dx = J^T e, by Cholesky.
             np.matmul(transposed, jacobian, out=normal)  # (matmul's syrk)
             normal_diagonal += damping + DAMPING_BIAS
