@@ -302,3 +302,21 @@ def test_swing_s_in_floats_and_looked_up_is_the_numpy_form_to_the_bit():
                 expected = (1.0 + BODY_MOTION_MARGIN) * timing._lattice_s(
                     step, float(mirror[0] * mirror[1]) * turn)
                 assert timing.swing_s(foot, np.array([x, y]), turn) == expected
+
+
+def test_ik_probes_solve_checked_targets_as_solve_does(monkeypatch):
+    """The probes' solve_trusted on targets checked once: solve's floats, solve's refusals."""
+    timing = polynomial_timing()
+    fast = timing.raw_s(np.array([0.15, 0.03]), 0.1)
+    solver = timing._solver
+    reference = WholeBodyIkSolver(timing.robot, solver.settings)
+
+    def through_solve(feet, yaws, body_yaw_rad, q_start, com):
+        return reference.solve(IkTargets(feet, np.array(yaws), body_yaw_rad,
+                                         com_in_world=com), q_start)
+
+    with monkeypatch.context() as patch:
+        patch.setattr(solver, 'solve_trusted', through_solve)
+        assert timing.raw_s(np.array([0.15, 0.03]), 0.1) == fast
+    with pytest.raises(ValueError, match='NaN'):
+        timing.raw_s(np.array([np.nan, 0.0]), 0.0)

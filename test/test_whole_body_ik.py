@@ -149,6 +149,48 @@ def test_large_sole_rotations_are_measured_like_an_independent_log3(name):
                                        rtol=1e-8, atol=1e-12)
 
 
+@pytest.mark.parametrize('name', ['robosimian', 'biped'])
+def test_error_map_is_the_per_foot_formulas(name):
+    """The solver's one affine map of the placements against target - p and E = R_target R^T.
+
+    Positions bit for bit; vee(E - E^T) / 2 and trace(E) to rounding; after one sole's yaw
+    changes only its block is redone, and the map equals a fresh workspace's.
+    """
+    robot = load_robot_model(name)
+    solver = WholeBodyIkSolver(robot)
+    rng = np.random.default_rng(7)
+    feet_count = len(robot.foot_frame_ids)
+    work = solver._workspace(True)
+    yaws = rng.uniform(-3.0, 3.0, feet_count).tolist()
+    for changed in range(feet_count + 1):
+        if changed < feet_count:
+            yaws[changed] += 0.25
+        targets = rng.uniform(-1.0, 1.0, (feet_count, 3))
+        np.add(targets, solver._frame_offset, out=work.frame_targets)
+        work.aim_soles(yaws, solver._offsets)
+        fresh = WholeBodyIkSolver(robot)._workspace(True)
+        fresh.aim_soles(yaws, solver._offsets)
+        np.add(targets, solver._frame_offset, out=fresh.frame_targets)
+        np.testing.assert_array_equal(work.error_map, fresh.error_map)
+        for k in range(feet_count):
+            rotation = pin.rpy.rpyToMatrix(*rng.uniform(-3.0, 3.0, 3))
+            work.placements[k] = pin.SE3(rotation, rng.uniform(-1.0, 1.0, 3)).homogeneous
+        np.dot(work.placements_flat, work.error_map, out=work.mapped)
+        positions = work.placements[:, :3, 3]
+        np.testing.assert_array_equal(work.per_foot[:, :3],
+                                      targets + solver._frame_offset - positions)
+        relative = np.array([pin.rpy.rpyToMatrix(0.0, 0.0, yaw) @ offset
+                             for yaw, offset in zip(yaws, solver._offsets, strict=True)]) \
+            @ work.placements[:, :3, :3].transpose(0, 2, 1)
+        if work.rows_per_foot == 6:
+            vees = 0.5 * np.stack([relative[:, 2, 1] - relative[:, 1, 2],
+                                   relative[:, 0, 2] - relative[:, 2, 0],
+                                   relative[:, 1, 0] - relative[:, 0, 1]], axis=1)
+            np.testing.assert_allclose(work.per_foot[:, 3:], vees, rtol=0, atol=1e-15)
+            np.testing.assert_allclose(work.traces, np.trace(relative, axis1=1, axis2=2),
+                                       rtol=0, atol=1e-15)
+
+
 def test_warm_start_reaches_a_smooth_walk_in_one_newton_step(setup):
     """Extrapolating the last solutions lands within one step of 1e-9 on a smooth walk."""
     robot, _, q0 = setup
@@ -185,6 +227,11 @@ def test_warm_start_keeps_the_joints_within_their_limits():
         history.append(robot.configuration(q[:3], 0.0, joints))
     start = solver.warm_start(history)
     assert robot.joint_positions(start)[index][0] == upper
+    # The clip of q with infinite bounds off the IK joints is the clip of the IK joints.
+    expected = 3.0 * (history[-1] - history[-2]) + history[-3]
+    ik = robot.q_indices(robot.ik_joint_names)
+    expected[ik] = np.clip(expected[ik], solver._lower, solver._upper)
+    np.testing.assert_array_equal(start, expected)
     np.testing.assert_allclose(solver.warm_start(history[:2])[:3], q[:3])
     np.testing.assert_array_equal(solver.warm_start(history[:1]), history[0])
 

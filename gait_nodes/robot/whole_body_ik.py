@@ -161,24 +161,21 @@ class WholeBodyIkSolver:
         self._frames = tuple(int(f) for f in robot.foot_frame_ids)
         self._frame_offset = np.array([0.0, 0.0, robot.foot_frame_height_m])
         self._offsets = np.array(robot.foot_rotation_offsets)
-        # The sole rotation targets of the last foot yaws (stance feet keep their yaw for long).
-        self._rotation_yaws: list[float] | None = None
-        self._rotation_targets = np.zeros((len(self._frames), 3, 3))
+        # The IK joints' limits over the whole configuration (infinite elsewhere): one clip of
+        # q is the clip of q[q_idx] (max/min with an infinite bound return the value itself).
+        self._q_lower = np.full(self.model.nq, -np.inf)
+        self._q_upper = np.full(self.model.nq, np.inf)
+        self._q_lower[self._q_idx] = self._lower
+        self._q_upper[self._q_idx] = self._upper
         self._work: dict[bool, _Workspace] = {}
 
     def _workspace(self, free_base: bool) -> _Workspace:
         work = self._work.get(free_base)
         if work is None:
             work = self._work[free_base] = _Workspace(
-                len(self._frames), self._rows_per_foot, self.model.nv, self._v_idx, free_base)
+                len(self._frames), self._rows_per_foot, self.model.nv, self._v_idx,
+                self._q_idx, self._lower, self._upper, free_base)
         return work
-
-    def _rotation_targets_for(self, yaws_rad: list[float]) -> np.ndarray:
-        if yaws_rad != self._rotation_yaws:
-            for k, yaw in enumerate(yaws_rad):
-                self._rotation_targets[k] = yaw_rotation(yaw) @ self._offsets[k]
-            self._rotation_yaws = list(yaws_rad)
-        return self._rotation_targets
 
     def warm_start(self, solutions: Sequence[np.ndarray],
                    times_s: Sequence[float] | None = None,
@@ -202,8 +199,8 @@ class WholeBodyIkSolver:
             q = 2.0 * solutions[-1] - solutions[-2]
         else:
             return np.array(solutions[-1], dtype=float)
-        q[self._q_idx] = np.minimum(np.maximum(q[self._q_idx], self._lower), self._upper)
-        return q
+        np.maximum(q, self._q_lower, out=q)
+        return np.minimum(q, self._q_upper, out=q)
 
     def solve(self, targets: IkTargets, q_start: np.ndarray) -> IkResult:
         """Configuration reaching ``targets``, starting the iteration at ``q_start``.
@@ -238,7 +235,7 @@ class WholeBodyIkSolver:
         settings = self.settings
         # Small-array numpy calls are what a solve costs (about 1 us each; pinocchio's are
         # cheaper): np.dot rather than @ for products (the same BLAS call, less dispatch),
-        # views made once, scalars set one by one. None changes a float.
+        # arrays and views made once in the workspace, scalars set one by one.
         dot = np.dot
         q = np.array(q_start, dtype=float)
         if not math.isfinite(dot(q, q)) and not np.isfinite(q).all():  # (one cheap test)
@@ -248,41 +245,48 @@ class WholeBodyIkSolver:
         q[5] = math.sin(half)
         q[6] = math.cos(half)
         free_base = com_in_world is not None
-        base = q[:3]
         if not free_base:
-            base[:] = base_position_in_world
+            q[:3] = base_position_in_world
         work = self._workspace(free_base)
         if work.settings is not settings:
             work.weigh(settings)
-        frame_targets = np.add(feet_in_world, self._frame_offset)
+        # The feet's frame targets go into the error map's constant row (see _Workspace).
+        np.add(feet_in_world, self._frame_offset, out=work.frame_targets)
         orient = self._orient
         if orient:
-            rotation_targets = self._rotation_targets_for(foot_yaws_rad)
+            work.aim_soles(foot_yaws_rad, self._offsets)
         com_target = np.asarray(com_in_world, dtype=float) if free_base else None
         error, full, placements = work.error, work.full, work.placements
-        positions, positions_error, com_error = work.positions, work.positions_error, \
-            work.com_error
-        rows_per_foot, base_cols = work.rows_per_foot, work.base_cols
-        q_idx, lower, upper = self._q_idx, self._lower, self._upper
-        joints = q[q_idx]
+        placements_flat, error_map, mapped = work.placements_flat, work.error_map, work.mapped
+        traces, com_error = work.traces, work.com_error
+        jacobian, transposed, normal = work.jacobian, work.transposed, work.normal
+        normal_fortran, normal_diagonal, columns = work.normal.T, work.normal_diagonal, \
+            work.columns
+        base_cols, x_idx = work.base_cols, work.x_idx
+        x_lower, x_upper, weights = work.x_lower, work.x_upper, work.weights
+        unknowns = q[x_idx]  # base translation (free base), then the IK joints
         world = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
         placement, frame_jacobian = pin.updateFramePlacement, pin.getFrameJacobian
         foot_rows = work.foot_rows
-        point_feet = rows_per_foot != 6
+        point_feet = work.rows_per_foot != 6
         iteration = 0
         while True:
             pin.forwardKinematics(model, data, q)
             for k, frame in enumerate(frames):
                 placements[k] = placement(model, data, frame).homogeneous
-            np.subtract(frame_targets, positions, out=positions_error)
-            if orient:
-                self._orientation_errors(rotation_targets, work)
+            # Foot position errors, sole orientation errors (small-angle) and the soles'
+            # relative rotation traces: one affine map of the placements.
+            dot(placements_flat, error_map, out=mapped)
+            if orient and min(traces.tolist()) <= SMALL_ANGLE_TRACE:
+                work.large_orientation_errors()
             if free_base:
                 np.subtract(com_target, pin.centerOfMass(
                     model, data, pin.KinematicLevel.POSITION, False), out=com_error)
             squares = error * error
-            # Every foot's and the COM's squared error over its squared tolerance, at most 1.
-            converged = max(dot(squares, work.weights).tolist()) <= 1.0
+            # Every foot's and the COM's squared error over its squared tolerance (at most 1
+            # each when converged), then the plain sum of squares (the damping).
+            *scaled, damping = dot(squares, weights).tolist()
+            converged = max(scaled) <= 1.0
             if converged or iteration >= settings.max_iterations:
                 break
             iteration += 1
@@ -292,27 +296,26 @@ class WholeBodyIkSolver:
                 full[rows] = block[:3] if point_feet else block
             if free_base:
                 full[-3:, :-3] = pin.jacobianCenterOfMass(model, data, False)
-            jacobian = full[:, work.columns]
-            transposed = jacobian.T
+            full.take(columns, 1, jacobian, 'clip')  # the unknowns' columns (all valid)
             # Levenberg-Marquardt step (J^T J + lambda I) dx = J^T e, by Cholesky.
-            normal = transposed @ jacobian  # (matmul's syrk: cheaper here than np.dot's)
-            normal.reshape(-1)[::len(normal) + 1] += dot(error, error) + DAMPING_BIAS  # (a view)
-            # (lower=0, overwrite_a=1, overwrite_b=1 positionally: f2py parses keywords slowly)
-            _, step, info = lapack.dposv(normal, dot(transposed, error), 0, 1, 1)
+            np.matmul(transposed, jacobian, out=normal)  # (matmul's syrk)
+            normal_diagonal += damping + DAMPING_BIAS
+            # (lower=0, overwrite_a=1, overwrite_b=1 positionally: f2py parses keywords slowly;
+            # the symmetric matrix passed as its Fortran-ordered transpose: factored in place)
+            _, step, info = lapack.dposv(normal_fortran, dot(transposed, error), 0, 1, 1)
             if info != 0:  # not reached with lambda > 0; keep the iteration defined anyway
                 step = np.linalg.lstsq(jacobian, error, rcond=None)[0]
-            joint_step = step[base_cols:]
-            largest = max(map(abs, joint_step.tolist()), default=0.0)
+            values = step.tolist()
+            largest = max(map(abs, values[base_cols:]), default=0.0)
             if largest > MAX_NEWTON_STEP_RAD:
                 step *= MAX_NEWTON_STEP_RAD / largest
-            if free_base:
-                np.add(base, step[:3], out=base)
-            joints += joint_step
-            np.maximum(joints, lower, out=joints)
-            np.minimum(joints, upper, out=joints)
-            q[q_idx] = joints
+            unknowns += step
+            np.maximum(unknowns, x_lower, out=unknowns)
+            np.minimum(unknowns, x_upper, out=unknowns)
+            q[x_idx] = unknowns
         norms = np.sqrt(dot(squares, work.groups))  # feet positions, orientations, COM
-        margins = np.minimum(joints - lower, upper - joints).tolist()
+        joints = unknowns[base_cols:]
+        margins = np.minimum(joints - self._lower, self._upper - joints).tolist()
         at_limit = () if min(margins, default=1.0) > 1e-9 else tuple(
             name for name, margin in zip(self.joint_names, margins, strict=True)
             if margin <= 1e-9)
@@ -323,21 +326,6 @@ class WholeBodyIkSolver:
                         com_error_m=float(norms[-1]) if free_base else 0.0,
                         joints_at_limit=at_limit)
 
-    @staticmethod
-    def _orientation_errors(rotation_targets: np.ndarray, work: _Workspace) -> None:
-        """Sole orientation errors ``log3(R_target R^T)`` (world frame) into ``work.per_foot``.
-
-        Below 1e-4 rad on every foot, ``vee(E - E^T) / 2`` of ``E = R_target R^T`` (the
-        rotation vector to a relative 2e-9: sin(a) = a); beyond, Pinocchio's log3 foot by foot.
-        """
-        np.matmul(rotation_targets, work.rotations_transposed, out=work.relative)
-        np.dot(work.relative_flat, VEE_AND_TRACE, out=work.vee_and_trace)  # (matmul's gemm)
-        if min(work.traces.tolist()) > SMALL_ANGLE_TRACE:
-            work.orientations_error[:] = work.vees
-        else:
-            for k, relative in enumerate(work.relative):
-                work.orientations_error[k] = pin.log3(relative)
-
 
 #: Maps a row-major flattened rotation E to (vee(E - E^T) / 2, trace(E)).
 VEE_AND_TRACE = np.zeros((9, 4))
@@ -346,6 +334,15 @@ VEE_AND_TRACE[[5, 6, 1], [0, 1, 2]] = -0.5
 VEE_AND_TRACE[[0, 4, 8], 3] = 1.0
 #: trace(E) = 1 + 2 cos(a) above this: rotation angle a below 1e-4 rad.
 SMALL_ANGLE_TRACE = 1.0 + 2.0 * math.cos(1e-4)
+#: ``dot(R_target.ravel(), SOLE_MAP)`` is the (16, 4) linear map from a foot's flattened
+#: homogeneous placement (rotation R) to (vee(E - E^T) / 2, trace(E)) of E = R_target R^T:
+#: E[a, b] = sum_c R_target[a, c] R[b, c], and R[b, c] is the placement's entry 4 b + c.
+SOLE_MAP = np.zeros((9, 16, 4))
+for _e, _m in zip(*np.nonzero(VEE_AND_TRACE), strict=True):
+    for _c in range(3):
+        SOLE_MAP[3 * (_e // 3) + _c, 4 * (_e % 3) + _c, _m] += VEE_AND_TRACE[_e, _m]
+SOLE_MAP = SOLE_MAP.reshape(9, 64)
+del _e, _m, _c
 
 
 class _Workspace:
@@ -354,10 +351,17 @@ class _Workspace:
     ``full`` holds the stacked task Jacobian over Pinocchio's whole velocity vector, plus three
     constant columns: the world-frame base translation moves every foot and the COM one to
     one. ``columns`` picks the unknowns out of it (base translation, then the IK joints).
+
+    ``error_map`` is the affine map from the feet's homogeneous placements (flattened, their
+    constant 1 included) to ``mapped``: the soles' traces of ``E = R_target R^T`` (6-row feet),
+    then every foot's position error ``target - p`` (exact: -1 on p, the target on the 1, zero
+    elsewhere) and small-angle orientation error ``vee(E - E^T) / 2`` (the rotation vector to a
+    relative 2e-9 below 1e-4 rad), which is ``error`` without the COM rows. Its rotation part
+    changes only with the sole yaw targets (:meth:`aim_soles`: stance feet keep theirs).
     """
 
     def __init__(self, feet_count: int, rows_per_foot: int, nv: int, v_idx: np.ndarray,
-                 free_base: bool):
+                 q_idx: np.ndarray, lower: np.ndarray, upper: np.ndarray, free_base: bool):
         rows = feet_count * rows_per_foot + (3 if free_base else 0)
         self.rows_per_foot = rows_per_foot
         self.full = np.zeros((rows, nv + 3))
@@ -365,31 +369,55 @@ class _Workspace:
         self.foot_rows = [(slice(k * rows_per_foot, (k + 1) * rows_per_foot), slice(0, nv))
                           for k in range(feet_count)]
         self.base_cols = 3 if free_base else 0
+        base = np.arange(3 if free_base else 0)
         if free_base:
             for k in range(feet_count):
                 r = k * rows_per_foot
                 self.full[r:r + 3, -3:] = np.eye(3)
             self.full[-3:, -3:] = np.eye(3)
-            self.columns = np.concatenate([np.arange(nv, nv + 3), v_idx])
-        else:
-            self.columns = np.array(v_idx)
-        self.error = np.zeros(rows)
-        self.per_foot = self.error[:feet_count * rows_per_foot].reshape(feet_count,
-                                                                        rows_per_foot)
-        self.positions_error = self.per_foot[:, :3]
+        self.columns = np.concatenate([np.arange(nv, nv + len(base)), v_idx])
+        # The unknowns in q (base translation, joints) and their bounds.
+        self.x_idx = np.concatenate([base, q_idx])
+        self.x_lower = np.concatenate([np.full(len(base), -np.inf), lower])
+        self.x_upper = np.concatenate([np.full(len(base), np.inf), upper])
+        unknowns = len(self.columns)
+        self.jacobian = np.zeros((rows, unknowns))
+        self.transposed = self.jacobian.T
+        self.normal = np.zeros((unknowns, unknowns))
+        self.normal_diagonal = self.normal.reshape(-1)[::unknowns + 1]
+        # ``evaluation``: the traces (6-row feet), then the error vector.
+        orientation = rows_per_foot == 6
+        trace_count = feet_count if orientation else 0
+        foot_errors = feet_count * rows_per_foot
+        self.evaluation = np.zeros(trace_count + rows)
+        self.traces = self.evaluation[:trace_count]
+        self.error = self.evaluation[trace_count:]
+        self.mapped = self.evaluation[:trace_count + foot_errors]
+        self.per_foot = self.error[:foot_errors].reshape(feet_count, rows_per_foot)
         self.com_error = self.error[-3:] if free_base else None
         # Foot frame placements (homogeneous matrices) and views of them.
         self.placements = np.zeros((feet_count, 4, 4))
-        self.positions = self.placements[:, :3, 3]
-        self.rotations_transposed = self.placements[:, :3, :3].transpose(0, 2, 1)
+        self.placements_flat = self.placements.reshape(-1)
+        self.error_map = np.zeros((16 * feet_count, trace_count + foot_errors))
+        outputs = self.error_map.shape[1]
+        for k in range(feet_count):
+            for i in range(3):
+                self.error_map[16 * k + 4 * i + 3, trace_count + k * rows_per_foot + i] = -1.0
+        #: (F, 3) view of the error map's target entries (the placements' 1 to each error).
+        self.frame_targets = np.lib.stride_tricks.as_strided(
+            self.error_map[15:, trace_count:], (feet_count, 3),
+            ((16 * outputs + rows_per_foot) * 8, 8))
+        # Each foot's sole block of the error map: its placement rows, (vee, trace) columns.
+        self.sole_blocks = [(np.arange(16 * k, 16 * k + 16)[:, None],
+                             np.array([trace_count + k * rows_per_foot + 3 + m
+                                       for m in range(3)] + [k])[None, :])
+                            for k in range(feet_count)]
+        self.yaws: list[float | None] = [None] * feet_count
+        self.rotation_targets = np.zeros((feet_count, 3, 3))
         self.relative = np.zeros((feet_count, 3, 3))
-        self.relative_flat = self.relative.reshape(feet_count, 9)
-        self.vee_and_trace = np.zeros((feet_count, 4))
-        self.vees, self.traces = self.vee_and_trace[:, :3], self.vee_and_trace[:, 3]
-        self.orientations_error = self.per_foot[:, 3:]  # (empty for 3-row feet)
         # Sums the squared errors into norms: each foot's position, each foot's orientation
-        # (6-row feet), the COM (free base); ``weights`` divides them by their tolerances.
-        orientation = rows_per_foot == 6
+        # (6-row feet), the COM (free base); ``weights`` divides them by their tolerances and
+        # adds a last column of ones (the sum of all squares).
         self.groups = np.zeros((rows, (2 if orientation else 1) * feet_count + 1))
         for k in range(feet_count):
             r = k * rows_per_foot
@@ -398,7 +426,7 @@ class _Workspace:
                 self.groups[r + 3:r + 6, feet_count + k] = 1.0
         if free_base:
             self.groups[-3:, -1] = 1.0
-        self.weights = self.groups.copy()
+        self.weights = None
         self.settings = None
 
     def weigh(self, settings: IkSettings) -> None:
@@ -407,8 +435,28 @@ class _Workspace:
         scale = np.full(self.groups.shape[1], settings.position_tolerance_m ** -2)
         scale[feet_count:-1] = settings.orientation_tolerance_rad ** -2
         scale[-1] = settings.com_tolerance_m ** -2
-        self.weights = self.groups * scale
+        self.weights = np.column_stack([self.groups * scale, np.ones(len(self.groups))])
         self.settings = settings
+
+    def aim_soles(self, yaws_rad: list[float], offsets: np.ndarray) -> None:
+        """Point the error map's sole blocks at the yaw targets (those that changed)."""
+        for k, yaw in enumerate(yaws_rad):
+            if yaw != self.yaws[k]:
+                target = self.rotation_targets[k] = yaw_rotation(yaw) @ offsets[k]
+                rows, cols = self.sole_blocks[k]
+                self.error_map[rows, cols] = np.dot(target.reshape(9), SOLE_MAP).reshape(16, 4)
+                self.yaws[k] = yaw
+
+    def large_orientation_errors(self) -> None:
+        """Sole orientation errors ``log3(R_target R^T)`` (world frame), foot by foot.
+
+        For a sole 1e-4 rad or more off its target, where the error map's small-angle form
+        (``sin(a) = a``) is no longer the rotation vector.
+        """
+        np.matmul(self.rotation_targets, self.placements[:, :3, :3].transpose(0, 2, 1),
+                  out=self.relative)
+        for k, relative in enumerate(self.relative):
+            self.per_foot[k, 3:] = pin.log3(relative)
 
 
 # -- seeds and the nominal stance -------------------------------------------------------------

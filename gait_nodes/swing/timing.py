@@ -186,15 +186,24 @@ class SwingTiming:
 
         The full-model COM is held at ``com`` and the body level at ``body_yaw_rad``.
         """
-        from gait_nodes.robot.whole_body_ik import IkTargets
-
+        # What IkTargets would check at every sample, checked once for all of them.
+        feet = np.asarray(feet, dtype=float)
+        yaws = np.asarray(yaws, dtype=float)
+        com = np.asarray(com, dtype=float)
+        if feet.shape != (len(u), len(self._feet), 3) or yaws.shape != feet.shape[:2] \
+                or com.shape != (3,):
+            raise ValueError(f'swing probe: feet must be (N, F, 3) with (N, F) yaws and a (3,) '
+                             f'COM, got {feet.shape}, {yaws.shape} and {com.shape}')
+        if not (np.isfinite(feet).all() and np.isfinite(yaws).all() and np.isfinite(com).all()
+                and math.isfinite(body_yaw_rad)):
+            raise ValueError('swing probe targets hold a NaN or infinite value')
+        yaw_lists = yaws.tolist()
         solutions = [np.array(q_start, dtype=float)]
         joints = []
         for k in range(len(u)):
             # Started where the last solutions head (as the IK node does): one Newton step.
-            result = self._solver.solve(IkTargets(feet[k], yaws[k], body_yaw_rad,
-                                                  com_in_world=com),
-                                        self._solver.warm_start(solutions[-3:]))
+            result = self._solver.solve_trusted(feet[k], yaw_lists[k], body_yaw_rad,
+                                                self._solver.warm_start(solutions[-3:]), com)
             if result.foot_position_errors_m.max() > 1e-4 or result.com_error_m > 1e-4:
                 raise SwingPolicyError(f'a swing to {np.round(feet[-1], 3).tolist()} leaves '
                                        f'the reach of the limbs')
