@@ -420,12 +420,21 @@ class OnlinePreviewController:
 
     def _cache_gains(self) -> None:
         g = self._gains
-        self._fast = (g.A, g.B.reshape(3, 1), g.C, g.integral_gain, g.state_gain,
-                      g.preview_gain, g.settings.dt_ns, g.settings.preview_steps)
+        # The per-tick products in plain floats (step): A is the cart-table's integrator chain
+        # (1, dt, dt^2/2 / 0, 1, dt / 0, 0, 1) and C = (1, 0, -zc/g).
+        self._fast = (g.A[0, 1], g.A[0, 2], g.A[1, 2], tuple(g.B.tolist()), g.C[2],
+                      g.integral_gain, tuple(g.state_gain.tolist()), g.preview_gain,
+                      g.settings.dt_ns, g.settings.preview_steps)
 
     def step(self) -> ComSample:
-        """Return the state at ``t_k`` and advance the controller to ``t_k + dt``."""
-        A, B, C, Gi, Gx, Gd, dt_ns, steps = self._fast
+        """Return the state at ``t_k`` and advance the controller to ``t_k + dt``.
+
+        The 3 x 2 state products are written out in plain floats (a numpy call on arrays this
+        small costs ten times the arithmetic); they equal the matrix form
+        :meth:`step_reference` up to rounding (the BLAS kernels may fuse multiply-adds), and
+        only the preview sum over the window is a numpy dot.
+        """
+        a01, a02, a12, (b0, b1, b2), c2, Gi, (g0, g1, g2), Gd, dt_ns, steps = self._fast
         window = self._window
         offset = (self._stamp_ns - self._window_origin_ns) // dt_ns
         if window is None or offset < 0 or offset > len(window) - steps - 1 \
@@ -436,11 +445,33 @@ class OnlinePreviewController:
         x = self._state
         # x is replaced, never written, so its rows can be handed out without copies.
         current = ComSample(self._stamp_ns, x[0], x[1], x[2])
-        # ndarray.dot: matmul's products with less overhead per call on these small arrays.
-        error_sum = self._error_sum + C.dot(x) - window[0]
-        self._error_sum = error_sum
-        self._state = A.dot(x) + B * (-Gi * error_sum - Gx.dot(x) - Gd.dot(window[1:]))
+        (cx, cy), (vx, vy), (ax, ay) = x.tolist()
+        rx, ry = window[0].tolist()
+        fx, fy = Gd.dot(window[1:]).tolist()
+        sx, sy = self._error_sum.tolist()
+        sx += cx + c2 * ax - rx
+        sy += cy + c2 * ay - ry
+        ux = -Gi * sx - (g0 * cx + g1 * vx + g2 * ax) - fx
+        uy = -Gi * sy - (g0 * cy + g1 * vy + g2 * ay) - fy
+        self._error_sum = np.array((sx, sy))
+        self._state = np.array(((cx + a01 * vx + a02 * ax + b0 * ux,
+                                 cy + a01 * vy + a02 * ay + b0 * uy),
+                                (vx + a12 * ax + b1 * ux, vy + a12 * ay + b1 * uy),
+                                (ax + b2 * ux, ay + b2 * uy)))
         self._stamp_ns += dt_ns
+        return current
+
+    def step_reference(self) -> ComSample:
+        """:meth:`step` in the matrix form of Kajita eq. (13) (the reference for its tests)."""
+        g = self._gains
+        window = self.window()
+        x = self._state
+        current = ComSample(self._stamp_ns, x[0], x[1], x[2])
+        self._error_sum = self._error_sum + g.C @ x - window[0]
+        self._state = g.A @ x + g.B.reshape(3, 1) * (
+            -g.integral_gain * self._error_sum - g.state_gain @ x
+            - g.preview_gain @ window[1:])
+        self._stamp_ns += g.settings.dt_ns
         return current
 
     def zmp(self) -> np.ndarray:
