@@ -18,6 +18,10 @@ reference, held at its end (the walk the other nodes still follow, then a stands
 last ZMP). The generator starts from the robot's measured COM (/gait/com, the simulator's
 full-model COM, with its velocity from the recent samples) when one is fresh, so that a
 controller restarted mid-walk picks up the robot where it is; without one, from the reference.
+The COM is stepped by time: ticks the timer missed are caught up (up to ``MAX_CATCH_UP_TICKS``);
+further behind the clock (a process starved on an overloaded machine, a jump in time) the state
+is carried over to now, never stepped ahead of it, and the gap is reported (WARN,
+``com_preview_controller: controller``).
 
 A ZMP reference with a NaN, out-of-order stamps, too short a horizon (< ``preview_s``) or in a
 frame other than odom is dropped and reported on /diagnostics; the controller keeps its last good
@@ -317,11 +321,20 @@ class ComPreviewController(Node):
             self._measured_com.clear()
         behind = (now_ns - self._generator.stamp_ns) // preview.dt_ns
         if behind > MAX_CATCH_UP_TICKS or behind < -1:
-            # Far off the clock (a jump in time): carry the state over to now.
+            # Far off the clock (a jump in time, or a process starved of its ticks on an
+            # overloaded machine): carry the state over to now, and step from there only the
+            # tick of now (stepping the missed ticks too would publish a COM that ran ahead of
+            # the clock by as much, and the next tick would carry that state back to now).
             current = self._generator.state()
             self._generator.reset(current.position_in_world, current.velocity_in_world,
                                   current.acceleration_in_world, stamp_ns=now_ns)
             self._generator.set_reference(self._reference)
+            self.diagnostics.report(
+                'controller', WARN, f'{abs(behind) * preview.dt_s:.3f} s '
+                f'{"behind" if behind > 0 else "ahead of"} the clock (more than '
+                f'{MAX_CATCH_UP_TICKS} ticks): the COM state carried over to now',
+                {'behind_s': behind * preview.dt_s, 'max_catch_up_ticks': MAX_CATCH_UP_TICKS})
+            behind = 0
         elif behind < 0:
             return
         try:

@@ -9,7 +9,12 @@ import yaml
 from com_references import NS_PER_S, biped_walk_vertices, sample_vertices, window
 
 from gait_nodes import contract, runtime
-from gait_nodes.com_preview_controller import DEFAULTS, ComPreviewController, plan_yaw
+from gait_nodes.com_preview_controller import (
+    DEFAULTS,
+    MAX_CATCH_UP_TICKS,
+    ComPreviewController,
+    plan_yaw,
+)
 from gait_nodes.diagnostics import level_value
 from gait_nodes.interfaces import get_message
 from gait_nodes.runtime import Parameter, QoSProfile, qos_profile_latched
@@ -314,3 +319,46 @@ def test_shipped_defaults_match_the_declared_parameters():
     path = HERE.parent / 'config' / 'com_preview_controller.yaml'
     shipped = yaml.safe_load(path.read_text())['com_preview_controller']['ros__parameters']
     assert shipped == DEFAULTS
+
+
+@pytest.mark.parametrize('method', ['preview', 'polynomial'])
+def test_a_controller_starved_of_ticks_publishes_no_state_from_the_future(start, method):
+    # On two overloaded cores a node process can miss its timer for more than
+    # MAX_CATCH_UP_TICKS periods (0.6 s seen over DDS). The controller then starts again at
+    # the clock; it once also stepped the ticks it had missed from there, and published a COM
+    # state 0.3 s ahead of the clock (stamped in the future, the next one 0.3 s earlier): the
+    # whole-body IK followed a COM that ran ahead, then dropped back.
+    start('-p', f'robot:={BIPED}', '-p', f'com_method:={method}')
+    plan = biped_walk_vertices(steps=6)
+    starved_s = (MAX_CATCH_UP_TICKS + 10) * DT
+    received = []  # (clock at delivery [ns], stamp [ns])
+
+    def starve(context):
+        controller = context['controller']
+        controller.destroy_timer(controller._timer)
+        recorder = context['recorder']
+        recorder.create_subscription(
+            get_message('trajectory_msgs/msg/MultiDOFJointTrajectory'), '/gait/com_reference',
+            lambda msg: received.append((recorder.get_clock().now().nanoseconds,
+                                         contract.time_msg_to_ns(msg.header.stamp))),
+            QoSProfile(depth=100))
+
+    def resume(context):
+        controller = context['controller']
+        controller._timer = controller.create_timer(DT, controller._tick)
+
+    context = run(plan, 6.0, [(3.0, starve), (3.0 + starved_s, resume)])
+    clock_ns, stamps_ns = np.array(received).T
+    assert len(stamps_ns) > 300
+    # Every state describes an instant the clock has reached, and time never runs back.
+    assert np.all(stamps_ns <= clock_ns)
+    assert np.all(np.diff(stamps_ns) > 0)
+    # After the gap the states go on from the clock, one tick apart.
+    np.testing.assert_allclose(np.diff(stamps_ns[1:]), DT * NS_PER_S)
+    assert stamps_ns[0] - int(3.0 * NS_PER_S) >= starved_s * NS_PER_S - DT * NS_PER_S
+    # The gap is reported, with how far behind the controller was.
+    late = [s for s in context['recorder'].statuses if s.name.endswith('controller')
+            and 'behind the clock' in s.message]
+    assert late and level_value(late[0].level) == 1
+    values = {kv.key: kv.value for kv in late[0].values}
+    assert float(values['behind_s']) >= starved_s - DT
