@@ -339,41 +339,39 @@ class ComPreviewController(Node):
             return
         try:
             for _ in range(max(int(behind), 0)):
-                self._generator.step()
-            sample = self._generator.step()
+                self._generator.step_values()
+            values = self._generator.step_values()
         except ComPlanningError as exc:
             self.diagnostics.report('generator', ERROR, f'{self._settings.method}: {exc}')
             return
-        self._publish(sample)
+        self._publish(values)
 
-    def _publish(self, sample) -> None:
+    def _publish(self, values) -> None:
+        """Publish ``(stamp_ns, cx, cy, vx, vy, ax, ay)`` (a generator's ``step_values``)."""
         # Plain floats into the message builder: the message of com_reference_to_msg of a
         # ComState of the same values (test_com_preview_node), without a dozen small arrays.
-        stamp_ns = sample.stamp_ns
+        stamp_ns, px, py, vx, vy, ax, ay = values
         yaw, yaw_rate = 0.0, 0.0
         if self._plan is not None:
             yaw, yaw_rate = self._plan_yaw.at((stamp_ns - self._plan.start_ns) * 1e-9)
             yaw = math.remainder(yaw, 2 * math.pi)
         height, climb, climb_rate = (0.0, 0.0, 0.0) if self._support is None \
             else self._support.at_ns(stamp_ns)
-        px, py = sample.position_in_world.tolist()
-        vx, vy = sample.velocity_in_world.tolist()
-        ax, ay = sample.acceleration_in_world.tolist()
         self._publisher.publish(self._messages.to_msg(
             stamp_ns, (px, py, self._settings.preview.com_height_m + height), (vx, vy, climb),
             (ax, ay, climb_rate), yaw, yaw_rate))
-        self._last_published = sample
+        self._last_published = values
 
     def _report_status(self) -> None:
         self.diagnostics.publish([self.inputs.status(self.get_clock().now().nanoseconds)])
         if self._last_published is None:
             self.diagnostics.report('controller', WARN, f'waiting for {ZMP_TOPIC}')
             return
-        sample = self._last_published
+        stamp_ns, px, py, _, _, ax, ay = self._last_published
         preview = self._settings.preview
-        zmp = sample.position_in_world - preview.com_height_m / preview.gravity_m_s2 \
-            * sample.acceleration_in_world
-        reference = self._reference.sample(np.array([sample.stamp_ns], dtype=np.int64))[0]
+        zmp = np.array((px, py)) - preview.com_height_m / preview.gravity_m_s2 \
+            * np.array((ax, ay))
+        reference = self._reference.sample(np.array([stamp_ns], dtype=np.int64))[0]
         values = {
             'com_method': self._settings.method,
             'zmp_error_m': float(np.linalg.norm(zmp - reference)),

@@ -225,3 +225,34 @@ def test_float_step_equals_the_matrix_step_to_rounding(seed):
     np.testing.assert_array_equal(fast[:, 0], reference[:, 0])
     scale = np.max(np.abs(reference[:, 1:]), axis=0)
     np.testing.assert_allclose(fast[:, 1:], reference[:, 1:], rtol=0, atol=1e-12 * scale.max())
+
+
+def test_step_values_are_the_step_and_a_short_window_changes_nothing(monkeypatch):
+    # step_values() is step() in floats; the window resampled WINDOW_LEAD_TICKS ahead (not to
+    # the reference's end) gives the same states to the bit, also when the reference stops
+    # coming (the window then runs out and is resampled over and over).
+    from gait_nodes.com import preview
+
+    times, points = biped_walk_vertices(steps=4)
+    runs = []
+    for lead, method in ((10, 'step_values'), (10, 'step'), (100000, 'step')):
+        monkeypatch.setattr(preview, 'WINDOW_LEAD_TICKS', lead)
+        controller = OnlinePreviewController(STANDARD, points[0])
+        values = []
+        for k in range(int(4.0 / STANDARD.dt_s)):
+            if k % 4 == 0 and k < 300:
+                controller.set_reference(window(times, points, k * STANDARD.dt_ns, 3.0, 0.01))
+            if method == 'step':
+                sample = controller.step()
+                values.append((sample.stamp_ns, *sample.position_in_world.tolist(),
+                               *sample.velocity_in_world.tolist(),
+                               *sample.acceleration_in_world.tolist()))
+            else:
+                values.append(controller.step_values())
+        state = controller.state()
+        values.append((state.stamp_ns, *state.position_in_world.tolist(),
+                       *state.velocity_in_world.tolist(),
+                       *state.acceleration_in_world.tolist()))
+        runs.append(np.array(values, dtype=object))
+    for run in runs[1:]:
+        assert [repr(tuple(row)) for row in run] == [repr(tuple(row)) for row in runs[0]]

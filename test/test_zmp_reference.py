@@ -144,3 +144,56 @@ def test_a_mid_walk_change_moves_the_zmp_no_more_than_the_new_steps(gait):
                              if boundary <= s.start_s < 6.2 + 2.0 + 2.0])
     foothold_change = np.max(np.linalg.norm(feet_a - feet_b, axis=1))
     assert np.max(np.linalg.norm(zmp_a - zmp_b, axis=1)) <= foothold_change + 1e-9
+
+
+@settings(max_examples=60, deadline=None)
+@given(knots=st.lists(st.tuples(st.floats(1e-3, 2.0), st.floats(-5.0, 5.0)), min_size=1,
+                      max_size=8),
+       start=st.floats(-10.0, 10.0), picks=st.lists(st.integers(0, 20), min_size=1, max_size=6),
+       between=st.lists(st.floats(-1.0, 2.0), min_size=1, max_size=12))
+def test_interp_floats_is_np_interp_to_the_bit(knots, start, picks, between):
+    # The planner's slid ZMP windows sample their new points in plain floats: the same bits as
+    # np.interp at the knots, between them, beyond both ends, and for a single knot.
+    from gait_nodes.planning.zmp_reference import interp_floats
+
+    xs = (start + np.cumsum([gap for gap, _ in knots])).tolist()
+    ys = [value for _, value in knots]
+    queries = [xs[k % len(xs)] for k in picks]
+    queries += [xs[0] + f * (xs[-1] - xs[0] + 0.5) - 0.25 for f in between]
+    queries += [xs[0] - 1.0, xs[-1] + 1.0, -0.0, 0.0]
+    expected = np.interp(np.array(queries), np.array(xs), np.array(ys))
+    got = np.array([interp_floats(x, xs, ys) for x in queries])
+    np.testing.assert_array_equal(got.view(np.int64), expected.view(np.int64))
+    assert np.isnan(interp_floats(float('nan'), xs, ys)) == (len(xs) > 1)
+
+
+@pytest.mark.parametrize('gait', sorted(GAITS))
+def test_slid_flat_windows_equal_windows_sampled_whole(gait):
+    # zmp_reference samples only the new tail of a window slid on flat ground (in floats); every
+    # window must be bit for bit the one sampled whole, across velocity changes, a stop, ticks
+    # skipped and a tick off the sample lattice.
+    from gait_nodes.planning.footsteps import GaitPlanner
+
+    description, values = GAITS[gait]
+    planner = GaitPlanner(description, GaitParameters.for_robot(description, **values))
+    origin_ns, period_ns = 3_000_000_000, 20_000_000
+    commands = {0.1: Twist2D(0.1), 3.0: Twist2D(0.05, 0.02, 0.1), 7.0: Twist2D()}
+    now_ns, checked = origin_ns, 0
+    while now_ns < origin_ns + 10_000_000_000:
+        now_s = (now_ns - origin_ns) * 1e-9
+        for at_s, twist in commands.items():
+            if at_s <= now_s < at_s + 0.02:
+                planner.set_velocity(twist, now_s)
+        planner.advance(now_s + 2.0 + planner.params.step_period_s)
+        planner.prune(now_s)
+        reference = planner.zmp_reference(now_ns, origin_ns, 2.0, 0.01)
+        last = planner._last_zmp_reference
+        planner._last_zmp_reference = None
+        whole = planner.zmp_reference(now_ns, origin_ns, 2.0, 0.01)
+        planner._last_zmp_reference = last
+        for name in ('stamps_ns', 'zmp_in_world', 'plane_heights_m'):
+            np.testing.assert_array_equal(getattr(reference, name).view(np.int64),
+                                          getattr(whole, name).view(np.int64))
+        checked += 1
+        now_ns += period_ns * (3 if checked % 37 == 0 else 1) + (5_000_000 * (checked % 53 == 0))
+    assert checked > 400

@@ -205,6 +205,16 @@ class ReplanningGenerator:
         self._stamp_ns += self.settings.dt_ns
         return sample
 
+    def step_values(self) -> tuple[int, float, float, float, float, float, float]:
+        """:meth:`step` as ``(stamp_ns, cx, cy, vx, vy, ax, ay)``.
+
+        The preview controller's form (:meth:`gait_nodes.com.preview.OnlinePreviewController.
+        step_values`), which the node publishes from.
+        """
+        sample = self.step()
+        return (sample.stamp_ns, *sample.position_in_world.tolist(),
+                *sample.velocity_in_world.tolist(), *sample.acceleration_in_world.tolist())
+
 
 class _SwayPlan:
     """A SwayTrajectory with the PiecewiseQuintic ``sample`` signature."""

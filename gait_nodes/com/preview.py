@@ -39,6 +39,9 @@ NS_PER_S = 1_000_000_000
 MAX_PREVIEW_S = 60.0
 #: Largest accepted sample time [s].
 MAX_DT_S = 1.0
+#: Ticks of reference resampled beyond the preview window (OnlinePreviewController): a new
+#: reference comes every 4 ticks (50 Hz); the window is resampled when these run out.
+WINDOW_LEAD_TICKS = 10
 
 
 @dataclass(frozen=True)
@@ -308,8 +311,10 @@ class OnlinePreviewController:
                  stamp_ns: int = 0):
         self._gains = preview_gains(settings)
         self._cache_gains()
-        self._state = np.zeros((3, 2))
-        self._error_sum = np.zeros(2)
+        # The state (cx, cy, vx, vy, ax, ay) and the error sum (sx, sy) are kept in plain
+        # floats (step runs at 200 Hz; the arrays of _state and _error_sum are made on demand).
+        self._x = (0.0,) * 6
+        self._e = (0.0, 0.0)
         self._stamp_ns = int(stamp_ns)
         self._reference = None
         self._window = None
@@ -332,14 +337,35 @@ class OnlinePreviewController:
         return self._stamp_ns
 
     @property
+    def _state(self) -> np.ndarray:
+        """(3, 2) rows position, velocity, acceleration (a new array of the kept floats)."""
+        cx, cy, vx, vy, ax, ay = self._x
+        return np.array(((cx, cy), (vx, vy), (ax, ay)))
+
+    @_state.setter
+    def _state(self, state: np.ndarray) -> None:
+        (cx, cy), (vx, vy), (ax, ay) = np.asarray(state, dtype=float).tolist()
+        self._x = (cx, cy, vx, vy, ax, ay)
+
+    @property
+    def _error_sum(self) -> np.ndarray:
+        """(2,) ZMP error sum (a new array of the kept floats)."""
+        return np.array(self._e)
+
+    @_error_sum.setter
+    def _error_sum(self, error_sum: np.ndarray) -> None:
+        sx, sy = np.asarray(error_sum, dtype=float).tolist()
+        self._e = (sx, sy)
+
+    @property
     def reference(self):
         """The ZmpReference in use, or None."""
         return self._reference
 
     def state(self) -> ComSample:
         """The current state, without advancing."""
-        return ComSample(self._stamp_ns, self._state[0].copy(), self._state[1].copy(),
-                         self._state[2].copy())
+        state = self._state
+        return ComSample(self._stamp_ns, state[0], state[1], state[2])
 
     def reset(self, position_in_world, velocity_in_world=(0.0, 0.0),
               acceleration_in_world=(0.0, 0.0), stamp_ns: int | None = None) -> None:
@@ -400,7 +426,10 @@ class OnlinePreviewController:
         steps = settings.preview_steps
         dt_ns = settings.dt_ns
         end_ns = int(self._reference.stamps_ns[-1])
-        extra = max(0, -(-(end_ns - self._stamp_ns) // dt_ns))
+        # The ticks up to the reference's end, but at most WINDOW_LEAD_TICKS: a new reference
+        # comes every few ticks, and each sample is interpolated on its own (np.interp works
+        # point by point), so a shorter grid gives the same values where both reach.
+        extra = min(max(0, -(-(end_ns - self._stamp_ns) // dt_ns)), WINDOW_LEAD_TICKS)
         grid = self._stamp_ns + dt_ns * np.arange(steps + 1 + extra, dtype=np.int64)
         self._window = self._reference.sample(grid)
         self._window_origin_ns = self._stamp_ns
@@ -422,12 +451,22 @@ class OnlinePreviewController:
         g = self._gains
         # The per-tick products in plain floats (step): A is the cart-table's integrator chain
         # (1, dt, dt^2/2 / 0, 1, dt / 0, 0, 1) and C = (1, 0, -zc/g).
-        self._fast = (g.A[0, 1], g.A[0, 2], g.A[1, 2], tuple(g.B.tolist()), g.C[2],
-                      g.integral_gain, tuple(g.state_gain.tolist()), g.preview_gain,
+        # (Python floats, not numpy scalars: the same doubles, cheaper arithmetic.)
+        self._fast = (float(g.A[0, 1]), float(g.A[0, 2]), float(g.A[1, 2]),
+                      tuple(g.B.tolist()), float(g.C[2]), float(g.integral_gain),
+                      tuple(g.state_gain.tolist()), g.preview_gain,
                       g.settings.dt_ns, g.settings.preview_steps)
 
     def step(self) -> ComSample:
         """Return the state at ``t_k`` and advance the controller to ``t_k + dt``.
+
+        The values of :meth:`step_values`, as arrays.
+        """
+        stamp_ns, cx, cy, vx, vy, ax, ay = self.step_values()
+        return ComSample(stamp_ns, np.array((cx, cy)), np.array((vx, vy)), np.array((ax, ay)))
+
+    def step_values(self) -> tuple[int, float, float, float, float, float, float]:
+        """:meth:`step` in plain floats: ``(stamp_ns, cx, cy, vx, vy, ax, ay)`` at ``t_k``.
 
         The 3 x 2 state products are written out in plain floats (a numpy call on arrays this
         small costs ten times the arithmetic); they equal the matrix form
@@ -442,24 +481,22 @@ class OnlinePreviewController:
             window = self.window()
         else:
             window = window[offset:offset + steps + 1]
-        x = self._state
-        # x is replaced, never written, so its rows can be handed out without copies.
-        current = ComSample(self._stamp_ns, x[0], x[1], x[2])
-        (cx, cy), (vx, vy), (ax, ay) = x.tolist()
+        stamp_ns = self._stamp_ns
+        current = self._x
+        cx, cy, vx, vy, ax, ay = current
         rx, ry = window[0].tolist()
         fx, fy = Gd.dot(window[1:]).tolist()
-        sx, sy = self._error_sum.tolist()
+        sx, sy = self._e
         sx += cx + c2 * ax - rx
         sy += cy + c2 * ay - ry
         ux = -Gi * sx - (g0 * cx + g1 * vx + g2 * ax) - fx
         uy = -Gi * sy - (g0 * cy + g1 * vy + g2 * ay) - fy
-        self._error_sum = np.array((sx, sy))
-        self._state = np.array(((cx + a01 * vx + a02 * ax + b0 * ux,
-                                 cy + a01 * vy + a02 * ay + b0 * uy),
-                                (vx + a12 * ax + b1 * ux, vy + a12 * ay + b1 * uy),
-                                (ax + b2 * ux, ay + b2 * uy)))
-        self._stamp_ns += dt_ns
-        return current
+        self._e = (sx, sy)
+        self._x = (cx + a01 * vx + a02 * ax + b0 * ux, cy + a01 * vy + a02 * ay + b0 * uy,
+                   vx + a12 * ax + b1 * ux, vy + a12 * ay + b1 * uy,
+                   ax + b2 * ux, ay + b2 * uy)
+        self._stamp_ns = stamp_ns + dt_ns
+        return (stamp_ns, *current)
 
     def step_reference(self) -> ComSample:
         """:meth:`step` in the matrix form of Kajita eq. (13) (the reference for its tests)."""

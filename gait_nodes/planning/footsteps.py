@@ -872,6 +872,15 @@ class GaitPlanner:
             memo['zmp_knots'] = knots
         return memo['zmp_knots']
 
+    def _zmp_knot_lists(self) -> tuple[list[float], list[float], list[float]]:
+        """:meth:`zmp_knots` as lists of floats: times [s], x [m], y [m]."""
+        memo = self._memo()
+        if 'zmp_knot_lists' not in memo:
+            times, points = self.zmp_knots()
+            memo['zmp_knot_lists'] = (times.tolist(), points[:, 0].tolist(),
+                                      points[:, 1].tolist())
+        return memo['zmp_knot_lists']
+
     def _zmp_knots_now(self) -> tuple[np.ndarray, np.ndarray]:
         if not self._steps:
             state = self._state()
@@ -913,6 +922,18 @@ class GaitPlanner:
         if last is not None and last[0][0] is knots and last[0][1] is plan \
                 and last[0][2:] == key[2:] and (first_ns - last[1]) % period_ns == 0:
             shift = (first_ns - last[1]) // period_ns
+        if 0 <= shift < count and plan is None:
+            # The few new samples of a slid window on flat ground in plain floats: numpy's
+            # int64 and float64 steps one by one ((stamp - origin) * 1e-9, np.interp's
+            # formula), hence its values to the bit (test_zmp_reference).
+            times, xs, ys = self._zmp_knot_lists()
+            stamps = [first_ns + period_ns * k for k in range(count - shift, count)]
+            zmp = [(zmp_reference.interp_floats(t, times, xs),
+                    zmp_reference.interp_floats(t, times, ys))
+                   for t in [(stamp - origin_ns) * 1e-9 for stamp in stamps]]
+            reference = last[2].followed_by(shift, stamps, zmp)
+            self._last_zmp_reference = (key, first_ns, reference)
+            return reference
         if 0 <= shift < count:
             stamps = first_ns + period_ns * np.arange(count - shift, count, dtype=np.int64)
         else:

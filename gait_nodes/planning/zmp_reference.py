@@ -24,6 +24,7 @@ convex support polygon with the margin, so the whole path does.
 
 from __future__ import annotations
 
+import bisect
 from collections.abc import Sequence
 
 import numpy as np
@@ -144,6 +145,32 @@ def crawl_margin_feasible(robot, params) -> float:
         _, radius = support.chebyshev_centre(normals, offsets_region)
         worst = min(worst, radius)
     return float(worst)
+
+
+def interp_floats(x: float, xs: list[float], ys: list[float]) -> float:
+    """``np.interp(x, xs, ys)`` for one float, in plain floats, to the last bit.
+
+    numpy's own steps (``arr_interp``): held beyond the ends, the knot's value at a knot,
+    else ``slope * (x - xs[j]) + ys[j]`` with ``slope = (ys[j+1] - ys[j]) / (xs[j+1] - xs[j])``
+    (from the other end if that is NaN). ``xs`` strictly increasing, as long as ``ys``.
+    """
+    last = len(xs) - 1
+    if last == 0:
+        return ys[0]  # (numpy's one-knot case: even for a NaN x)
+    if not x <= xs[last]:
+        return ys[last] if x > xs[last] else x  # (x NaN: NaN, as numpy)
+    if x < xs[0]:
+        return ys[0]
+    j = bisect.bisect_right(xs, x) - 1
+    if j == last or xs[j] == x:
+        return ys[j]
+    slope = (ys[j + 1] - ys[j]) / (xs[j + 1] - xs[j])
+    value = slope * (x - xs[j]) + ys[j]
+    if value != value:
+        value = slope * (x - xs[j + 1]) + ys[j + 1]
+        if value != value and ys[j] == ys[j + 1]:
+            value = ys[j]
+    return value
 
 
 def sample(knot_times_s: np.ndarray, knot_points: np.ndarray,
