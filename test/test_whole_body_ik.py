@@ -236,6 +236,64 @@ def test_warm_start_keeps_the_joints_within_their_limits():
     np.testing.assert_array_equal(solver.warm_start(history[:1]), history[0])
 
 
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 10_000), zeros=st.booleans())
+def test_warm_start_is_the_plain_formula_bit_for_bit(seed, zeros):
+    """The in-place extrapolation and the clip ufunc equal the plain numpy formula exactly.
+
+    Joints pushed past their limits, onto them, infinite bounds off the IK joints, and signed
+    zeros (a clip of -0.0 against a 0.0 bound must keep what maximum/minimum keep).
+    """
+    robot = load_robot_model('robosimian')
+    solver = WholeBodyIkSolver(robot)
+    rng = np.random.default_rng(seed)
+    q = nominal_configuration(robot)
+    history = [q + rng.normal(0.0, 0.3, q.shape) for _ in range(3)]
+    if zeros:
+        for k in range(len(q)):
+            history[-1][k] = -0.0 if k % 2 else 0.0
+        history[-2][:] = history[-1]
+        history[-3][:] = -history[-1]
+    for count in (3, 2):
+        recent = history[-count:]
+        line = 3.0 * (recent[-1] - recent[-2]) + recent[-3] if count == 3 \
+            else 2.0 * recent[-1] - recent[-2]
+        expected = np.minimum(np.maximum(line, solver._q_lower), solver._q_upper)
+        assert solver.warm_start(recent).tobytes() == expected.tobytes()
+
+
+def test_solver_workspace_views_are_the_rows_of_the_stacked_jacobian():
+    """The per-foot and COM blocks the solver writes through are views of its ``full``."""
+    robot = load_robot_model('robosimian')
+    solver = WholeBodyIkSolver(robot)
+    q = nominal_configuration(robot)
+    solver.solve(IkTargets(robot.foot_poses(q)[0] + [0.0, 0.0, 0.01],
+                           np.zeros(len(robot.foot_names)), com_in_world=robot.com(q)), q)
+    work = solver._work[True]
+    nv, rows = solver.model.nv, work.rows_per_foot
+    for k, (view, frame) in enumerate(work.foot_blocks):
+        assert frame == solver._frames[k]
+        assert view.base is work.full and np.shares_memory(view, work.full[k * rows:, :nv])
+        np.testing.assert_array_equal(view, work.full[k * rows:(k + 1) * rows, :nv])
+    assert np.shares_memory(work.com_block, work.full[-3:, :nv])
+    for k, (view, frame) in enumerate(work.foot_placements):
+        assert frame == solver._frames[k] and np.shares_memory(view, work.placements[k])
+    # A one-step solve leaves there Pinocchio's Jacobians at its start.
+    solver.settings = IkSettings(max_iterations=1)
+    feet = robot.foot_poses(q)[0] + [0.0, 0.0, 0.01]
+    result = solver.solve(IkTargets(feet, np.zeros(len(feet)), com_in_world=robot.com(q)), q)
+    assert result.iterations == 1
+    data = robot.new_data()
+    pin.forwardKinematics(solver.model, data, q)
+    pin.centerOfMass(solver.model, data, pin.KinematicLevel.POSITION, False)
+    pin.computeJointJacobians(solver.model, data)
+    for view, frame in work.foot_blocks:
+        np.testing.assert_array_equal(view, pin.getFrameJacobian(
+            solver.model, data, frame, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED))
+    np.testing.assert_array_equal(work.com_block,
+                                  pin.jacobianCenterOfMass(solver.model, data, False))
+
+
 def test_warm_start_follows_the_real_tick_times():
     """Ticks late or early: the extrapolation follows their real times.
 
@@ -530,6 +588,28 @@ def test_node_tracks_the_contract_references_checked_by_fk(inproc):
     assert int(values['fallback_swing_ticks']) == 0  # last second: no swing in progress
     assert any(int({kv.key: kv.value for kv in s.values}['fallback_swing_ticks']) > 0
                for s in inputs)
+
+
+def test_node_stops_hearing_the_robot_once_it_moves(inproc):
+    """/joint_states and /tf, which only seed the posture held before motion, are dropped.
+
+    Kept while the node holds a posture, dropped at its first solved tick.
+    """
+    from gait_nodes.whole_body_ik import WholeBodyIk
+
+    robot_topics = {'/joint_states', '/tf'}
+    waiting = WholeBodyIk()
+    executor = runtime.SingleThreadedExecutor()
+    executor.add_node(waiting)
+    executor.spin_for(0.1)
+    assert robot_topics <= {s.topic_name for s in waiting.subscriptions}
+    waiting.destroy_node()
+    node, _, collector = run_node(0.6)  # the plan starts at 0.5 s; references from the start
+    assert node._moving
+    topics = {s.topic_name for s in node.subscriptions}
+    assert not robot_topics & topics
+    assert {'/gait/com_reference', '/gait/footsteps', '/gait/swing_trajectory'} <= topics
+    assert len(collector.commands) == 120
 
 
 def test_node_holds_the_nominal_stance_before_the_references(inproc):

@@ -38,6 +38,9 @@ from gait_nodes.contract import ComState, FootstepPlan, Swing, SwingTrajectory
 from gait_nodes.errors import ConfigError, ParameterError
 from gait_nodes.robot.model import RobotModel, yaw_rotation
 
+#: ``np.clip``'s ufunc (max with the lower bound, then min with the upper one, NaN kept),
+#: without ``np.clip``'s Python wrapper.
+_clip = np._core.umath.clip
 #: Sugihara's bias weight: keeps the damped system regular at singular configurations.
 DAMPING_BIAS = 1e-9
 #: Largest joint change in one Newton step [rad]; keeps a far target from jumping branches.
@@ -173,7 +176,7 @@ class WholeBodyIkSolver:
         work = self._work.get(free_base)
         if work is None:
             work = self._work[free_base] = _Workspace(
-                len(self._frames), self._rows_per_foot, self.model.nv, self._v_idx,
+                self._frames, self._rows_per_foot, self.model.nv, self._v_idx,
                 self._q_idx, self._lower, self._upper, free_base)
         return work
 
@@ -194,13 +197,16 @@ class WholeBodyIkSolver:
         if times_s is not None and at_s is not None and len(solutions) >= 2:
             q = _lagrange(solutions[-3:], times_s[-3:], at_s)
         elif len(solutions) >= 3:
-            q = 3.0 * (solutions[-1] - solutions[-2]) + solutions[-3]
+            # 3 (s[-1] - s[-2]) + s[-3], in place: the same roundings, fewer arrays.
+            q = np.subtract(solutions[-1], solutions[-2])
+            q *= 3.0
+            q += solutions[-3]
         elif len(solutions) == 2:
             q = 2.0 * solutions[-1] - solutions[-2]
         else:
             return np.array(solutions[-1], dtype=float)
-        np.maximum(q, self._q_lower, out=q)
-        return np.minimum(q, self._q_upper, out=q)
+        # (the clip ufunc: maximum, then minimum, in one call)
+        return _clip(q, self._q_lower, self._q_upper, out=q)
 
     def solve(self, targets: IkTargets, q_start: np.ndarray) -> IkResult:
         """Configuration reaching ``targets``, starting the iteration at ``q_start``.
@@ -256,7 +262,7 @@ class WholeBodyIkSolver:
         if orient:
             work.aim_soles(foot_yaws_rad, self._offsets)
         com_target = np.asarray(com_in_world, dtype=float) if free_base else None
-        error, full, placements = work.error, work.full, work.placements
+        error, full = work.error, work.full
         placements_flat, error_map, mapped = work.placements_flat, work.error_map, work.mapped
         traces, com_error = work.traces, work.com_error
         jacobian, transposed, normal = work.jacobian, work.transposed, work.normal
@@ -267,13 +273,14 @@ class WholeBodyIkSolver:
         unknowns = q[x_idx]  # base translation (free base), then the IK joints
         world = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
         placement, frame_jacobian = pin.updateFramePlacement, pin.getFrameJacobian
-        foot_rows = work.foot_rows
+        foot_placements, foot_blocks, com_block = work.foot_placements, work.foot_blocks, \
+            work.com_block
         point_feet = work.rows_per_foot != 6
         iteration = 0
         while True:
             pin.forwardKinematics(model, data, q)
-            for k, frame in enumerate(frames):
-                placements[k] = placement(model, data, frame).homogeneous
+            for view, frame in foot_placements:
+                view[...] = placement(model, data, frame).homogeneous
             # Foot position errors, sole orientation errors (small-angle) and the soles'
             # relative rotation traces: one affine map of the placements.
             dot(placements_flat, error_map, out=mapped)
@@ -291,11 +298,11 @@ class WholeBodyIkSolver:
                 break
             iteration += 1
             pin.computeJointJacobians(model, data)
-            for rows, frame in zip(foot_rows, frames, strict=True):
+            for view, frame in foot_blocks:
                 block = frame_jacobian(model, data, frame, world)
-                full[rows] = block[:3] if point_feet else block
+                view[...] = block[:3] if point_feet else block
             if free_base:
-                full[-3:, :-3] = pin.jacobianCenterOfMass(model, data, False)
+                com_block[...] = pin.jacobianCenterOfMass(model, data, False)
             full.take(columns, 1, jacobian, 'clip')  # the unknowns' columns (all valid)
             # Levenberg-Marquardt step (J^T J + lambda I) dx = J^T e, by Cholesky.
             np.matmul(transposed, jacobian, out=normal)  # (matmul's syrk)
@@ -360,14 +367,18 @@ class _Workspace:
     changes only with the sole yaw targets (:meth:`aim_soles`: stance feet keep theirs).
     """
 
-    def __init__(self, feet_count: int, rows_per_foot: int, nv: int, v_idx: np.ndarray,
+    def __init__(self, frames: tuple[int, ...], rows_per_foot: int, nv: int, v_idx: np.ndarray,
                  q_idx: np.ndarray, lower: np.ndarray, upper: np.ndarray, free_base: bool):
+        feet_count = len(frames)
         rows = feet_count * rows_per_foot + (3 if free_base else 0)
         self.rows_per_foot = rows_per_foot
         self.full = np.zeros((rows, nv + 3))
         # Each foot's block of the Pinocchio columns of ``full``.
-        self.foot_rows = [(slice(k * rows_per_foot, (k + 1) * rows_per_foot), slice(0, nv))
-                          for k in range(feet_count)]
+        # Each foot's block of the Pinocchio columns of ``full`` and the COM's, as views (an
+        # assignment to a view skips the indexing of ``full[rows, cols]``), with their frames.
+        self.foot_blocks = [(self.full[k * rows_per_foot:(k + 1) * rows_per_foot, :nv], frame)
+                            for k, frame in enumerate(frames)]
+        self.com_block = self.full[-3:, :nv] if free_base else None
         self.base_cols = 3 if free_base else 0
         base = np.arange(3 if free_base else 0)
         if free_base:
@@ -398,6 +409,7 @@ class _Workspace:
         # Foot frame placements (homogeneous matrices) and views of them.
         self.placements = np.zeros((feet_count, 4, 4))
         self.placements_flat = self.placements.reshape(-1)
+        self.foot_placements = list(zip(self.placements, frames, strict=True))
         self.error_map = np.zeros((16 * feet_count, trace_count + foot_errors))
         outputs = self.error_map.shape[1]
         for k in range(feet_count):
