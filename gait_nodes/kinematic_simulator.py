@@ -157,9 +157,7 @@ def joint_command_from_msg(msg, robot: RobotModel, previous: np.ndarray,
         positions = np.array(msg.position, dtype=float)
         velocity = (np.array(msg.velocity, dtype=float) if len(msg.velocity)
                     else np.zeros(len(positions)))
-        # On the message's numbers: cheaper than numpy's isfinite and its reduction.
-        if not (all(map(math.isfinite, msg.position))
-                and all(map(math.isfinite, msg.velocity))):
+        if not (_all_finite(msg.position) and _all_finite(msg.velocity)):
             raise ContractError('a joint command holds a NaN or infinite value')
         return positions, velocity
     if len(set(names)) != len(names):
@@ -180,6 +178,16 @@ def joint_command_from_msg(msg, robot: RobotModel, previous: np.ndarray,
     command[indices] = positions
     velocity[indices] = np.array(msg.velocity, dtype=float) if len(msg.velocity) else 0.0
     return command, velocity
+
+
+def _all_finite(values) -> bool:
+    """Whether every one of the floats ``values`` is finite.
+
+    A finite sum has finite terms (a NaN or an infinity makes the sum NaN or infinite), and
+    summing is cheaper than asking each number (or numpy's isfinite and its reduction); a
+    sum that overflows is checked term by term.
+    """
+    return math.isfinite(sum(values)) or all(map(math.isfinite, values))
 
 
 class PlanContacts:
@@ -529,7 +537,9 @@ class KinematicSimulator(Node):
         next_ns = last_ns + period_ns
         if clock_ns < last_ns or clock_ns - next_ns > MAX_LAG_PERIODS * period_ns:
             return [clock_ns]
-        missed = max(clock_ns - next_ns, 0) // period_ns
+        if clock_ns < next_ns + period_ns:
+            return [next_ns]  # on time (every tick under inproc): no missed instant
+        missed = (clock_ns - next_ns) // period_ns
         return [next_ns + k * period_ns for k in range(missed + 1)]
 
     def _account(self, step) -> None:

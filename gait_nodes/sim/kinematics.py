@@ -53,6 +53,13 @@ BASE_FIT_ITERATIONS = 10
 ORIENTATION_PRIOR_M = 1e-3
 #: LAPACK's SVD (divide and conquer), what numpy.linalg.svd runs.
 _DGESDD = lapack.dgesdd
+try:
+    # The ufunc np.clip calls, without np.clip's Python dispatch (which costs as much as the
+    # clipping of a robot's joints): np.minimum(np.maximum(x, low), high), bit for bit, signed
+    # zeros and NaN included (test_kinematic_simulator checks it).
+    from numpy._core.umath import clip as _clip
+except ImportError:  # another numpy's layout
+    _clip = np.clip
 
 
 def _skew(vectors: np.ndarray) -> np.ndarray:
@@ -63,14 +70,16 @@ def _skew(vectors: np.ndarray) -> np.ndarray:
                      np.stack([-y, x, zero], -1)], -2)
 
 
-@dataclass(frozen=True)
+# Per-tick results are plain (slotted) dataclasses, read-only by convention: a frozen
+# dataclass's __init__ sets each field through object.__setattr__, three times the cost.
+@dataclass(slots=True)
 class ActuatorStep:
-    """One step of the position-controlled joints.
+    """One step of the position-controlled joints (read-only).
 
     The step keeps its inputs; the diagnostics (:attr:`demanded_over_limit`, :attr:`saturated`,
     :attr:`clamped_to_limits`) are computed from them when asked, and :attr:`any_saturated`,
-    :attr:`any_clamped` answer the usual "none" with one comparison of bytes each (np.minimum
-    and np.maximum return an input unchanged, bit for bit, where they do not clip it).
+    :attr:`any_clamped` answer the usual "none" with one comparison of bytes each (clipping
+    returns an input unchanged, bit for bit, where it does not clip it).
 
     Attributes:
         positions_rad: (J,) joint positions after the step [rad or m].
@@ -151,7 +160,7 @@ class PositionActuators:
         if not dt_s > 0.0:
             raise ParameterError(f'dt_s must be > 0 s, got {dt_s!r}')
         commanded_rad = np.asarray(commanded_rad, dtype=float)
-        target = np.minimum(np.maximum(commanded_rad, self.lower), self.upper)
+        target = _clip(commanded_rad, self.lower, self.upper)
         delta = target - positions_rad
         if self._any_continuous:
             wrapped = (delta + math.pi) % (2.0 * math.pi) - math.pi
@@ -161,8 +170,8 @@ class PositionActuators:
             allowed = self.velocity_limits_rad_s * dt_s
             minus_allowed = -allowed
             self._allowed = (dt_s, allowed, minus_allowed)
-        moved = np.minimum(np.maximum(delta, minus_allowed), allowed)
-        positions = np.minimum(np.maximum(positions_rad + moved, self.lower), self.upper)
+        moved = _clip(delta, minus_allowed, allowed)
+        positions = _clip(positions_rad + moved, self.lower, self.upper)
         velocities = (positions - positions_rad) / dt_s
         return ActuatorStep(positions, velocities, commanded_rad, target, delta, moved, allowed)
 
@@ -185,7 +194,7 @@ def _kabsch_centred(points_in_base: np.ndarray, centred_world: np.ndarray,
 
     The simulation keeps the centred world side per stance: the latched feet do not move.
     """
-    centre_base = np.add.reduce(points_in_base, 0) / len(points_in_base)
+    centre_base = _mean_of_rows(points_in_base.tolist())
     # ndarray.dot: the products of matmul (@) with less overhead per call on 3x3 matrices.
     u, singular, vt = svd3((points_in_base - centre_base).T.dot(centred_world))
     largest, second, _ = singular.tolist()
@@ -202,6 +211,22 @@ def _kabsch_centred(points_in_base: np.ndarray, centred_world: np.ndarray,
     pose.rotation = rotation
     pose.translation = centre_world - rotation.dot(centre_base)
     return pose
+
+
+def _mean_of_rows(rows: list) -> np.ndarray:
+    """``np.add.reduce(points, 0) / len(points)`` of (N, 3) points given as lists of floats.
+
+    The same sums in the same order (a reduction over the outer axis adds the rows one after
+    the other), so the same bits, in scalar arithmetic: numpy's reduction and its division of
+    a few floats cost more than the arithmetic (test_kinematic_simulator checks the bits).
+    """
+    (x, y, z), *others = rows
+    for other_x, other_y, other_z in others:
+        x += other_x
+        y += other_y
+        z += other_z
+    count = len(rows)
+    return np.array([x / count, y / count, z / count])
 
 
 def svd3(matrix: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -455,9 +480,9 @@ class SimulationSettings:
                                      f'{value!r}')
 
 
-@dataclass(frozen=True)
+@dataclass(slots=True)
 class SimulationStep:
-    """What one step of :class:`KinematicSimulation` produced.
+    """What one step of :class:`KinematicSimulation` produced (read-only, as ActuatorStep).
 
     Attributes:
         q: Pinocchio configuration after the step (base pose and joints), read-only.
