@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import bisect
 import math
+import struct
 import sys
 from collections import deque
 from dataclasses import dataclass
@@ -139,7 +140,7 @@ def joint_command_from_msg(msg, robot: RobotModel, previous: np.ndarray,
 
     A command may name a subset of the joints; the others keep their previous command
     (``previous``, ``previous_velocity``: zero when None). A command without velocities
-    commands zero velocity for the joints it names.
+    commands zero velocity for the joints it names. The arrays may be read-only.
 
     Raises:
         ContractError: No joints, an unknown or repeated joint name, ``position`` (or a
@@ -154,9 +155,8 @@ def joint_command_from_msg(msg, robot: RobotModel, previous: np.ndarray,
         raise ContractError(f'{len(names)} joint names but {len(msg.velocity)} velocities')
     if tuple(names) == robot.joint_names:
         # Every joint in the robot's order (what whole_body_ik sends): no lookups needed.
-        positions = np.array(msg.position, dtype=float)
-        velocity = (np.array(msg.velocity, dtype=float) if len(msg.velocity)
-                    else np.zeros(len(positions)))
+        positions = _float_array(msg.position)
+        velocity = _float_array(msg.velocity) if len(msg.velocity) else np.zeros(len(names))
         if not (_all_finite(msg.position) and _all_finite(msg.velocity)):
             raise ContractError('a joint command holds a NaN or infinite value')
         return positions, velocity
@@ -178,6 +178,22 @@ def joint_command_from_msg(msg, robot: RobotModel, previous: np.ndarray,
     command[indices] = positions
     velocity[indices] = np.array(msg.velocity, dtype=float) if len(msg.velocity) else 0.0
     return command, velocity
+
+
+def _float_array(values) -> np.ndarray:
+    """``np.array(values, dtype=float)`` of a sequence of numbers, read-only.
+
+    Packed as C doubles and viewed by numpy: half the cost of numpy's conversion of a list,
+    which looks at each element's type first; the same floats.
+    """
+    packer = _PACKERS.get(len(values))
+    if packer is None:
+        packer = _PACKERS[len(values)] = struct.Struct(f'{len(values)}d')
+    return np.frombuffer(packer.pack(*values))
+
+
+#: struct.Struct of n doubles, by n (_float_array).
+_PACKERS: dict[int, struct.Struct] = {}
 
 
 def _all_finite(values) -> bool:
@@ -286,7 +302,7 @@ class KinematicSimulator(Node):
         self._support_source: np.ndarray | None = None
         self._support: Support | None = None
         self._polygon_support: Support | None = None
-        self._polygon_cache: tuple[list, list] = ([], [])
+        self._polygon_cache: tuple = (None, [])
         #: Index of the last /gait/markers period that got its message.
         self._markers_slot: int | None = None
         self._period_ns = int(round(1e9 / self.params.rate_hz))
@@ -365,7 +381,13 @@ class KinematicSimulator(Node):
     def _now_ns(self) -> int:
         if self._owns_time:
             return self._sim_ns
-        return self.get_clock().now().nanoseconds
+        return self._clock_ns()
+
+    def _clock_ns(self) -> int:
+        """The node clock's time [ns] (the runtime's ``Clock.now_ns`` skips building a Time)."""
+        clock = self.get_clock()
+        now_ns = getattr(clock, 'now_ns', None)
+        return now_ns() if now_ns is not None else clock.now().nanoseconds
 
     # -- parameters ----------------------------------------------------------------------------
 
@@ -530,7 +552,7 @@ class KinematicSimulator(Node):
         The grid is re-anchored to the clock when the clock went back or the timer starved for
         more than ``MAX_LAG_PERIODS``.
         """
-        clock_ns = self.get_clock().now().nanoseconds
+        clock_ns = self._clock_ns()
         if not self._history:
             return [clock_ns]
         last_ns = self._history[-1][0]
@@ -566,8 +588,8 @@ class KinematicSimulator(Node):
     # Messages are built in one constructor call each (the per-tick cost of this node is mostly
     # Python objects). Published messages are read-only (ROS 2's intra-process rule, which the
     # inproc runtime relies on): the stamp, the headers of one instant, the joint name list, the
-    # polygon vertices and the markers' unchanging parts are shared between messages rather than
-    # copied.
+    # support polygon (its Polygon message, while the contacts stay) and the markers' unchanging
+    # parts are shared between messages rather than copied.
 
     def _publish_state(self, now_ns: int, q: np.ndarray, actuators: ActuatorStep):
         """Publish /joint_states and /tf; return the odom-frame header of ``now_ns``."""
@@ -600,8 +622,8 @@ class KinematicSimulator(Node):
         if zmp_finite:
             self._zmp.publish(new['PointStamped'](header, new['Point'](*zmp)))
         self._com.publish(new['PointStamped'](header, new['Point'](*com)))
-        vertices, outline = self._polygon_points(support)
-        self._polygon.publish(new['PolygonStamped'](header, new['Polygon'](vertices)))
+        polygon, outline = self._polygon_points(support)
+        self._polygon.publish(new['PolygonStamped'](header, polygon))
         if self.params.publish_markers:
             # A visualization topic at a display's rate (markers_rate_hz), not the monitor's:
             # the samples whose stamps open a new markers period.
@@ -612,8 +634,8 @@ class KinematicSimulator(Node):
                     header, zmp if zmp_finite else None,
                     com if all(map(math.isfinite, com)) else None, outline))
 
-    def _polygon_points(self, support: Support) -> tuple[list, list]:
-        """Point32 vertices and closed marker outline of the support polygon, once per support.
+    def _polygon_points(self, support: Support) -> tuple:
+        """Polygon message and closed marker outline of the support polygon, once per support.
 
         At the height of the ZMP's plane [m].
         """
@@ -622,7 +644,7 @@ class KinematicSimulator(Node):
             z = support.plane_height_m
             vertices = [point32(x=x, y=y, z=z) for x, y in support.polygon.tolist()]
             outline = [point(x=x, y=y, z=z) for x, y in support.polygon.tolist()]
-            self._polygon_cache = (vertices, outline + outline[:1])
+            self._polygon_cache = (self._new['Polygon'](vertices), outline + outline[:1])
             self._polygon_support = support
         return self._polygon_cache
 

@@ -487,7 +487,7 @@ class SimulationStep:
     Attributes:
         q: Pinocchio configuration after the step (base pose and joints), read-only.
         actuators: The joint step (velocities, saturation, clamping).
-        contacts: (F,) booleans: feet in contact after the step.
+        contacts: (F,) booleans: feet in contact after the step, read-only.
         contact_points_in_world: (F, 3) contact points; NaN for feet in the air [m].
         slip_m: Largest distance of a stance foot frame from where it was latched, after the
             base fit (non-zero only when the commands cannot keep every stance foot still).
@@ -522,6 +522,15 @@ class KinematicSimulation:
         # The configuration of the forward kinematics in the base frame: base at the origin.
         self._q_in_base = self.q.copy()
         self._q_in_base[:7] = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0)
+        # Whether q is the base pose followed by the joint vector (1-DOF joints in the robot's
+        # joint order, as every shipped robot has them): then q is built by one concatenation
+        # and the joints written by a slice rather than by robot.set_joint_positions.
+        model = robot.model
+        self._joints_follow_base = (
+            model.nq == 7 + len(robot.joint_names)
+            and np.array_equal(robot.q_indices(robot.joint_names), np.arange(7, model.nq)))
+        # The last read-only contacts given to step() (by identity), their copy and its list.
+        self._contacts_given: tuple = (None, None, None)
         self.joints = robot.joint_positions(self.q)
         self.base = pin.XYZQUATToSE3(self.q[:7])
         feet = self._feet_in_base(self.joints)
@@ -539,7 +548,10 @@ class KinematicSimulation:
     def _feet_in_base(self, joints: np.ndarray) -> list[pin.SE3]:
         """Foot frames in the base frame at ``joints`` (updateFramePlacement returns copies)."""
         q = self._q_in_base
-        self.robot.set_joint_positions(q, joints)
+        if self._joints_follow_base:
+            q[7:] = joints
+        else:
+            self.robot.set_joint_positions(q, joints)
         model, data = self.robot.model, self._data
         pin.forwardKinematics(model, data, q)
         return [pin.updateFramePlacement(model, data, f) for f in self.robot.foot_frame_ids]
@@ -600,8 +612,18 @@ class KinematicSimulation:
         feet = self._feet_in_base(actuators.positions_rad)
         if contacts is None:
             contacts = self._contacts_by_height(feet)
-        contacts = np.asarray(contacts, dtype=bool)
-        down = contacts.tolist()
+        given, contacts_copy, down = self._contacts_given
+        if contacts is given:
+            # A schedule's answer is a read-only array, the same one until the contacts change
+            # (PlanContacts): its copy and list are those of the previous step.
+            contacts = contacts_copy
+        else:
+            given = contacts if isinstance(contacts, np.ndarray) and contacts.base is None \
+                and not contacts.flags.writeable else None
+            contacts = np.array(contacts, dtype=bool)
+            contacts.flags.writeable = False
+            down = contacts.tolist()
+            self._contacts_given = (given, contacts, down)
         latched = self.latched
         kept = tuple(k for k, d in enumerate(down) if d and latched[k] is not None)
         base = self.base
@@ -633,10 +655,13 @@ class KinematicSimulation:
                 touched.append(self.robot.foot_names[k])
         self.base = base
         self.joints = actuators.positions_rad
-        q = self.q.copy()
-        q[:7] = pin.SE3ToXYZQUAT(base)
-        self.robot.set_joint_positions(q, self.joints)
+        if self._joints_follow_base:
+            q = np.concatenate((pin.SE3ToXYZQUAT(base), self.joints))
+        else:
+            q = self.q.copy()
+            q[:7] = pin.SE3ToXYZQUAT(base)
+            self.robot.set_joint_positions(q, self.joints)
         q.flags.writeable = False
         self.q = q
-        return SimulationStep(q, actuators, contacts.copy(), self.contact_points(), slip,
+        return SimulationStep(q, actuators, contacts, self.contact_points(), slip,
                               tuple(touched))

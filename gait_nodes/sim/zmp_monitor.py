@@ -218,6 +218,12 @@ class ZmpMonitor:
         ``plane_height_m``: height of the plane [m]; None: ``ground_height_m``.
         """
         plane = self.ground_height_m if plane_height_m is None else float(plane_height_m)
+        com, zmp, fz = self._com_and_zmp(q, v, a, plane)
+        return com, np.full(3, np.nan) if zmp is None else np.array(zmp), fz
+
+    def _com_and_zmp(self, q: np.ndarray, v: np.ndarray, a: np.ndarray,
+                     plane: float) -> tuple[np.ndarray, list | None, float]:
+        """:meth:`com_and_zmp` with the ZMP as a list of floats, None where undefined."""
         data = self.data
         dhg = pin.computeCentroidalMomentumTimeVariation(self.model, data, q, v, a)
         com = data.com[0].copy()
@@ -231,8 +237,8 @@ class ZmpMonitor:
         tau_x = lx + cy * fz - cz * fy
         tau_y = ly + cz * fx - cx * fz
         if fz <= MIN_NORMAL_FORCE_N:
-            return com, np.full(3, np.nan), fz
-        return com, np.array([-tau_y / fz, tau_x / fz, plane]), fz
+            return com, None, fz
+        return com, [-tau_y / fz, tau_x / fz, plane], fz
 
     def support(self, contact_points_in_world: np.ndarray) -> Support:
         """The :class:`Support` of these contact points (C, 3) [m], kept while they stay."""
@@ -261,12 +267,13 @@ class ZmpMonitor:
         return self._margin(zmp_in_world, self.support(contact_points_in_world))
 
     def _margin(self, zmp_in_world: np.ndarray, support: Support) -> float:
-        x, y = zmp_in_world[0], zmp_in_world[1]
-        if len(support.centres_hull) == 0 or not (math.isfinite(x) and math.isfinite(y)):
+        return self._margin_of(float(zmp_in_world[0]), float(zmp_in_world[1]), support)
+
+    def _margin_of(self, x: float, y: float, support: Support) -> float:
+        if not support.centres_hull_edges or not (math.isfinite(x) and math.isfinite(y)):
             return -math.inf
         # geometry.disc_support_margin, with the centres' hull kept between calls.
-        return (point_signed_distance(float(x), float(y), support.centres_hull_edges)
-                + self.foot_radius_m)
+        return point_signed_distance(x, y, support.centres_hull_edges) + self.foot_radius_m
 
     def evaluate(self, q: np.ndarray, v: np.ndarray, a: np.ndarray,
                  contact_points_in_world: np.ndarray | Support) -> ZmpState:
@@ -276,6 +283,9 @@ class ZmpMonitor:
         """
         support = contact_points_in_world if isinstance(contact_points_in_world, Support) \
             else self.support(contact_points_in_world)
-        com, zmp, fz = self.com_and_zmp(q, v, a, support.plane_height_m)
-        return ZmpState(com, zmp, fz, self._margin(zmp, support),
+        com, zmp, fz = self._com_and_zmp(q, v, a, support.plane_height_m)
+        if zmp is None:
+            return ZmpState(com, np.full(3, np.nan), fz, -math.inf,
+                            support.contact_points_in_world)
+        return ZmpState(com, np.array(zmp), fz, self._margin_of(zmp[0], zmp[1], support),
                         support.contact_points_in_world)
