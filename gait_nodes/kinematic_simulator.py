@@ -457,6 +457,8 @@ class KinematicSimulator(Node):
             return self._command
         delay_ns = 0 if self.context.runtime == 'inproc' else self.params.command_delay_s * 1e9
         at_ns = now_ns - delay_ns
+        if at_ns == self._command_stamp_ns:
+            return self._command  # at the newest setpoint (every tick under inproc)
         setpoints = self._setpoints
         if len(setpoints) > 1 and at_ns < setpoints[-1][0]:
             for k in range(len(setpoints) - 1, 0, -1):
@@ -468,8 +470,8 @@ class KinematicSimulator(Node):
         ahead_ns = min(max(at_ns - self._command_stamp_ns, 0), MAX_EXTRAPOLATION_PERIODS
                        * period_ns)
         if ahead_ns == 0:
-            # At the newest setpoint (every tick under inproc): command + velocity * 0 is the
-            # command itself (up to the sign of a zero, which no joint position sees).
+            # At the newest setpoint or before it: command + velocity * 0 is the command itself
+            # (up to the sign of a zero, which no joint position sees).
             return self._command
         return self._command + self._command_velocity * (ahead_ns * 1e-9)
 
