@@ -146,20 +146,20 @@ def joint_command_from_msg(msg, robot: RobotModel, previous: np.ndarray,
         ContractError: No joints, an unknown or repeated joint name, ``position`` (or a
             non-empty ``velocity``) not one value per name, or a NaN/infinite value.
     """
-    names = list(msg.name)
-    if not names:
+    count = len(msg.name)
+    if not count:
         raise ContractError('a joint command names no joints')
-    if len(msg.position) != len(names):
-        raise ContractError(f'{len(names)} joint names but {len(msg.position)} positions')
-    if len(msg.velocity) not in (0, len(names)):
-        raise ContractError(f'{len(names)} joint names but {len(msg.velocity)} velocities')
-    if tuple(names) == robot.joint_names:
+    if len(msg.position) != count:
+        raise ContractError(f'{count} joint names but {len(msg.position)} positions')
+    if len(msg.velocity) not in (0, count):
+        raise ContractError(f'{count} joint names but {len(msg.velocity)} velocities')
+    if tuple(msg.name) == robot.joint_names:
         # Every joint in the robot's order (what whole_body_ik sends): no lookups needed.
-        positions = _float_array(msg.position)
-        velocity = _float_array(msg.velocity) if len(msg.velocity) else np.zeros(len(names))
-        if not (_all_finite(msg.position) and _all_finite(msg.velocity)):
+        if not _all_finite(msg.position, msg.velocity):
             raise ContractError('a joint command holds a NaN or infinite value')
-        return positions, velocity
+        return (_float_array(msg.position),
+                _float_array(msg.velocity) if len(msg.velocity) else np.zeros(count))
+    names = list(msg.name)
     if len(set(names)) != len(names):
         repeated = sorted({n for n in names if names.count(n) > 1})
         raise ContractError(f'joint names repeat: {repeated}')
@@ -196,14 +196,15 @@ def _float_array(values) -> np.ndarray:
 _PACKERS: dict[int, struct.Struct] = {}
 
 
-def _all_finite(values) -> bool:
-    """Whether every one of the floats ``values`` is finite.
+def _all_finite(values, more_values) -> bool:
+    """Whether every one of the floats ``values`` and ``more_values`` is finite.
 
     A finite sum has finite terms (a NaN or an infinity makes the sum NaN or infinite), and
     summing is cheaper than asking each number (or numpy's isfinite and its reduction); a
     sum that overflows is checked term by term.
     """
-    return math.isfinite(sum(values)) or all(map(math.isfinite, values))
+    return (math.isfinite(sum(values) + sum(more_values))
+            or (all(map(math.isfinite, values)) and all(map(math.isfinite, more_values))))
 
 
 class PlanContacts:
@@ -711,7 +712,8 @@ class KinematicSimulator(Node):
         window.samples += 1
         window.samples_outside += level == ERROR
         window.samples_warn += level == WARN
-        window.min_margin_m = min(window.min_margin_m, margin)
+        if margin < window.min_margin_m:  # min() without the call
+            window.min_margin_m = margin
         if level != self._stability_level:
             self._stability_level = level
             self.diagnostics.report('stability', level, self._stability_message(level, state),

@@ -198,7 +198,7 @@ def _kabsch_centred(points_in_base: np.ndarray, centred_world: np.ndarray,
     # ndarray.dot: the products of matmul (@) with less overhead per call on 3x3 matrices.
     u, singular, vt = svd3((points_in_base - centre_base).T.dot(centred_world))
     largest, second, _ = singular.tolist()
-    if second <= COLLINEAR_TOLERANCE * max(largest, 1e-300):
+    if second <= COLLINEAR_TOLERANCE * (1e-300 if 1e-300 > largest else largest):  # max()
         return None
     # Kabsch: R = V diag(1, 1, d) U^T with d = det(V U^T) = +-1 (no reflection).
     v = vt.T
