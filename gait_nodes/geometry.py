@@ -115,7 +115,9 @@ def point_signed_distance(x: float, y: float,
         t = (relative_x * edge_x + relative_y * edge_y) / length_sq
         t = 0.0 if t < 0.0 else 1.0 if t > 1.0 else t
         dx, dy = x - (start_x + t * edge_x), y - (start_y + t * edge_y)
-        nearest_sq = min(nearest_sq, dx * dx + dy * dy)
+        distance_sq = dx * dx + dy * dy
+        if distance_sq < nearest_sq:  # min() without the call
+            nearest_sq = distance_sq
         if not edge_x * relative_y - edge_y * relative_x >= 0.0:
             inside = False
     distance = math.sqrt(nearest_sq)

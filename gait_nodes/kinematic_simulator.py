@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import bisect
 import math
+import struct
 import sys
 from collections import deque
 from dataclasses import dataclass
@@ -139,29 +140,26 @@ def joint_command_from_msg(msg, robot: RobotModel, previous: np.ndarray,
 
     A command may name a subset of the joints; the others keep their previous command
     (``previous``, ``previous_velocity``: zero when None). A command without velocities
-    commands zero velocity for the joints it names.
+    commands zero velocity for the joints it names. The arrays may be read-only.
 
     Raises:
         ContractError: No joints, an unknown or repeated joint name, ``position`` (or a
             non-empty ``velocity``) not one value per name, or a NaN/infinite value.
     """
-    names = list(msg.name)
-    if not names:
+    count = len(msg.name)
+    if not count:
         raise ContractError('a joint command names no joints')
-    if len(msg.position) != len(names):
-        raise ContractError(f'{len(names)} joint names but {len(msg.position)} positions')
-    if len(msg.velocity) not in (0, len(names)):
-        raise ContractError(f'{len(names)} joint names but {len(msg.velocity)} velocities')
-    if tuple(names) == robot.joint_names:
+    if len(msg.position) != count:
+        raise ContractError(f'{count} joint names but {len(msg.position)} positions')
+    if len(msg.velocity) not in (0, count):
+        raise ContractError(f'{count} joint names but {len(msg.velocity)} velocities')
+    if tuple(msg.name) == robot.joint_names:
         # Every joint in the robot's order (what whole_body_ik sends): no lookups needed.
-        positions = np.array(msg.position, dtype=float)
-        velocity = (np.array(msg.velocity, dtype=float) if len(msg.velocity)
-                    else np.zeros(len(positions)))
-        # On the message's numbers: cheaper than numpy's isfinite and its reduction.
-        if not (all(map(math.isfinite, msg.position))
-                and all(map(math.isfinite, msg.velocity))):
+        if not _all_finite(msg.position, msg.velocity):
             raise ContractError('a joint command holds a NaN or infinite value')
-        return positions, velocity
+        return (_float_array(msg.position),
+                _float_array(msg.velocity) if len(msg.velocity) else np.zeros(count))
+    names = list(msg.name)
     if len(set(names)) != len(names):
         repeated = sorted({n for n in names if names.count(n) > 1})
         raise ContractError(f'joint names repeat: {repeated}')
@@ -180,6 +178,33 @@ def joint_command_from_msg(msg, robot: RobotModel, previous: np.ndarray,
     command[indices] = positions
     velocity[indices] = np.array(msg.velocity, dtype=float) if len(msg.velocity) else 0.0
     return command, velocity
+
+
+def _float_array(values) -> np.ndarray:
+    """``np.array(values, dtype=float)`` of a sequence of numbers, read-only.
+
+    Packed as C doubles and viewed by numpy: half the cost of numpy's conversion of a list,
+    which looks at each element's type first; the same floats.
+    """
+    packer = _PACKERS.get(len(values))
+    if packer is None:
+        packer = _PACKERS[len(values)] = struct.Struct(f'{len(values)}d')
+    return np.frombuffer(packer.pack(*values))
+
+
+#: struct.Struct of n doubles, by n (_float_array).
+_PACKERS: dict[int, struct.Struct] = {}
+
+
+def _all_finite(values, more_values) -> bool:
+    """Whether every one of the floats ``values`` and ``more_values`` is finite.
+
+    A finite sum has finite terms (a NaN or an infinity makes the sum NaN or infinite), and
+    summing is cheaper than asking each number (or numpy's isfinite and its reduction); a
+    sum that overflows is checked term by term.
+    """
+    return (math.isfinite(sum(values) + sum(more_values))
+            or (all(map(math.isfinite, values)) and all(map(math.isfinite, more_values))))
 
 
 class PlanContacts:
@@ -278,7 +303,7 @@ class KinematicSimulator(Node):
         self._support_source: np.ndarray | None = None
         self._support: Support | None = None
         self._polygon_support: Support | None = None
-        self._polygon_cache: tuple[list, list] = ([], [])
+        self._polygon_cache: tuple = (None, [])
         #: Index of the last /gait/markers period that got its message.
         self._markers_slot: int | None = None
         self._period_ns = int(round(1e9 / self.params.rate_hz))
@@ -357,7 +382,13 @@ class KinematicSimulator(Node):
     def _now_ns(self) -> int:
         if self._owns_time:
             return self._sim_ns
-        return self.get_clock().now().nanoseconds
+        return self._clock_ns()
+
+    def _clock_ns(self) -> int:
+        """The node clock's time [ns] (the runtime's ``Clock.now_ns`` skips building a Time)."""
+        clock = self.get_clock()
+        now_ns = getattr(clock, 'now_ns', None)
+        return now_ns() if now_ns is not None else clock.now().nanoseconds
 
     # -- parameters ----------------------------------------------------------------------------
 
@@ -427,6 +458,8 @@ class KinematicSimulator(Node):
             return self._command
         delay_ns = 0 if self.context.runtime == 'inproc' else self.params.command_delay_s * 1e9
         at_ns = now_ns - delay_ns
+        if at_ns == self._command_stamp_ns:
+            return self._command  # at the newest setpoint (every tick under inproc)
         setpoints = self._setpoints
         if len(setpoints) > 1 and at_ns < setpoints[-1][0]:
             for k in range(len(setpoints) - 1, 0, -1):
@@ -438,8 +471,8 @@ class KinematicSimulator(Node):
         ahead_ns = min(max(at_ns - self._command_stamp_ns, 0), MAX_EXTRAPOLATION_PERIODS
                        * period_ns)
         if ahead_ns == 0:
-            # At the newest setpoint (every tick under inproc): command + velocity * 0 is the
-            # command itself (up to the sign of a zero, which no joint position sees).
+            # At the newest setpoint or before it: command + velocity * 0 is the command itself
+            # (up to the sign of a zero, which no joint position sees).
             return self._command
         return self._command + self._command_velocity * (ahead_ns * 1e-9)
 
@@ -522,14 +555,16 @@ class KinematicSimulator(Node):
         The grid is re-anchored to the clock when the clock went back or the timer starved for
         more than ``MAX_LAG_PERIODS``.
         """
-        clock_ns = self.get_clock().now().nanoseconds
+        clock_ns = self._clock_ns()
         if not self._history:
             return [clock_ns]
         last_ns = self._history[-1][0]
         next_ns = last_ns + period_ns
         if clock_ns < last_ns or clock_ns - next_ns > MAX_LAG_PERIODS * period_ns:
             return [clock_ns]
-        missed = max(clock_ns - next_ns, 0) // period_ns
+        if clock_ns < next_ns + period_ns:
+            return [next_ns]  # on time (every tick under inproc): no missed instant
+        missed = (clock_ns - next_ns) // period_ns
         return [next_ns + k * period_ns for k in range(missed + 1)]
 
     def _account(self, step) -> None:
@@ -556,8 +591,8 @@ class KinematicSimulator(Node):
     # Messages are built in one constructor call each (the per-tick cost of this node is mostly
     # Python objects). Published messages are read-only (ROS 2's intra-process rule, which the
     # inproc runtime relies on): the stamp, the headers of one instant, the joint name list, the
-    # polygon vertices and the markers' unchanging parts are shared between messages rather than
-    # copied.
+    # support polygon (its Polygon message, while the contacts stay) and the markers' unchanging
+    # parts are shared between messages rather than copied.
 
     def _publish_state(self, now_ns: int, q: np.ndarray, actuators: ActuatorStep):
         """Publish /joint_states and /tf; return the odom-frame header of ``now_ns``."""
@@ -590,8 +625,8 @@ class KinematicSimulator(Node):
         if zmp_finite:
             self._zmp.publish(new['PointStamped'](header, new['Point'](*zmp)))
         self._com.publish(new['PointStamped'](header, new['Point'](*com)))
-        vertices, outline = self._polygon_points(support)
-        self._polygon.publish(new['PolygonStamped'](header, new['Polygon'](vertices)))
+        polygon, outline = self._polygon_points(support)
+        self._polygon.publish(new['PolygonStamped'](header, polygon))
         if self.params.publish_markers:
             # A visualization topic at a display's rate (markers_rate_hz), not the monitor's:
             # the samples whose stamps open a new markers period.
@@ -602,8 +637,8 @@ class KinematicSimulator(Node):
                     header, zmp if zmp_finite else None,
                     com if all(map(math.isfinite, com)) else None, outline))
 
-    def _polygon_points(self, support: Support) -> tuple[list, list]:
-        """Point32 vertices and closed marker outline of the support polygon, once per support.
+    def _polygon_points(self, support: Support) -> tuple:
+        """Polygon message and closed marker outline of the support polygon, once per support.
 
         At the height of the ZMP's plane [m].
         """
@@ -612,7 +647,7 @@ class KinematicSimulator(Node):
             z = support.plane_height_m
             vertices = [point32(x=x, y=y, z=z) for x, y in support.polygon.tolist()]
             outline = [point(x=x, y=y, z=z) for x, y in support.polygon.tolist()]
-            self._polygon_cache = (vertices, outline + outline[:1])
+            self._polygon_cache = (self._new['Polygon'](vertices), outline + outline[:1])
             self._polygon_support = support
         return self._polygon_cache
 
@@ -677,7 +712,8 @@ class KinematicSimulator(Node):
         window.samples += 1
         window.samples_outside += level == ERROR
         window.samples_warn += level == WARN
-        window.min_margin_m = min(window.min_margin_m, margin)
+        if margin < window.min_margin_m:  # min() without the call
+            window.min_margin_m = margin
         if level != self._stability_level:
             self._stability_level = level
             self.diagnostics.report('stability', level, self._stability_message(level, state),

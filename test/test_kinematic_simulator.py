@@ -31,6 +31,8 @@ from gait_nodes.sim.kinematics import (
     ORIENTATION_PRIOR_M,
     KinematicSimulation,
     PositionActuators,
+    _clip,
+    _mean_of_rows,
     fit_base_pose,
     fit_base_pose_gauss_newton,
     kabsch,
@@ -180,6 +182,35 @@ def test_svd3_is_numpys_svd(seed, rank, scale):
     np.testing.assert_allclose((u * singular) @ vt, matrix, rtol=0, atol=1e-12 * scale)
     np.testing.assert_allclose(u @ u.T, np.eye(3), atol=1e-12)
     np.testing.assert_allclose(vt @ vt.T, np.eye(3), atol=1e-12)
+
+
+@settings(max_examples=200, deadline=None)
+@given(seed=st.integers(0, 2**31), count=st.integers(1, 12),
+       scale=st.sampled_from([1e-9, 1e-3, 1.0, 1e3]))
+def test_mean_of_rows_is_numpys_reduction_bit_for_bit(seed, count, scale):
+    """The Kabsch centre in floats: np.add.reduce(points, 0) / len(points), bytes included."""
+    rng = np.random.default_rng(seed)
+    points = rng.normal(size=(count, 3)) * scale * 10.0 ** rng.uniform(-3, 3, (count, 1))
+    assert (_mean_of_rows(points.tolist()).tobytes()
+            == (np.add.reduce(points, 0) / count).tobytes())
+
+
+def test_clip_is_minimum_of_maximum_bit_for_bit():
+    """The actuators' clip: np.minimum(np.maximum(x, low), high) on every awkward value.
+
+    Signed zeros, NaN, infinities and subnormals, at every length (numpy's vector loops and
+    their scalar tails).
+    """
+    rng = np.random.default_rng(5)
+    awkward = np.array([-0.0, 0.0, np.nan, -np.inf, np.inf, 1.0, -1.0, 5e-324, -5e-324, 0.5])
+    for length in range(1, 41):
+        for _ in range(50):
+            x, low, high = (rng.choice(awkward, length) for _ in range(3))
+            if rng.random() < 0.5:
+                x = rng.normal(size=length)
+            with np.errstate(invalid='ignore'):
+                expected = np.minimum(np.maximum(x, low), high)
+            assert _clip(x, low, high).tobytes() == expected.tobytes()
 
 
 @settings(max_examples=60, deadline=None)
@@ -637,6 +668,30 @@ def test_bad_joint_commands_are_rejected_and_the_state_is_held(inproc, robot, q_
         np.testing.assert_allclose(positions, good, atol=1e-12)
     for msg in states:
         assert np.all(np.isfinite(msg.position))
+
+
+def test_joint_commands_with_non_finite_values_and_only_those_are_refused(robot, q_nominal):
+    """The finiteness check (a sum first, term by term when the sum is not finite).
+
+    Huge finite values whose sum overflows are accepted; a NaN, an infinity or infinities of
+    both signs (whose sum is NaN) in positions or velocities are refused.
+    """
+    from gait_nodes.contract import ContractError
+    from gait_nodes.kinematic_simulator import joint_command_from_msg
+
+    names, start = list(robot.joint_names), robot.joint_positions(q_nominal)
+    huge = np.full(len(names), 1e308)
+    for positions, velocities in ((start, ()), (start, huge), (huge, -huge)):
+        command, velocity = joint_command_from_msg(joint_command(names, positions, velocities),
+                                                   robot, start)
+        assert command.tobytes() == np.asarray(positions, dtype=float).tobytes()
+        assert np.all(velocity == (velocities if len(velocities) else 0.0))
+    for bad in ([math.nan], [math.inf], [-math.inf], [math.inf, -math.inf]):
+        values = start.copy()
+        values[:len(bad)] = bad
+        for positions, velocities in ((values, ()), (start, values)):
+            with pytest.raises(ContractError, match='NaN or infinite'):
+                joint_command_from_msg(joint_command(names, positions, velocities), robot, start)
 
 
 def test_a_subset_command_moves_only_its_joints(inproc, robot, q_nominal):

@@ -199,6 +199,14 @@ def test_sliding_differences_are_central_differences_bit_for_bit(robosimian):
         for got, want in zip(sliding.at(qs[k], qs[k + 1], qs[k + 2], steps[k], steps[k + 1]),
                              expected, strict=True):
             assert got.tobytes() == want.tobytes()
+    # Along the stream with the kept difference but another step before (its division by the
+    # step is not reused), and with the default step after.
+    for k, before, after in ((0, 0.005, 0.005), (1, 0.004, None), (2, 0.004, 0.004),
+                             (3, 0.005, None)):
+        expected = central_differences(model, qs[k], qs[k + 1], qs[k + 2], before, after)
+        for got, want in zip(sliding.at(qs[k], qs[k + 1], qs[k + 2], before, after),
+                             expected, strict=True):
+            assert got.tobytes() == want.tobytes()
 
 
 def test_margin_matches_the_shared_geometry(robosimian):

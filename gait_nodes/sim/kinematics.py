@@ -53,6 +53,13 @@ BASE_FIT_ITERATIONS = 10
 ORIENTATION_PRIOR_M = 1e-3
 #: LAPACK's SVD (divide and conquer), what numpy.linalg.svd runs.
 _DGESDD = lapack.dgesdd
+try:
+    # The ufunc np.clip calls, without np.clip's Python dispatch (which costs as much as the
+    # clipping of a robot's joints): np.minimum(np.maximum(x, low), high), bit for bit, signed
+    # zeros and NaN included (test_kinematic_simulator checks it).
+    from numpy._core.umath import clip as _clip
+except ImportError:  # another numpy's layout
+    _clip = np.clip
 
 
 def _skew(vectors: np.ndarray) -> np.ndarray:
@@ -63,14 +70,16 @@ def _skew(vectors: np.ndarray) -> np.ndarray:
                      np.stack([-y, x, zero], -1)], -2)
 
 
-@dataclass(frozen=True)
+# Per-tick results are plain (slotted) dataclasses, read-only by convention: a frozen
+# dataclass's __init__ sets each field through object.__setattr__, three times the cost.
+@dataclass(slots=True)
 class ActuatorStep:
-    """One step of the position-controlled joints.
+    """One step of the position-controlled joints (read-only).
 
     The step keeps its inputs; the diagnostics (:attr:`demanded_over_limit`, :attr:`saturated`,
     :attr:`clamped_to_limits`) are computed from them when asked, and :attr:`any_saturated`,
-    :attr:`any_clamped` answer the usual "none" with one comparison of bytes each (np.minimum
-    and np.maximum return an input unchanged, bit for bit, where they do not clip it).
+    :attr:`any_clamped` answer the usual "none" with one comparison of bytes each (clipping
+    returns an input unchanged, bit for bit, where it does not clip it).
 
     Attributes:
         positions_rad: (J,) joint positions after the step [rad or m].
@@ -151,7 +160,7 @@ class PositionActuators:
         if not dt_s > 0.0:
             raise ParameterError(f'dt_s must be > 0 s, got {dt_s!r}')
         commanded_rad = np.asarray(commanded_rad, dtype=float)
-        target = np.minimum(np.maximum(commanded_rad, self.lower), self.upper)
+        target = _clip(commanded_rad, self.lower, self.upper)
         delta = target - positions_rad
         if self._any_continuous:
             wrapped = (delta + math.pi) % (2.0 * math.pi) - math.pi
@@ -161,8 +170,8 @@ class PositionActuators:
             allowed = self.velocity_limits_rad_s * dt_s
             minus_allowed = -allowed
             self._allowed = (dt_s, allowed, minus_allowed)
-        moved = np.minimum(np.maximum(delta, minus_allowed), allowed)
-        positions = np.minimum(np.maximum(positions_rad + moved, self.lower), self.upper)
+        moved = _clip(delta, minus_allowed, allowed)
+        positions = _clip(positions_rad + moved, self.lower, self.upper)
         velocities = (positions - positions_rad) / dt_s
         return ActuatorStep(positions, velocities, commanded_rad, target, delta, moved, allowed)
 
@@ -185,11 +194,11 @@ def _kabsch_centred(points_in_base: np.ndarray, centred_world: np.ndarray,
 
     The simulation keeps the centred world side per stance: the latched feet do not move.
     """
-    centre_base = np.add.reduce(points_in_base, 0) / len(points_in_base)
+    centre_base = _mean_of_rows(points_in_base.tolist())
     # ndarray.dot: the products of matmul (@) with less overhead per call on 3x3 matrices.
     u, singular, vt = svd3((points_in_base - centre_base).T.dot(centred_world))
     largest, second, _ = singular.tolist()
-    if second <= COLLINEAR_TOLERANCE * max(largest, 1e-300):
+    if second <= COLLINEAR_TOLERANCE * (1e-300 if 1e-300 > largest else largest):  # max()
         return None
     # Kabsch: R = V diag(1, 1, d) U^T with d = det(V U^T) = +-1 (no reflection).
     v = vt.T
@@ -202,6 +211,22 @@ def _kabsch_centred(points_in_base: np.ndarray, centred_world: np.ndarray,
     pose.rotation = rotation
     pose.translation = centre_world - rotation.dot(centre_base)
     return pose
+
+
+def _mean_of_rows(rows: list) -> np.ndarray:
+    """``np.add.reduce(points, 0) / len(points)`` of (N, 3) points given as lists of floats.
+
+    The same sums in the same order (a reduction over the outer axis adds the rows one after
+    the other), so the same bits, in scalar arithmetic: numpy's reduction and its division of
+    a few floats cost more than the arithmetic (test_kinematic_simulator checks the bits).
+    """
+    (x, y, z), *others = rows
+    for other_x, other_y, other_z in others:
+        x += other_x
+        y += other_y
+        z += other_z
+    count = len(rows)
+    return np.array([x / count, y / count, z / count])
 
 
 def svd3(matrix: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -455,14 +480,14 @@ class SimulationSettings:
                                      f'{value!r}')
 
 
-@dataclass(frozen=True)
+@dataclass(slots=True)
 class SimulationStep:
-    """What one step of :class:`KinematicSimulation` produced.
+    """What one step of :class:`KinematicSimulation` produced (read-only, as ActuatorStep).
 
     Attributes:
         q: Pinocchio configuration after the step (base pose and joints), read-only.
         actuators: The joint step (velocities, saturation, clamping).
-        contacts: (F,) booleans: feet in contact after the step.
+        contacts: (F,) booleans: feet in contact after the step, read-only.
         contact_points_in_world: (F, 3) contact points; NaN for feet in the air [m].
         slip_m: Largest distance of a stance foot frame from where it was latched, after the
             base fit (non-zero only when the commands cannot keep every stance foot still).
@@ -497,6 +522,15 @@ class KinematicSimulation:
         # The configuration of the forward kinematics in the base frame: base at the origin.
         self._q_in_base = self.q.copy()
         self._q_in_base[:7] = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0)
+        # Whether q is the base pose followed by the joint vector (1-DOF joints in the robot's
+        # joint order, as every shipped robot has them): then q is built by one concatenation
+        # and the joints written by a slice rather than by robot.set_joint_positions.
+        model = robot.model
+        self._joints_follow_base = (
+            model.nq == 7 + len(robot.joint_names)
+            and np.array_equal(robot.q_indices(robot.joint_names), np.arange(7, model.nq)))
+        # The last read-only contacts given to step() (by identity), their copy and its list.
+        self._contacts_given: tuple = (None, None, None)
         self.joints = robot.joint_positions(self.q)
         self.base = pin.XYZQUATToSE3(self.q[:7])
         feet = self._feet_in_base(self.joints)
@@ -514,7 +548,10 @@ class KinematicSimulation:
     def _feet_in_base(self, joints: np.ndarray) -> list[pin.SE3]:
         """Foot frames in the base frame at ``joints`` (updateFramePlacement returns copies)."""
         q = self._q_in_base
-        self.robot.set_joint_positions(q, joints)
+        if self._joints_follow_base:
+            q[7:] = joints
+        else:
+            self.robot.set_joint_positions(q, joints)
         model, data = self.robot.model, self._data
         pin.forwardKinematics(model, data, q)
         return [pin.updateFramePlacement(model, data, f) for f in self.robot.foot_frame_ids]
@@ -575,8 +612,18 @@ class KinematicSimulation:
         feet = self._feet_in_base(actuators.positions_rad)
         if contacts is None:
             contacts = self._contacts_by_height(feet)
-        contacts = np.asarray(contacts, dtype=bool)
-        down = contacts.tolist()
+        given, contacts_copy, down = self._contacts_given
+        if contacts is given:
+            # A schedule's answer is a read-only array, the same one until the contacts change
+            # (PlanContacts): its copy and list are those of the previous step.
+            contacts = contacts_copy
+        else:
+            given = contacts if isinstance(contacts, np.ndarray) and contacts.base is None \
+                and not contacts.flags.writeable else None
+            contacts = np.array(contacts, dtype=bool)
+            contacts.flags.writeable = False
+            down = contacts.tolist()
+            self._contacts_given = (given, contacts, down)
         latched = self.latched
         kept = tuple(k for k, d in enumerate(down) if d and latched[k] is not None)
         base = self.base
@@ -608,10 +655,13 @@ class KinematicSimulation:
                 touched.append(self.robot.foot_names[k])
         self.base = base
         self.joints = actuators.positions_rad
-        q = self.q.copy()
-        q[:7] = pin.SE3ToXYZQUAT(base)
-        self.robot.set_joint_positions(q, self.joints)
+        if self._joints_follow_base:
+            q = np.concatenate((pin.SE3ToXYZQUAT(base), self.joints))
+        else:
+            q = self.q.copy()
+            q[:7] = pin.SE3ToXYZQUAT(base)
+            self.robot.set_joint_positions(q, self.joints)
         q.flags.writeable = False
         self.q = q
-        return SimulationStep(q, actuators, contacts.copy(), self.contact_points(), slip,
+        return SimulationStep(q, actuators, contacts, self.contact_points(), slip,
                               tuple(touched))

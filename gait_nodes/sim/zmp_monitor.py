@@ -71,22 +71,30 @@ def central_differences(model: pin.Model, q_before: np.ndarray, q: np.ndarray,
     ``v = (d1 h2 / h1 + d2 h1 / h2) / (h1 + h2)``, ``a = 2 (d2 / h2 - d1 / h1) / (h1 + h2)``,
     second-order accurate, exact for joint motions of constant acceleration.
     """
-    return _from_differences(pin.difference(model, q_before, q),
-                             pin.difference(model, q, q_after), dt_before_s, dt_after_s)
+    v, a, _ = _from_differences(pin.difference(model, q_before, q),
+                                pin.difference(model, q, q_after), dt_before_s, dt_after_s)
+    return v, a
 
 
 def _from_differences(d1: np.ndarray, d2: np.ndarray, dt_before_s: float,
-                      dt_after_s: float | None) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`central_differences` from its two configuration differences."""
+                      dt_after_s: float | None, d1_rate: np.ndarray | None = None
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`central_differences` from its two configuration differences, and ``d2 / h2``.
+
+    ``d2 / h2`` is the next instant's ``d1 / h1`` along a stream of equal steps; ``d1_rate``:
+    ``d1 / h1`` if known (the same division, so the same bits).
+    """
     h1 = float(dt_before_s)
     h2 = h1 if dt_after_s is None else float(dt_after_s)
+    rate1 = d1 / h1 if d1_rate is None else d1_rate
+    rate2 = d2 / h2
     if h1 == h2:
         # The same values with a third fewer array operations (a fixed-rate simulation's case):
         # h2 / h1 is exactly 1 and 2 x / (h1 + h2) exactly x / h1 (scaling by 2 is exact).
-        return (d1 + d2) / (h1 + h2), (d2 / h2 - d1 / h1) / h1
+        return (d1 + d2) / (h1 + h2), (rate2 - rate1) / h1, rate2
     v = (d1 * (h2 / h1) + d2 * (h1 / h2)) / (h1 + h2)
-    a = 2.0 * (d2 / h2 - d1 / h1) / (h1 + h2)
-    return v, a
+    a = 2.0 * (rate2 - rate1) / (h1 + h2)
+    return v, a, rate2
 
 
 class SlidingDifferences:
@@ -94,8 +102,9 @@ class SlidingDifferences:
 
     Consecutive instants share a difference: the ``q_after (-) q`` of one call is the
     ``q (-) q_before`` of the next, kept and not computed again when the next call's
-    ``q_before`` and ``q`` are the very same arrays (callers must not modify them in place).
-    The values are :func:`central_differences`'s, bit for bit.
+    ``q_before`` and ``q`` are the very same arrays (callers must not modify them in place),
+    and so is its division by the step when the steps are equal. The values are
+    :func:`central_differences`'s, bit for bit.
 
     Args:
         model: Pinocchio model of the configurations.
@@ -103,18 +112,24 @@ class SlidingDifferences:
 
     def __init__(self, model: pin.Model):
         self.model = model
-        # (q, q_after, q_after (-) q) of the last call.
-        self._last: tuple = (None, None, None)
+        # (q, q_after, q_after (-) q, its step [s], the difference over the step) of the last
+        # call.
+        self._last: tuple = (None, None, None, None, None)
 
     def at(self, q_before: np.ndarray, q: np.ndarray, q_after: np.ndarray, dt_before_s: float,
            dt_after_s: float | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Velocity and acceleration at ``q`` (:func:`central_differences`)."""
-        start, end, difference = self._last
+        start, end, difference, step_s, rate = self._last
         if start is not q_before or end is not q:
             difference = pin.difference(self.model, q_before, q)
+            rate = None
+        elif float(dt_before_s) != step_s:
+            rate = None
         after = pin.difference(self.model, q, q_after)
-        self._last = (q, q_after, after)
-        return _from_differences(difference, after, dt_before_s, dt_after_s)
+        v, a, after_rate = _from_differences(difference, after, dt_before_s, dt_after_s, rate)
+        self._last = (q, q_after, after,
+                      float(dt_before_s if dt_after_s is None else dt_after_s), after_rate)
+        return v, a
 
 
 @dataclass(frozen=True)
@@ -139,9 +154,11 @@ class Support:
     centres_hull_edges: list
 
 
-@dataclass(frozen=True)
+@dataclass(slots=True)
 class ZmpState:
-    """The monitor's view of one instant.
+    """The monitor's view of one instant (read-only).
+
+    A plain dataclass, one per tick: a frozen one's __init__ costs three times as much.
 
     Attributes:
         com_in_world: (3,) centre of mass of the full model [m].
@@ -201,6 +218,12 @@ class ZmpMonitor:
         ``plane_height_m``: height of the plane [m]; None: ``ground_height_m``.
         """
         plane = self.ground_height_m if plane_height_m is None else float(plane_height_m)
+        com, zmp, fz = self._com_and_zmp(q, v, a, plane)
+        return com, np.full(3, np.nan) if zmp is None else np.array(zmp), fz
+
+    def _com_and_zmp(self, q: np.ndarray, v: np.ndarray, a: np.ndarray,
+                     plane: float) -> tuple[np.ndarray, list | None, float]:
+        """:meth:`com_and_zmp` with the ZMP as a list of floats, None where undefined."""
         data = self.data
         dhg = pin.computeCentroidalMomentumTimeVariation(self.model, data, q, v, a)
         com = data.com[0].copy()
@@ -214,8 +237,8 @@ class ZmpMonitor:
         tau_x = lx + cy * fz - cz * fy
         tau_y = ly + cz * fx - cx * fz
         if fz <= MIN_NORMAL_FORCE_N:
-            return com, np.full(3, np.nan), fz
-        return com, np.array([-tau_y / fz, tau_x / fz, plane]), fz
+            return com, None, fz
+        return com, [-tau_y / fz, tau_x / fz, plane], fz
 
     def support(self, contact_points_in_world: np.ndarray) -> Support:
         """The :class:`Support` of these contact points (C, 3) [m], kept while they stay."""
@@ -244,12 +267,13 @@ class ZmpMonitor:
         return self._margin(zmp_in_world, self.support(contact_points_in_world))
 
     def _margin(self, zmp_in_world: np.ndarray, support: Support) -> float:
-        x, y = zmp_in_world[0], zmp_in_world[1]
-        if len(support.centres_hull) == 0 or not (math.isfinite(x) and math.isfinite(y)):
+        return self._margin_of(float(zmp_in_world[0]), float(zmp_in_world[1]), support)
+
+    def _margin_of(self, x: float, y: float, support: Support) -> float:
+        if not support.centres_hull_edges or not (math.isfinite(x) and math.isfinite(y)):
             return -math.inf
         # geometry.disc_support_margin, with the centres' hull kept between calls.
-        return (point_signed_distance(float(x), float(y), support.centres_hull_edges)
-                + self.foot_radius_m)
+        return point_signed_distance(x, y, support.centres_hull_edges) + self.foot_radius_m
 
     def evaluate(self, q: np.ndarray, v: np.ndarray, a: np.ndarray,
                  contact_points_in_world: np.ndarray | Support) -> ZmpState:
@@ -259,6 +283,9 @@ class ZmpMonitor:
         """
         support = contact_points_in_world if isinstance(contact_points_in_world, Support) \
             else self.support(contact_points_in_world)
-        com, zmp, fz = self.com_and_zmp(q, v, a, support.plane_height_m)
-        return ZmpState(com, zmp, fz, self._margin(zmp, support),
+        com, zmp, fz = self._com_and_zmp(q, v, a, support.plane_height_m)
+        if zmp is None:
+            return ZmpState(com, np.full(3, np.nan), fz, -math.inf,
+                            support.contact_points_in_world)
+        return ZmpState(com, np.array(zmp), fz, self._margin_of(zmp[0], zmp[1], support),
                         support.contact_points_in_world)
