@@ -19,7 +19,7 @@ import yaml
 from gait_nodes import runtime
 from gait_nodes.bag.analysis import inspect_bag
 from gait_nodes.bag.reader import BagReader, NotABagError
-from gait_nodes.bag.writer import BagWriter, message_appender
+from gait_nodes.bag.writer import BagWriter, ChunkThread, message_appender
 from gait_nodes.graph import TOPICS
 from gait_nodes.interfaces import get_message, serialize_message, type_hash
 from gait_nodes.replay import Replayer, replay_qos
@@ -461,23 +461,27 @@ def test_writer_refuses_an_existing_directory(tmp_path):
         BagWriter(tmp_path / 'exists')
 
 
-@pytest.mark.parametrize('compression', ['zstd', 'none'])
+@pytest.mark.parametrize('compression', ['zstd', 'lz4', 'none'])
 def test_fast_message_path_writes_the_bytes_of_mcap_add_message(compression):
-    """The recorder's message appender leaves the file mcap's own add_message would write.
+    """The recorder's message appender and chunk thread leave the file mcap's own would write.
 
     Small chunks (many chunk ends, some in the middle of a batch), out-of-order log times,
     channels appearing mid-chunk, empty and large messages, batches of 1 to 40 messages,
-    explicit flushes in between.
+    explicit flushes in between; the chunks finished on the caller's thread (mcap's Writer)
+    or compressed and written on a ChunkThread.
     """
     import io
 
     from mcap.writer import CompressionType, Writer
 
-    kind = {'zstd': CompressionType.ZSTD, 'none': CompressionType.NONE}[compression]
+    if compression == 'lz4':
+        pytest.importorskip('lz4.frame')
+    kind = {'zstd': CompressionType.ZSTD, 'lz4': CompressionType.LZ4,
+            'none': CompressionType.NONE}[compression]
     messages = written_messages()
     channels = sorted({topic for topic, _, _ in messages})
     outputs = []
-    for fast in (False, True):
+    for fast, threaded in ((False, False), (True, False), (True, True)):
         stream = io.BytesIO()
         writer = Writer(stream, chunk_size=4096, compression=kind)
         writer.start(profile='ros2', library='test')
@@ -486,6 +490,8 @@ def test_fast_message_path_writes_the_bytes_of_mcap_add_message(compression):
                for t in channels}
         append = message_appender(writer) if fast else None
         assert not fast or append is not None
+        chunk_thread = ChunkThread.attach(writer, stream) if threaded else None
+        assert not threaded or chunk_thread is not None
         batch = []
         for k, (topic, stamp, data) in enumerate(messages):
             log_time = stamp - (k % 5) * 1000  # not monotonic
@@ -499,13 +505,24 @@ def test_fast_message_path_writes_the_bytes_of_mcap_add_message(compression):
                 writer.add_message(channel_id=ids[topic], log_time=log_time, data=data,
                                    publish_time=stamp, sequence=k)
             if k % 301 == 0:
-                writer.flush()
+                if chunk_thread is None:
+                    writer.flush()
+                else:  # the stream is the thread's until stopped
+                    chunk_thread.finish_chunk()
+                    chunk_thread.flush()
         if batch:
             append(batch)
+        if chunk_thread is not None:
+            chunk_thread.finish_chunk()
+            chunk_thread.stop()
         writer.finish()
         outputs.append(stream.getvalue())
     assert len(messages) > 500
-    assert outputs[0] == outputs[1]
+    from mcap.reader import make_reader
+
+    assert len(make_reader(io.BytesIO(outputs[0])).get_summary().chunk_indexes) > 20
+    assert outputs[1] == outputs[0]
+    assert outputs[2] == outputs[0]
 
 
 def test_margin_of_the_fixture_formula_is_consistent():
@@ -513,3 +530,29 @@ def test_margin_of_the_fixture_formula_is_consistent():
     assert gait_bag.expected_margin(0.5, 0.0) == pytest.approx(0.3)
     assert gait_bag.expected_margin(0.5, 0.4) == pytest.approx(-0.1)
     assert gait_bag.expected_margin(1.5, 0.7) == pytest.approx(-math.hypot(0.3, 0.4))
+
+
+def test_chunk_thread_error_is_raised_on_the_callers_thread_and_nothing_hangs():
+    """A write failing on the ChunkThread (a full disk) is raised by the next call made there."""
+    import io
+
+    from mcap.writer import CompressionType, Writer
+
+    class FullDisk(io.BytesIO):
+        def write(self, data):
+            if len(data) > 1000:
+                raise OSError(28, 'No space left on device')
+            return super().write(data)
+
+    stream = FullDisk()
+    writer = Writer(stream, chunk_size=4096, compression=CompressionType.ZSTD)
+    writer.start(profile='ros2', library='test')
+    schema = writer.register_schema(name='s', encoding='ros2msg', data=b'')
+    channel = writer.register_channel(topic='/t', message_encoding='cdr', schema_id=schema)
+    chunk_thread = ChunkThread.attach(writer, stream)
+    for k in range(50):
+        writer.add_message(channel_id=channel, log_time=k, data=os.urandom(200), publish_time=k)
+    chunk_thread.finish_chunk()
+    with pytest.raises(OSError, match='No space'):
+        chunk_thread.stop()
+    chunk_thread.stop()  # raised once; the thread is gone

@@ -3,8 +3,10 @@
 The MCAP file follows rosbag2's Jazzy MCAP storage: profile ``ros2``, schemas in ``ros2msg``
 encoding (the definition and its dependencies separated by lines of 80 ``=``), messages in
 ``cdr``, channel metadata ``offered_qos_profiles`` and ``topic_type_hash``. The open chunk is
-finished at least every ``flush_period_s`` of wall time, so a SIGKILL loses at most that much; a
-clean ``close()`` writes the summary and ``metadata.yaml``.
+finished at least every ``flush_period_s`` of wall time, so a SIGKILL loses at most that much
+(and the few milliseconds a finished chunk takes to be compressed and written, on a thread of
+its own, see :class:`ChunkThread`); a clean ``close()`` writes every chunk, the summary and
+``metadata.yaml``.
 """
 
 from __future__ import annotations
@@ -12,14 +14,19 @@ from __future__ import annotations
 import dataclasses
 import io
 import itertools
+import queue
 import struct
+import threading
 import time
+import zlib
 from pathlib import Path
 
 import yaml
+from mcap import writer as mcap_writer
+from mcap.data_stream import RecordBuilder
 from mcap.opcode import Opcode
-from mcap.records import MessageIndex
-from mcap.writer import CompressionType, Writer
+from mcap.records import Chunk, ChunkIndex, MessageIndex
+from mcap.writer import CompressionType, IndexType, Writer
 
 from gait_nodes.errors import ConfigError
 
@@ -29,6 +36,8 @@ ROS_DISTRO = 'jazzy'
 _MESSAGE_RECORD = struct.Struct('<BQHIQQ')
 #: Messages a BagWriter keeps before appending them to the MCAP chunk in one batch.
 _PENDING_MAX = 256
+#: Finished chunks waiting for the ChunkThread at most (then the writer waits for it).
+_CHUNKS_QUEUED_MAX = 4
 
 
 class _MessageIndex(MessageIndex):
@@ -128,6 +137,159 @@ def message_appender(writer: Writer):
     return append
 
 
+class ChunkThread:
+    """Compresses and writes a Writer's finished chunks on a thread, in order.
+
+    Compressing a chunk (zstd, ~1 MB) and its CRC take milliseconds of a recorder's thread,
+    most of the bag's cost under the inproc runtime, where the recorder shares the thread of
+    every node. Both release the GIL, so on a thread of their own they run on another core
+    meanwhile. :meth:`attach` makes the Writer hand its chunks here: what the Writer's own
+    chunk finishing (``Writer.__finalize_chunk``) did at once is split in two, the same steps
+    in the same order, so the file has the same bytes (test_bags checks it against mcap's
+    ``add_message``). On the caller's thread: the chunk's statistics, its records and message
+    indexes taken from the ChunkBuilder, which starts the next chunk. On this thread:
+    compression, CRC, the Chunk and MessageIndex records written to the stream and the
+    ChunkIndex kept for the summary. Chunks are written in the order they were finished.
+
+    :meth:`flush` asks for the stream to be flushed after the chunks finished before it;
+    :meth:`stop` waits until all are written, after which chunks are written at once again
+    (the summary the Writer's ``finish`` writes comes after every chunk). An error of the
+    thread (a full disk) is raised by the next call made here.
+    """
+
+    def __init__(self, writer: Writer, stream, compression: CompressionType,
+                 message_indexes: bool):
+        self._writer = writer
+        self._stream = stream
+        self._chunks = writer._Writer__chunk_builder
+        self._statistics = writer._Writer__statistics
+        self._chunk_indices = writer._Writer__chunk_indices
+        self._records = writer._Writer__record_builder
+        self._message_indexes = message_indexes
+        if compression == CompressionType.ZSTD:
+            # mcap compresses with zstandard.compress, which is this with a new context per call.
+            self._compression, self._compress = 'zstd', mcap_writer.zstandard.ZstdCompressor(
+                level=3).compress
+        elif compression == CompressionType.LZ4:
+            self._compression, self._compress = 'lz4', mcap_writer.lz4.frame.compress
+        else:
+            self._compression, self._compress = '', bytes
+        self._queue: queue.Queue = queue.Queue(maxsize=_CHUNKS_QUEUED_MAX)
+        self._thread: threading.Thread | None = None
+        self._error: BaseException | None = None
+        self._stopped = False
+        writer._Writer__finalize_chunk = self.finish_chunk
+
+    @classmethod
+    def attach(cls, writer: Writer, stream) -> ChunkThread | None:
+        """A ChunkThread finishing ``writer``'s chunks (written to ``stream``), or None.
+
+        None when ``writer`` does not have the private state of the mcap version this was
+        written for (its chunks are then finished by the Writer itself, at once).
+        """
+        try:
+            usable = (writer._Writer__chunk_builder is not None
+                      and not writer._Writer__enable_data_crcs
+                      and writer._Writer__enable_crcs
+                      and writer._Writer__stream is stream
+                      and hasattr(writer, '_Writer__finalize_chunk')
+                      and isinstance(writer._Writer__chunk_indices, list)
+                      and isinstance(writer._Writer__record_builder, RecordBuilder))
+            compression = writer._Writer__compression
+            index_types = writer._Writer__index_types
+        except AttributeError:
+            return None
+        if not usable:
+            return None
+        return cls(writer, stream, compression, bool(index_types & IndexType.MESSAGE))
+
+    def finish_chunk(self) -> None:
+        """Take the open chunk from the Writer and have it written (the Writer calls this)."""
+        self._raise_error()
+        chunks = self._chunks
+        if chunks.num_messages == 0:
+            return
+        self._statistics.chunk_count += 1
+        job = (chunks.end(), chunks.message_start_time, chunks.message_end_time,
+               list(chunks.message_indices.items()))
+        chunks.reset()
+        # Records the Writer buffered outside chunks go to the file before this chunk, as the
+        # Writer's own chunk finishing writes them (there are none while messages are added).
+        records = self._records.end()
+        if records:
+            self._submit(records)
+        self._submit(job)
+
+    def flush(self) -> None:
+        """Flush the stream once the chunks finished so far are written."""
+        self._raise_error()
+        self._submit(None)
+
+    def stop(self) -> None:
+        """Wait until every chunk is written; later chunks are written at once."""
+        if self._thread is not None:
+            self._queue.put(StopIteration)
+            self._thread.join()
+            self._thread = None
+        self._stopped = True
+        self._raise_error()
+
+    def _submit(self, job) -> None:
+        if self._stopped:
+            self._do(job)
+            return
+        if self._thread is None:
+            self._thread = threading.Thread(target=self._run, name='mcap-chunks', daemon=True)
+            self._thread.start()
+        self._queue.put(job)
+
+    def _run(self) -> None:
+        while True:
+            job = self._queue.get()
+            if job is StopIteration:
+                return
+            if self._error is None:
+                try:
+                    self._do(job)
+                except BaseException as exc:  # noqa: BLE001 - raised on the caller's thread
+                    self._error = exc
+
+    def _raise_error(self) -> None:
+        if self._error is not None:
+            error, self._error = self._error, None
+            raise error
+
+    def _do(self, job) -> None:
+        stream = self._stream
+        if job is None:
+            stream.flush()
+            return
+        if isinstance(job, bytes):
+            stream.write(job)
+            return
+        data, start_time, end_time, message_indexes = job
+        compressed = self._compress(data)
+        builder = RecordBuilder()
+        Chunk(compression=self._compression, data=compressed, message_start_time=start_time,
+              message_end_time=end_time, uncompressed_crc=zlib.crc32(data),
+              uncompressed_size=len(data)).write(builder)
+        chunk_start = stream.tell()
+        chunk_length = builder.count
+        offsets = {}
+        if self._message_indexes:
+            for channel_id, index in message_indexes:
+                offsets[channel_id] = chunk_start + builder.count
+                index.write(builder)
+        index_length = builder.count - chunk_length
+        stream.write(builder.end())
+        self._chunk_indices.append(ChunkIndex(
+            message_start_time=start_time, message_end_time=end_time,
+            chunk_start_offset=chunk_start, chunk_length=chunk_length,
+            message_index_offsets=offsets, message_index_length=index_length,
+            compression=self._compression, compressed_size=len(compressed),
+            uncompressed_size=len(data)))
+
+
 @dataclasses.dataclass
 class _Topic:
     channel_id: int
@@ -146,10 +308,12 @@ class BagWriter:
         flush_period_s: Longest wall time [s] a message may stay in memory.
         chunk_size: Target uncompressed chunk size [bytes].
         compression: 'zstd', 'lz4' or 'none' (per chunk, as rosbag2's MCAP storage does).
+        background: Compress and write finished chunks on a thread (:class:`ChunkThread`);
+            the file is the same.
     """
 
     def __init__(self, path: str | Path, flush_period_s: float = 0.5,
-                 chunk_size: int = 1 << 20, compression: str = 'zstd'):
+                 chunk_size: int = 1 << 20, compression: str = 'zstd', background: bool = True):
         self.path = Path(path)
         if self.path.exists():
             raise ConfigError(f'bag directory {self.path} exists already; not overwriting')
@@ -167,6 +331,8 @@ class BagWriter:
         self._writer = Writer(self._stream, chunk_size=chunk_size, compression=kinds[compression])
         self._writer.start(profile='ros2', library=f'gait_nodes, {ROS_DISTRO}')
         self._append = message_appender(self._writer) or self._add_messages
+        self._chunk_thread = ChunkThread.attach(self._writer, self._stream) \
+            if background else None
         #: Messages written but not yet appended to the MCAP chunk, in order:
         #: ``(channel_id, log_time, data, publish_time, sequence)``.
         self._pending: list = []
@@ -263,9 +429,13 @@ class BagWriter:
             self.flush()
 
     def flush(self) -> None:
-        """Finish the open chunk and push it to the file."""
+        """Finish the open chunk and push it to the file (with a ChunkThread: have it pushed)."""
         self._take_pending()
-        self._writer.flush()
+        if self._chunk_thread is not None:
+            self._chunk_thread.finish_chunk()
+            self._chunk_thread.flush()
+        else:
+            self._writer.flush()
         self._flush_at = time.monotonic() + self.flush_period_s
 
     def metadata(self) -> dict:
@@ -302,6 +472,15 @@ class BagWriter:
             return
         self._closed = True
         metadata = self.metadata()
+        if self._chunk_thread is not None:
+            try:
+                try:
+                    self._chunk_thread.finish_chunk()
+                finally:
+                    self._chunk_thread.stop()  # every chunk written before the summary
+            except BaseException:
+                self._stream.close()
+                raise
         info = metadata['rosbag2_bagfile_information']
         self._writer.add_metadata('rosbag2', {
             'serialized_metadata': yaml.safe_dump(info, sort_keys=False),

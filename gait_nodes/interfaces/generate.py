@@ -76,6 +76,38 @@ class _Alignment:
         self.modulus, self.remainder = modulus, 0
 
 
+class SequenceStructs(dict):
+    """``structs[n]``: the Struct of ``n`` primitives of one format, made on first use.
+
+    A sequence of primitives (JointState.position) is packed with the Struct of its length,
+    which is found here at once rather than built from a format string made for each message
+    (``struct.pack('<%dd' % n, ...)`` costs twice as much for 28 doubles). Same bytes, same
+    errors.
+    """
+
+    #: Lengths kept per format (all forgotten at once beyond).
+    KEPT = 64
+    _shared: dict[str, SequenceStructs] = {}
+
+    def __init__(self, fmt: str):
+        super().__init__()
+        self.order, self.char = fmt[0], fmt[1:]
+
+    @classmethod
+    def of(cls, fmt: str) -> SequenceStructs:
+        """The one instance for ``fmt`` (byte order character and format character)."""
+        structs = cls._shared.get(fmt)
+        if structs is None:
+            structs = cls._shared[fmt] = cls(fmt)
+        return structs
+
+    def __missing__(self, count: int) -> struct.Struct:
+        if len(self) >= self.KEPT:
+            self.clear()
+        made = self[count] = struct.Struct(f'{self.order}{count}{self.char}')
+        return made
+
+
 class _CodeWriter:
     def __init__(self):
         self.lines: list[str] = []
@@ -89,6 +121,13 @@ class _CodeWriter:
     def unique(self, prefix: str) -> str:
         self._counter += 1
         return f'{prefix}{self._counter}'
+
+    def sequence_structs(self, fmt: str) -> str:
+        """Name of the :class:`SequenceStructs` of ``fmt`` (byte order and one format char)."""
+        char = 'bool' if fmt[1] == '?' else fmt[1]
+        name = f'SEQ_{"LE" if fmt[0] == "<" else "BE"}_{char}'
+        self.constants[name] = SequenceStructs.of(fmt)
+        return name
 
     def struct_const(self, fmt: str) -> str:
         name = self._struct_names.get(fmt)
@@ -379,7 +418,8 @@ class _SerializerBuilder:
         if base in _BYTE_LIKE:
             self.w.emit(indent, f'b += bytes({var})')
         else:
-            self.w.emit(indent, f'b += pack("<%d{fmt}" % len({var}), *{var})')
+            structs = self.w.sequence_structs('<' + fmt)
+            self.w.emit(indent, f'b += {structs}[len({var})].pack(*{var})')
 
 
 class _DeserializerBuilder:
@@ -488,8 +528,8 @@ class _DeserializerBuilder:
                 if field.base_type != 'uint8' or field.container == 'array':
                     self.emit(indent, f'{target} = list({target})')
             else:
-                self.emit(indent, f'{target} = list(unpack_from("{self.order}%d{fmt}" '
-                                    f'% {count}, d, p))')
+                structs = self.w.sequence_structs(self.order + fmt)
+                self.emit(indent, f'{target} = list({structs}[{count}].unpack_from(d, p))')
             self.emit(indent, f'p += {size} * {count}')
             if field.container == 'array':
                 state.advance(size * field.size)

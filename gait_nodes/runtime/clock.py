@@ -125,7 +125,8 @@ class Clock:
 
     def now(self) -> Time:
         """Current time."""
-        nanoseconds = self.now_ns()
+        source = self._source  # now_ns() inline for a simulated source (many calls per tick)
+        nanoseconds = source() if source is not None else self.now_ns()
         if type(nanoseconds) is not int or nanoseconds < 0:
             return Time(nanoseconds=nanoseconds, clock_type=self.clock_type)
         # The common case without Time.__init__'s conversions (called many times per tick).

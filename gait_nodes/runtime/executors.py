@@ -45,12 +45,6 @@ def _deliver(subscription, msg) -> None:
     subscription.callback(msg)
 
 
-def _serialize_published(msg) -> bytes:
-    """CDR of a message published under inproc's rule (never edited again): it may reuse work."""
-    serialize = getattr(type(msg), 'serialize_published', None)
-    return serialize(msg) if serialize is not None else msg.serialize()
-
-
 class SingleThreadedExecutor:
     """Runs the callbacks of its nodes one at a time, in the calling thread."""
 
@@ -62,6 +56,8 @@ class SingleThreadedExecutor:
         self._timers_key = None
         self._nodes_version = 0
         self._rclpy_executor = None
+        #: Message class -> its serialize_published (or serialize), for raw subscriptions.
+        self._serializers: dict = {}
         if self.context.runtime == 'rclpy':
             from rclpy.executors import SingleThreadedExecutor as RclpyExecutor
 
@@ -169,6 +165,7 @@ class SingleThreadedExecutor:
         transport = self.context.transport
         queue = transport.queue
         popleft = queue.popleft
+        serializers = self._serializers
         # A message goes to all its subscriptions in a row; raw ones share its one serialization.
         while queue:
             msg, subscriptions = popleft()
@@ -179,8 +176,39 @@ class SingleThreadedExecutor:
                     subscription.callback(msg)
                     continue
                 if data is None:
-                    data = msg if isinstance(msg, bytes) else _serialize_published(msg)
+                    if isinstance(msg, bytes):
+                        data = msg
+                    else:
+                        # A message published under inproc's rule (never edited again) is
+                        # serialized by serialize_published, which may reuse earlier work.
+                        serialize = serializers.get(msg.__class__)
+                        if serialize is None:
+                            serialize = serializers[msg.__class__] = getattr(
+                                msg.__class__, 'serialize_published', msg.__class__.serialize)
+                        data = serialize(msg)
                 subscription.callback(data)
+
+    def _spin_inproc(self, end_ns: int | None) -> None:
+        """``_inproc_step`` until it returns False or the context stops (spin and spin_for).
+
+        The same steps, in one loop: this runs every timer callback of the graph.
+        """
+        context = self.context
+        transport = context.transport
+        queue = transport.queue
+        ok, shutdown_requested = context.ok, context.shutdown_requested.is_set
+        next_timer, drain = self._next_timer, self._drain
+        while ok() and not shutdown_requested():
+            if queue:
+                drain()
+                continue
+            timer = next_timer()
+            if timer is None or (end_ns is not None and timer.next_call_ns > end_ns):
+                return
+            if timer.next_call_ns > transport.now_ns:
+                transport.now_ns = timer.next_call_ns
+            timer.call()
+            drain()
 
     # --- loops ------------------------------------------------------------------------------
 
@@ -191,8 +219,7 @@ class SingleThreadedExecutor:
             return
         if self.inproc:
             with _fewer_collections():
-                while self._running() and self._inproc_step(None):
-                    pass
+                self._spin_inproc(None)
             return
         while self._running():
             self._dds_step(None)
@@ -206,8 +233,7 @@ class SingleThreadedExecutor:
             transport = self.context.transport
             end_ns = transport.now_ns + int(round(duration_sec * NS_PER_S))
             with _fewer_collections():
-                while self._running() and self._inproc_step(end_ns):
-                    pass
+                self._spin_inproc(end_ns)
             if self._running():
                 transport.now_ns = max(transport.now_ns, end_ns)
             return

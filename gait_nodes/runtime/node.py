@@ -249,9 +249,11 @@ class Node:
         """The node's logger."""
         return self._logger
 
-    @_rclpy_forward
     def get_clock(self) -> Clock:
         """The node's clock (ROS time: simulated under inproc or use_sim_time)."""
+        # _rclpy_forward spelled out: nodes ask for their clock many times per tick.
+        if self._rclpy_node is not None:
+            return self._rclpy_node.get_clock()
         return self._clock
 
     @property
