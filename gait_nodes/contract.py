@@ -655,8 +655,8 @@ class ZmpReferenceReader:
         offset = next(compress(count(), map(operator.is_, repeat(poses[0]), previous)), None)
         if offset is not None:
             kept = previous[offset:]
-            # (all() over map(is_) first: the usual case, every kept pose the same object, at
-            # a third of the instructions of counting the run off as it goes)
+            # (all() over map(is_) first: the usual case, every kept pose the same object,
+            # without the new int per pose of counting the run off as it goes)
             run = min(len(poses), len(kept)) if all(map(operator.is_, poses, kept)) \
                 else next(compress(count(), map(operator.is_not, poses, kept)))
         if run == 0:
