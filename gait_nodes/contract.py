@@ -54,6 +54,8 @@ COM_JOINT_NAME = 'com'
 #: Two foot transforms closer than this [m, rad] are "the same place".
 SAME_PLACE_TOLERANCE = 1e-9
 _NS_PER_S = 1_000_000_000
+#: New poses a ZmpReferenceReader decodes one by one in floats (more: as arrays).
+_FEW_POSES = 16
 
 
 class ContractError(GaitNodesError):
@@ -322,15 +324,16 @@ class ZmpReference:
         object.__setattr__(self, 'zmp_in_world', zmp)
         object.__setattr__(self, 'plane_heights_m', heights)
 
-    def followed_by(self, shift: int, stamps_ns: np.ndarray, zmp_in_world: np.ndarray,
-                    plane_heights_m: np.ndarray | None = None) -> ZmpReference:
+    def followed_by(self, shift: int, stamps_ns: Sequence[int], zmp_in_world,
+                    plane_heights_m=None) -> ZmpReference:
         """This reference from its sample ``shift`` on, followed by new samples (a window slid).
 
         Equal to ``ZmpReference`` of the concatenated arrays (this reference's plane heights,
-        zeros for new samples without heights), but only the new samples and their junction
-        are checked (the kept ones were checked when this reference was made), and the arrays
-        are read-only views of a buffer the successive windows fill (:class:`_WindowBuffer`):
-        a few samples written per window, not the whole window copied. The result remembers
+        zeros for new samples without heights; the same checks in the same order, hence the
+        same :class:`ContractError`), but only the new samples and their junction are checked
+        (the kept ones were checked when this reference was made), and the arrays are
+        read-only views of a buffer the successive windows fill (:class:`_WindowBuffer`): a
+        few samples written per window, not the whole window copied. The result remembers
         where it came from, so that :meth:`ZmpReferenceMessages.to_msg` reuses the kept
         samples' poses without comparing them.
 
@@ -341,41 +344,36 @@ class ZmpReference:
             plane_heights_m: (M,) their plane heights [m]; None: zeros.
         """
         count = len(self.stamps_ns)
-        stamps = [int(stamp) for stamp in np.asarray(stamps_ns, dtype=np.int64).tolist()]
-        zmp = np.asarray(zmp_in_world, dtype=float)
-        heights = (np.zeros(len(stamps)) if plane_heights_m is None
-                   else np.asarray(plane_heights_m, dtype=float))
+        stamps, flat, heights = _sample_lists(stamps_ns, zmp_in_world, plane_heights_m)
         if not 0 <= shift <= count or (shift == count and not stamps):
             raise ContractError(f'a ZMP reference of {count} samples slid by {shift} with '
                                 f'{len(stamps)} new samples')
-        if zmp.shape != (len(stamps), 2) or heights.shape != (len(stamps),):
-            raise ContractError(f'new ZMP reference samples of shapes {zmp.shape} and '
-                                f'{heights.shape} for {len(stamps)} stamps')
-        previous = [int(self.stamps_ns[-1])] if shift < count else []
-        joined = previous + stamps
-        if any(b <= a for a, b in zip(joined, joined[1:], strict=False)):
-            raise ContractError('ZMP reference stamps are not strictly increasing')
-        if not all(map(math.isfinite, zmp.ravel().tolist())):
+        if not all(map(math.isfinite, flat)):
             raise ContractError('the ZMP reference holds a NaN or infinite value')
-        if not all(map(math.isfinite, heights.tolist())):
+        before = int(self.stamps_ns[-1]) if shift < count else stamps[0] - 1
+        for stamp in stamps:
+            if stamp <= before:
+                raise ContractError('ZMP reference stamps are not strictly increasing')
+            before = stamp
+        if not all(map(math.isfinite, heights)):
             raise ContractError('the ZMP reference plane heights holds a NaN or infinite value')
         window = self.__dict__.get('_window')
         if window is None or not window[0].can_append(window[2], len(stamps)):
             buffer = _WindowBuffer(4 * (count - shift + len(stamps)))
-            buffer.append(self.stamps_ns[shift:], self.zmp_in_world[shift:],
-                          self.plane_heights_m[shift:])
+            buffer.append_arrays(self.stamps_ns[shift:], self.zmp_in_world[shift:],
+                                 self.plane_heights_m[shift:])
             start = 0
         else:
             buffer, start, _ = window
             start += shift
-        stop = buffer.append(stamps, zmp, heights)
+        stop = buffer.append(stamps, flat, heights)
         result = object.__new__(ZmpReference)
-        object.__setattr__(result, 'stamps_ns', buffer.view(buffer.stamps_ns, start, stop))
-        object.__setattr__(result, 'zmp_in_world', buffer.view(buffer.zmp_in_world, start, stop))
-        object.__setattr__(result, 'plane_heights_m',
-                           buffer.view(buffer.plane_heights_m, start, stop))
-        object.__setattr__(result, '_window', (buffer, start, stop))
-        object.__setattr__(result, '_slid_from', (weakref.ref(self), shift))
+        # (frozen: the fields set in the instance's dict, as object.__setattr__ would)
+        result.__dict__.update(stamps_ns=buffer.stamps_read_only[start:stop],
+                               zmp_in_world=buffer.zmp_read_only[start:stop],
+                               plane_heights_m=buffer.heights_read_only[start:stop],
+                               _window=(buffer, start, stop),
+                               _slid_from=(weakref.ref(self), shift))
         return result
 
     @property
@@ -396,30 +394,81 @@ class ZmpReference:
         return result
 
 
+def _sample_lists(stamps_ns, zmp_in_world, plane_heights_m
+                  ) -> tuple[list[int], list[float], list[float]]:
+    """New ZMP reference samples as lists: stamps [ns], flat ``x0, y0, x1, ...`` [m], heights.
+
+    A list of Python ints with a list of (x, y) tuples of Python floats (the planner's slid
+    windows, the reader's new poses) is taken as it is; anything else goes through numpy
+    (``np.asarray`` with the dtypes of :class:`ZmpReference`), which gives the same values
+    for such lists. Shapes are checked (:class:`ContractError`).
+    """
+    flat = None
+    if type(stamps_ns) is list and type(zmp_in_world) is list \
+            and len(zmp_in_world) == len(stamps_ns):
+        stamps, flat = stamps_ns, []
+        for stamp, row in zip(stamps_ns, zmp_in_world, strict=True):
+            if type(stamp) is int and type(row) is tuple and len(row) == 2 \
+                    and type(row[0]) is float and type(row[1]) is float:
+                flat += row
+            else:
+                flat = None
+                break
+    if flat is None:
+        stamps = np.asarray(stamps_ns, dtype=np.int64).tolist()
+        zmp = np.asarray(zmp_in_world, dtype=float)
+        if zmp.shape != (len(stamps), 2):
+            raise ContractError(f'new ZMP reference samples of shape {zmp.shape} for '
+                                f'{len(stamps)} stamps')
+        flat = zmp.ravel().tolist()
+    if plane_heights_m is None:
+        heights = [0.0] * len(stamps)
+    elif type(plane_heights_m) is list and len(plane_heights_m) == len(stamps) \
+            and all(type(value) is float for value in plane_heights_m):
+        heights = plane_heights_m
+    else:
+        values = np.asarray(plane_heights_m, dtype=float)
+        if values.shape != (len(stamps),):
+            raise ContractError(f'new ZMP reference plane heights of shape {values.shape} for '
+                                f'{len(stamps)} stamps')
+        heights = values.tolist()
+    return stamps, flat, heights
+
+
 class _WindowBuffer:
     """Storage of successive windows of a ZMP reference (:meth:`ZmpReference.followed_by`).
 
-    Each window is a read-only view of a stretch of these arrays; new samples are written past
-    the last window's end, which no earlier window covers, so no window ever changes. A window
-    that does not end where the filled part ends (a second slide of the same window) or does
-    not fit starts a new buffer.
+    Each window is a slice of the read-only views of these arrays; new samples are written
+    past the last window's end, which no earlier window covers, so no window ever changes. A
+    window that does not end where the filled part ends (a second slide of the same window) or
+    does not fit starts a new buffer.
 
     Args:
         size: Samples it holds.
     """
 
+    #: Samples written one element at a time (numpy's slice assignment from a list costs
+    #: about as much as 20 element assignments).
+    _ELEMENTWISE = 8
+
     def __init__(self, size: int):
         self.stamps_ns = np.empty(size, dtype=np.int64)
         self.zmp_in_world = np.empty((size, 2))
         self.plane_heights_m = np.empty(size)
+        self._zmp_flat = self.zmp_in_world.reshape(-1)  # (a view: x0, y0, x1, y1, ...)
+        self.stamps_read_only, self.zmp_read_only, self.heights_read_only = (
+            self.stamps_ns.view(), self.zmp_in_world.view(), self.plane_heights_m.view())
+        for view in (self.stamps_read_only, self.zmp_read_only, self.heights_read_only):
+            view.setflags(write=False)  # (and so is every slice of them)
         self.end = 0  # samples written
 
     def can_append(self, stop: int, count: int) -> bool:
         """Whether ``count`` samples fit after a window ending at ``stop`` (the filled end)."""
         return stop == self.end and self.end + count <= len(self.stamps_ns)
 
-    def append(self, stamps_ns, zmp_in_world, plane_heights_m) -> int:
-        """Write samples at the filled end; the new end."""
+    def append_arrays(self, stamps_ns: np.ndarray, zmp_in_world: np.ndarray,
+                      plane_heights_m: np.ndarray) -> int:
+        """Write (M,), (M, 2), (M,) arrays at the filled end; the new end."""
         start, stop = self.end, self.end + len(stamps_ns)
         self.stamps_ns[start:stop] = stamps_ns
         self.zmp_in_world[start:stop] = zmp_in_world
@@ -427,17 +476,32 @@ class _WindowBuffer:
         self.end = stop
         return stop
 
-    @staticmethod
-    def view(array: np.ndarray, start: int, stop: int) -> np.ndarray:
-        """Read-only ``array[start:stop]``."""
-        result = array[start:stop]
-        result.setflags(write=False)
-        return result
+    def append(self, stamps_ns: list[int], zmp_flat: list[float],
+               plane_heights_m: list[float]) -> int:
+        """Write samples given as lists (:func:`_sample_lists`) at the filled end; the new end."""
+        start, stop = self.end, self.end + len(stamps_ns)
+        if len(stamps_ns) <= self._ELEMENTWISE:
+            stamps, zmp, heights = self.stamps_ns, self._zmp_flat, self.plane_heights_m
+            k = start
+            for stamp, height in zip(stamps_ns, plane_heights_m, strict=True):
+                stamps[k] = stamp
+                heights[k] = height
+                k += 1
+            k = 2 * start
+            for value in zmp_flat:
+                zmp[k] = value
+                k += 1
+        else:
+            self.stamps_ns[start:stop] = stamps_ns
+            self._zmp_flat[2 * start:2 * stop] = zmp_flat
+            self.plane_heights_m[start:stop] = plane_heights_m
+        self.end = stop
+        return stop
 
 
 def zmp_reference_to_msg(reference: ZmpReference):
     """nav_msgs/Path for ``reference`` (layout in the module docstring): a new message."""
-    return ZmpReferenceMessages().to_msg(reference)
+    return ZmpReferenceMessages(share_constants=False).to_msg(reference)
 
 
 class ZmpReferenceMessages:
@@ -445,12 +509,19 @@ class ZmpReferenceMessages:
 
     Consecutive references of a planner share most samples: a pose equal to the previous
     message's at the same stamp (same point, bit for bit) is that same PoseStamped object, not a
-    copy, which saves building hundreds of small objects per message. For a publisher that
-    never edits a message it built (subscribers treat received messages as read-only, the ROS 2
-    intra-process rule); :func:`zmp_reference_to_msg` gives independent messages.
+    copy, which saves building hundreds of small objects per message. The poses also share one
+    identity Quaternion, and the Path's header is its first pose's (the same values). For a
+    publisher that never edits a message it built (subscribers treat received messages as
+    read-only, the ROS 2 intra-process rule); :func:`zmp_reference_to_msg` gives independent
+    messages.
+
+    Args:
+        share_constants: Share the identity orientation and the header as above (False: every
+            part of a message is its own object; poses are still shared between messages).
     """
 
-    def __init__(self):
+    def __init__(self, share_constants: bool = True):
+        self._share = share_constants
         self._constructors = (None,)
         self._reference: ZmpReference | None = None  # the last message's reference
         self._poses: list = []  # and its poses
@@ -463,6 +534,7 @@ class ZmpReferenceMessages:
                 'geometry_msgs/msg/PoseStamped', 'std_msgs/msg/Header',
                 'builtin_interfaces/msg/Time', 'geometry_msgs/msg/Pose',
                 'geometry_msgs/msg/Point', 'geometry_msgs/msg/Quaternion')))
+            self._identity = self._constructors[-1](0.0, 0.0, 0.0, 1.0)
             self._reference = None
         _, pose_stamped, header, time, pose, point, quaternion = self._constructors
         stamps = reference.stamps_ns
@@ -481,27 +553,36 @@ class ZmpReferenceMessages:
             reused = np.zeros(len(stamps), dtype=bool)
             offset = int(np.searchsorted(last.stamps_ns, stamps[0]))
             if offset < len(last.stamps_ns):
-                count = min(len(last.stamps_ns) - offset, len(stamps))
-                window = slice(offset, offset + count)
-                reused[:count] = ((last.stamps_ns[window] == stamps[:count])
-                                  & (last_bits[window].view(np.int64)
-                                     == bits[:count].view(np.int64)).all(axis=1))
+                overlap = min(len(last.stamps_ns) - offset, len(stamps))
+                window = slice(offset, offset + overlap)
+                reused[:overlap] = ((last.stamps_ns[window] == stamps[:overlap])
+                                    & (last_bits[window].view(np.int64)
+                                       == bits[:overlap].view(np.int64)).all(axis=1))
             # The leading run of reused samples is one slice of the previous list.
             run = len(reused) if reused.all() else int(np.argmin(reused))
             poses = self._poses[offset:offset + run]
+            reused = reused.tolist()
         else:
             poses = []
-        zmp, heights = reference.zmp_in_world, reference.plane_heights_m
-        for k in range(len(poses), len(stamps)):
-            if reused is not None and reused[k]:
-                poses.append(self._poses[offset + k])
-                continue
-            x, y = zmp[k].tolist()
-            poses.append(pose_stamped(
-                header(time(*divmod(int(stamps[k]), _NS_PER_S)), WORLD_FRAME),
-                pose(point(x, y, float(heights[k])), quaternion(0.0, 0.0, 0.0, 1.0))))
+        first = len(poses)
+        if first < len(stamps):  # the new poses, from the samples as Python ints and floats
+            for k, stamp, (x, y), z in zip(
+                    count(first), stamps[first:].tolist(),
+                    reference.zmp_in_world[first:].tolist(),
+                    reference.plane_heights_m[first:].tolist(), strict=False):
+                if reused is not None and reused[k]:
+                    poses.append(self._poses[offset + k])
+                    continue
+                poses.append(pose_stamped(
+                    header(time(*divmod(stamp, _NS_PER_S)), WORLD_FRAME),
+                    pose(point(x, y, z), self._identity if self._share
+                         else quaternion(0.0, 0.0, 0.0, 1.0))))
+        if self._share:
+            top = poses[0].header  # (the Path's stamp is its first sample's)
+        else:
+            top = header(time(*divmod(int(stamps[0]), _NS_PER_S)), WORLD_FRAME)
         self._reference, self._poses = reference, poses
-        return path(header(time(*divmod(int(stamps[0]), _NS_PER_S)), WORLD_FRAME), poses)
+        return path(top, poses)
 
 
 def zmp_reference_from_msg(msg) -> ZmpReference:
@@ -531,6 +612,21 @@ def _pose_samples(poses) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
             np.array([p.z for p in points], dtype=float))
 
 
+def _pose_lists(poses) -> tuple[list[int], list[tuple[float, float]], list[float]]:
+    """:func:`_pose_samples` as lists (the same values, the same frame check), for a few poses."""
+    stamps, zmp, heights = [], [], []
+    for pose in poses:
+        header = pose.header
+        if header.frame_id not in ('', WORLD_FRAME):
+            raise ContractError(f'a /gait/zmp_reference pose is in frame {header.frame_id!r}; '
+                                f'the contract frame is {WORLD_FRAME!r}')
+        stamps.append(header.stamp.sec * _NS_PER_S + header.stamp.nanosec)
+        point = pose.pose.position
+        zmp.append((point.x, point.y))
+        heights.append(point.z)
+    return stamps, zmp, heights
+
+
 class ZmpReferenceReader:
     """Decodes the successive /gait/zmp_reference messages of a subscription, reusing work.
 
@@ -539,12 +635,13 @@ class ZmpReferenceReader:
     objects (``is``) of the previous good message's, as :class:`ZmpReferenceMessages` publishes
     them, costs only the decoding of its new tail: those poses were read, checked and found
     good last time. Relies on the rule that a published message is not edited (received
-    messages are read-only, as under rclpy's intra-process communication); a message
-    deserialized from the wire never shares poses, so it is decoded whole.
+    messages are read-only, as under rclpy's intra-process communication): the previous
+    message's pose list is kept, not copied. A message deserialized from the wire never shares
+    poses, so it is decoded whole.
     """
 
     def __init__(self):
-        self._poses: list = []
+        self._poses: Sequence = ()
         self._reference: ZmpReference | None = None
 
     def read(self, msg) -> ZmpReference:
@@ -557,14 +654,20 @@ class ZmpReferenceReader:
         # Where the first pose was in the previous message, then how far the two stay the same.
         offset = next(compress(count(), map(operator.is_, repeat(poses[0]), previous)), None)
         if offset is not None:
-            same = poses[:len(previous) - offset]
-            run = next(compress(count(), map(operator.is_not, same, previous[offset:])),
-                       len(same))
+            kept = previous[offset:]
+            # (all() over map(is_) first: the usual case, every kept pose the same object,
+            # without the new int per pose of counting the run off as it goes)
+            run = min(len(poses), len(kept)) if all(map(operator.is_, poses, kept)) \
+                else next(compress(count(), map(operator.is_not, poses, kept)))
         if run == 0:
             reference = zmp_reference_from_msg(msg)
+        elif offset + run == len(previous) and len(poses) - run <= _FEW_POSES:
+            # The usual slid window: the known samples from ``offset`` on, then a few new
+            # ones, checked as ZmpReference would check them (followed_by), in plain floats.
+            reference = self._reference.followed_by(offset, *_pose_lists(poses[run:]))
         else:
             reference = self._extend(self._reference, offset, run, poses[run:])
-        self._poses, self._reference = list(poses), reference
+        self._poses, self._reference = poses, reference
         return reference
 
     @staticmethod
@@ -665,6 +768,12 @@ class ComReferenceMessages:
     ``com_reference_to_msg([ComState(...)])`` field by field, but without the ComState's arrays
     and with the message constructors looked up once (a node lives in one runtime). A
     non-finite value goes through :class:`ComState`, which raises its :class:`ContractError`.
+
+    Parts that do not change are built once and shared by the messages: the joint names, the
+    zero ``time_from_start``, the zero angular acceleration (and angular velocity at a zero yaw
+    rate), the rotation while the yaw stays the same (bit for bit: -0.0 is another yaw). For
+    a publisher that never edits a message it built (the inproc and rclpy intra-process rule;
+    a DDS subscriber gets its own copy), as :class:`ZmpReferenceMessages`.
     """
 
     def __init__(self):
@@ -674,6 +783,12 @@ class ComReferenceMessages:
                  'geometry_msgs/msg/Transform', 'geometry_msgs/msg/Twist',
                  'geometry_msgs/msg/Vector3', 'geometry_msgs/msg/Quaternion')
         self._constructors = tuple(map(get_constructor, names))
+        _, _, _, _, duration, _, _, vector, _ = self._constructors
+        self._joint_names = [COM_JOINT_NAME]
+        self._zero_duration = duration(0, 0)
+        self._zero = vector(0.0, 0.0, 0.0)
+        self._yaw = (math.nan, 0.0)  # (yaw [rad], its sign) of self._rotation
+        self._rotation = None
 
     def to_msg(self, stamp_ns: int, position_in_world: Sequence[float],
                velocity_in_world: Sequence[float], acceleration_in_world: Sequence[float],
@@ -693,17 +808,22 @@ class ComReferenceMessages:
             return com_reference_to_msg([ComState(
                 stamp_ns, position_in_world, velocity_in_world, acceleration_in_world, yaw_rad,
                 yaw_rate_rad_s)])
-        trajectory, point, header, time, duration, transform, twist, vector, quaternion = \
+        trajectory, point, header, time, _, transform, twist, vector, quaternion = \
             self._constructors
         px, py, pz, vx, vy, vz, ax, ay, az = map(float, values)
-        yaw = float(yaw_rad)
+        yaw = (float(yaw_rad), math.copysign(1.0, yaw_rad))
+        if yaw != self._yaw:
+            self._yaw = yaw
+            self._rotation = quaternion(0.0, 0.0, math.sin(0.5 * yaw[0]), math.cos(0.5 * yaw[0]))
+        rate = float(yaw_rate_rad_s)
+        zero = self._zero
         return trajectory(
-            header(time(*divmod(int(stamp_ns), _NS_PER_S)), WORLD_FRAME), [COM_JOINT_NAME],
-            [point([transform(vector(px, py, pz), quaternion(0.0, 0.0, math.sin(0.5 * yaw),
-                                                               math.cos(0.5 * yaw)))],
-                   [twist(vector(vx, vy, vz), vector(0.0, 0.0, float(yaw_rate_rad_s)))],
-                   [twist(vector(ax, ay, az), vector(0.0, 0.0, 0.0))],
-                   duration(0, 0))])
+            header(time(*divmod(int(stamp_ns), _NS_PER_S)), WORLD_FRAME), self._joint_names,
+            [point([transform(vector(px, py, pz), self._rotation)],
+                   [twist(vector(vx, vy, vz), zero if rate == 0.0 and math.copysign(1.0, rate) > 0
+                          else vector(0.0, 0.0, rate))],
+                   [twist(vector(ax, ay, az), zero)],
+                   self._zero_duration)])
 
 
 def com_reference_from_msg(msg) -> list[ComState]:

@@ -375,3 +375,90 @@ def test_zmp_reference_followed_by_checks_the_new_samples():
     with pytest.raises(ContractError):
         reference.followed_by(4, [30], [[0.0, 0.0]])
     assert reference.followed_by(3, [20], [[1.0, 2.0]]).stamps_ns.tolist() == [20]
+
+
+_SAMPLE_VALUES = st.sampled_from([0.0, -0.0, 1.5, -2.25, 1e-310, 1e308, math.nan, math.inf])
+
+
+@settings(max_examples=80, deadline=None)
+@given(st.integers(0, 3), st.lists(st.tuples(st.integers(-3, 8), _SAMPLE_VALUES, _SAMPLE_VALUES,
+                                             _SAMPLE_VALUES), max_size=5),
+       st.booleans(), st.sampled_from(['tuples', 'lists', 'numpy_floats', 'ints']))
+def test_zmp_reference_followed_by_takes_lists_as_it_takes_arrays(shift, new, heights, form):
+    """New samples as lists (the planner's, the reader's) or as arrays: the same result.
+
+    The same reference bit for bit, or the same ContractError.
+    """
+    base = ZmpReference([0, 10, 20], [[0.5, -0.5], [0.0, -0.0], [1.0, 2.0]], [0.0, 0.1, -0.0])
+    stamps = [20 + gap for gap, _, _, _ in new]
+    stamps = [sum(stamps[:k + 1]) - 20 * k for k in range(len(stamps))]  # gaps may be <= 0
+    zmp = [(x, y) for _, x, y, _ in new]
+    plane = [z for _, _, _, z in new] if heights else None
+    if form == 'lists':
+        zmp = [list(row) for row in zmp]
+    elif form == 'numpy_floats':
+        zmp = [tuple(np.float64(v) for v in row) for row in zmp]
+    elif form == 'ints':
+        zmp = [tuple(int(v) if math.isfinite(v) else v for v in row) for row in zmp]
+
+    def slid(stamps_ns, zmp_in_world, plane_heights_m):
+        try:
+            return _bits(base.followed_by(shift, stamps_ns, zmp_in_world, plane_heights_m))
+        except ContractError as exc:
+            return str(exc)
+
+    as_arrays = slid(np.array(stamps, dtype=np.int64),
+                     np.array(zmp, dtype=float).reshape(len(zmp), 2),
+                     None if plane is None else np.array(plane, dtype=float))
+    assert slid(stamps, zmp, plane) == as_arrays
+    if isinstance(as_arrays, tuple):  # and as the reference of the concatenated arrays
+        whole = ZmpReference(
+            np.concatenate((base.stamps_ns[shift:], np.array(stamps, dtype=np.int64))),
+            np.concatenate((base.zmp_in_world[shift:],
+                            np.array(zmp, dtype=float).reshape(len(zmp), 2))),
+            np.concatenate((base.plane_heights_m[shift:],
+                            np.zeros(len(stamps)) if plane is None else plane)))
+        assert as_arrays == _bits(whole)
+
+
+def test_zmp_reference_followed_by_refuses_bad_shapes_given_as_lists():
+    reference = ZmpReference([0, 10], np.zeros((2, 2)))
+    for stamps, zmp, heights in [([20], [(0.0, 0.0, 0.0)], None), ([20], [(0.0,)], None),
+                                 ([20, 30], [(0.0, 0.0)], None), ([20], [(0.0, 0.0)], [0.0, 1.0]),
+                                 ([20], [(0.0, 0.0)], [[0.0]])]:
+        with pytest.raises(ContractError, match='shape'):
+            reference.followed_by(1, stamps, zmp, heights)
+
+
+def test_zmp_reference_to_msg_parts_are_independent_within_a_message():
+    """The publisher's builder shares the identity orientation; the converter does not."""
+    reference = ZmpReference(np.arange(3) * 10_000_000, np.ones((3, 2)))
+    msg = contract.zmp_reference_to_msg(reference)
+    assert msg.header is not msg.poses[0].header
+    msg.poses[0].pose.orientation.w = 0.5
+    assert msg.poses[1].pose.orientation.w == 1.0
+    shared = contract.ZmpReferenceMessages().to_msg(reference)
+    assert shared.poses[0].pose.orientation is shared.poses[2].pose.orientation
+    assert serialize_message(shared) == serialize_message(
+        contract.zmp_reference_to_msg(reference))
+
+
+def test_com_reference_messages_share_constants_without_changing_a_byte():
+    """Shared parts (repeated yaws, signed zeros): every message is com_reference_to_msg's.
+
+    And stays so after the later ones were built.
+    """
+    builder = contract.ComReferenceMessages()
+    yaws = [0.0, 0.0, -0.0, -0.0, 0.0, 0.3, 0.3, -0.3, 0.0]
+    rates = [0.0, -0.0, -0.0, 0.0, 1.0, 1.0, 0.0, -0.0, 0.0]
+    built, expected = [], []
+    for k, (yaw, rate) in enumerate(zip(yaws, rates, strict=True)):
+        position, velocity, acceleration = (0.1 * k, 0.2, 0.7), (0.0, -0.0, 0.0), (k, 0.0, 0.0)
+        built.append(builder.to_msg(k * 5_000_000, position, velocity, acceleration, yaw, rate))
+        expected.append(serialize_message(contract.com_reference_to_msg([ComState(
+            k * 5_000_000, position, velocity, acceleration, yaw, rate)])))
+        assert serialize_message(built[-1]) == expected[-1]
+    assert [serialize_message(msg) for msg in built] == expected
+    assert built[0].points[0].transforms[0].rotation is built[1].points[0].transforms[0].rotation
+    assert built[1].points[0].transforms[0].rotation \
+        is not built[2].points[0].transforms[0].rotation  # -0.0: another quaternion
