@@ -550,9 +550,12 @@ def test_chunk_thread_error_is_raised_on_the_callers_thread_and_nothing_hangs():
     schema = writer.register_schema(name='s', encoding='ros2msg', data=b'')
     channel = writer.register_channel(topic='/t', message_encoding='cdr', schema_id=schema)
     chunk_thread = ChunkThread.attach(writer, stream)
-    for k in range(50):
-        writer.add_message(channel_id=channel, log_time=k, data=os.urandom(200), publish_time=k)
-    chunk_thread.finish_chunk()
+    # The thread's error surfaces at the first call made after it happened: which one that is
+    # depends on the thread's timing, but stop() waits for the thread, so by then at the latest.
     with pytest.raises(OSError, match='No space'):
+        for k in range(50):
+            writer.add_message(channel_id=channel, log_time=k, data=os.urandom(200),
+                               publish_time=k)
+        chunk_thread.finish_chunk()
         chunk_thread.stop()
     chunk_thread.stop()  # raised once; the thread is gone
