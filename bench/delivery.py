@@ -1,10 +1,10 @@
 #!/usr/bin/env python3
 """The inproc runtime's own cost per 5 ms tick of the gait graph: executor, delivery, recorder.
 
-    python bench/delivery.py [--bag /work/baseline/robosimian_crawl] [--duration 20]
-                             [--runs 3] [--profile]
+    python bench/delivery.py [--bag DIR] [--duration 20] [--runs 3] [--profile]
 
-Replays a recorded bag of the graph (``python -m gait_nodes run --record DIR``) through the
+Replays a recorded bag of the graph (``python -m gait_nodes run --record DIR``; without
+``--bag``, the robosimian_crawl scenario is recorded first with ``--fast``) through the
 ``inproc`` runtime with the graph's shape but none of its work: one stand-in node per graph node,
 with that node's timers (periods and creation order), publishers and subscriptions (callbacks
 that do nothing), each timer publishing the bag's messages of its node's topics logged at that
@@ -29,6 +29,7 @@ import collections
 import gc
 import shutil
 import statistics
+import subprocess
 import sys
 import tempfile
 import time
@@ -180,15 +181,22 @@ def serialization_cpu(recorded: dict, duration_s: float) -> float:
 def main() -> int:
     """Run the replays and print the figures."""
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
-    parser.add_argument('--bag', default='/work/baseline/robosimian_crawl')
+    parser.add_argument('--bag', default=None,
+                        help='a bag of the graph (default: robosimian_crawl recorded first)')
     parser.add_argument('--duration', type=float, default=20.0)
     parser.add_argument('--runs', type=int, default=3)
     parser.add_argument('--profile', action='store_true')
     options = parser.parse_args()
-    recorded = read_bag(Path(options.bag))
     work = Path(tempfile.mkdtemp(prefix='bench_delivery_'))
     results = []
     try:
+        if options.bag is None:
+            options.bag = str(work / 'graph')
+            subprocess.run([sys.executable, '-m', 'gait_nodes', 'run', '--fast', '--scenario',
+                            'robosimian_crawl', '--duration', str(options.duration),
+                            '--record', options.bag, '--no-plot'],
+                           check=True, stdout=subprocess.DEVNULL, cwd=REPO)
+        recorded = read_bag(Path(options.bag))
         for run in range(options.runs):
             output = work / f'bag{run}'
             results.append(replay(recorded, options.duration, output, options.profile))

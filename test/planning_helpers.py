@@ -72,3 +72,33 @@ def zmp_depths(plan, times_s, zmp):
 def zmp_margins(plan, times_s, zmp, foot_radius_m):
     """Margin of each ZMP sample inside the support polygon (hull of the stance feet's discs)."""
     return zmp_depths(plan, times_s, zmp) + foot_radius_m
+
+
+def check_slid_windows(planner, commands: dict, origin_ns: int, duration_ns: int) -> int:
+    """Drive ``planner`` as the footstep_planner node does and compare each slid ZMP window.
+
+    Every 20 ms tick (mostly one on; now and then 3 ticks, or 5 ms off the sample lattice) the
+    plan is advanced and pruned, the velocities of ``commands`` ({time [s]: Twist2D}) are set,
+    and the window the planner slid from its last one must be, bit for bit, the window computed
+    whole (without a last window). Returns how many windows were compared.
+    """
+    period_ns = 20_000_000
+    now_ns, checked = origin_ns, 0
+    while now_ns < origin_ns + duration_ns:
+        now_s = (now_ns - origin_ns) * 1e-9
+        for at_s, twist in commands.items():
+            if at_s <= now_s < at_s + 0.02:
+                planner.set_velocity(twist, now_s)
+        planner.advance(now_s + 2.0 + planner.params.step_period_s)
+        planner.prune(now_s)
+        reference = planner.zmp_reference(now_ns, origin_ns, 2.0, 0.01)
+        last = planner._last_zmp_reference
+        planner._last_zmp_reference = None
+        whole = planner.zmp_reference(now_ns, origin_ns, 2.0, 0.01)
+        planner._last_zmp_reference = last  # the next window slides from the slid one
+        for name in ('stamps_ns', 'zmp_in_world', 'plane_heights_m'):
+            np.testing.assert_array_equal(getattr(reference, name).view(np.int64),
+                                          getattr(whole, name).view(np.int64))
+        checked += 1
+        now_ns += period_ns * (3 if checked % 37 == 0 else 1) + (5_000_000 * (checked % 53 == 0))
+    return checked

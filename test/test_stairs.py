@@ -13,6 +13,7 @@ import pinocchio as pin
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from planning_helpers import check_slid_windows
 
 from gait_nodes.com.support_height import SupportHeight
 from gait_nodes.errors import ParameterError, TerrainError
@@ -393,23 +394,6 @@ def test_the_sliding_zmp_reference_is_the_whole_computation_to_the_bit(staircase
     from gait_nodes.planning.footsteps import GaitPlanner
 
     planner = GaitPlanner(BIPED, biped_params(), terrain=staircase)
-    origin_ns, period_ns = 7_000_000_000, 20_000_000
     commands = {0.1: Twist2D(0.1), 4.0: Twist2D(0.05, 0.0, 0.1), 9.0: Twist2D()}
-    now_ns, checked = origin_ns, 0
-    while now_ns < origin_ns + 14_000_000_000:
-        now_s = (now_ns - origin_ns) * 1e-9
-        for at_s, twist in commands.items():
-            if at_s <= now_s < at_s + 0.02:
-                planner.set_velocity(twist, now_s)
-        planner.advance(now_s + 2.0 + planner.params.step_period_s)
-        planner.prune(now_s)
-        reference = planner.zmp_reference(now_ns, origin_ns, 2.0, 0.01)
-        planner._last_zmp_reference = None
-        whole = planner.zmp_reference(now_ns, origin_ns, 2.0, 0.01)
-        for name in ('stamps_ns', 'zmp_in_world', 'plane_heights_m'):
-            np.testing.assert_array_equal(getattr(reference, name).view(np.int64),
-                                          getattr(whole, name).view(np.int64))
-        checked += 1
-        # Mostly one tick on; now and then 3 ticks, or 5 ms off the sample lattice.
-        now_ns += period_ns * (3 if checked % 37 == 0 else 1) + (5_000_000 * (checked % 53 == 0))
+    checked = check_slid_windows(planner, commands, 7_000_000_000, 14_000_000_000)
     assert checked > 500

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from planning_helpers import robot, stance_at, zmp_depths, zmp_margins
+from planning_helpers import check_slid_windows, robot, stance_at, zmp_depths, zmp_margins
 
 from gait_nodes.planning.footsteps import Twist2D, plan_walk
 from gait_nodes.planning.gait_params import GaitParameters
@@ -176,24 +176,6 @@ def test_slid_flat_windows_equal_windows_sampled_whole(gait):
 
     description, values = GAITS[gait]
     planner = GaitPlanner(description, GaitParameters.for_robot(description, **values))
-    origin_ns, period_ns = 3_000_000_000, 20_000_000
     commands = {0.1: Twist2D(0.1), 3.0: Twist2D(0.05, 0.02, 0.1), 7.0: Twist2D()}
-    now_ns, checked = origin_ns, 0
-    while now_ns < origin_ns + 10_000_000_000:
-        now_s = (now_ns - origin_ns) * 1e-9
-        for at_s, twist in commands.items():
-            if at_s <= now_s < at_s + 0.02:
-                planner.set_velocity(twist, now_s)
-        planner.advance(now_s + 2.0 + planner.params.step_period_s)
-        planner.prune(now_s)
-        reference = planner.zmp_reference(now_ns, origin_ns, 2.0, 0.01)
-        last = planner._last_zmp_reference
-        planner._last_zmp_reference = None
-        whole = planner.zmp_reference(now_ns, origin_ns, 2.0, 0.01)
-        planner._last_zmp_reference = last
-        for name in ('stamps_ns', 'zmp_in_world', 'plane_heights_m'):
-            np.testing.assert_array_equal(getattr(reference, name).view(np.int64),
-                                          getattr(whole, name).view(np.int64))
-        checked += 1
-        now_ns += period_ns * (3 if checked % 37 == 0 else 1) + (5_000_000 * (checked % 53 == 0))
+    checked = check_slid_windows(planner, commands, 3_000_000_000, 10_000_000_000)
     assert checked > 400
