@@ -155,8 +155,10 @@ def bench_recorder_inproc(count: int, folder: Path) -> None:
                 executor.spin_for(0.0)
         executor.spin_for(0.0)
         elapsed = time.perf_counter() - start
-        recorded = recorder.writer.message_count
         recorder.destroy_node()
+        # Counted once the bag is closed: the writer counts a topic's messages as it appends
+        # them to the chunk, in batches, so a count taken before close misses the last batch.
+        recorded = recorder.writer.message_count
     finally:
         runtime.shutdown()
     print(f'recorder node, inproc runtime: {recorded / elapsed:12,.0f} msg/s '
