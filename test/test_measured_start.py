@@ -103,6 +103,52 @@ def test_standing_still_mid_walk_with_a_zero_twist_closes_the_stance():
     np.testing.assert_allclose(plan.positions_in_world[-1][:, :2], nominal, atol=1e-9)
 
 
+@pytest.mark.parametrize('late_s', [0.0, 0.05, 0.2])
+def test_a_velocity_that_comes_before_the_first_lift_off_walks_as_one_that_came_first(late_s):
+    # A planner that rejoined a robot mid-walk before its first /cmd_vel came plans the stance
+    # closed (zero twist). The velocity arriving before the first foot lifts starts the walk
+    # there: no group of feet is first squared up (a whole step, the walk then from standstill).
+    feet, yaws, zmp, pose = _mid_walk(5.0)
+    start = MeasuredStart(feet, yaws, zmp)
+    first, plan_first = _plan_from(start, Twist2D(0.1), pose)
+    late = GaitPlanner(QUADRUPED, PARAMS, base_pose=pose, start=start)
+    late.set_velocity(Twist2D(), 0.0)
+    late.advance(late_s + 5.0)
+    assert late.steps[0].slots[0].lift_off_s > late_s  # a stopping step, no foot up yet
+    late.set_velocity(Twist2D(0.1), late_s)
+    late.advance(20.0)
+    plan_late = late.footstep_plan()
+    # Every swing starts where the foot is and moves it forwards.
+    where = {name: feet[k] for k, name in enumerate(plan_late.foot_names)}
+    for swing in plan_late.swings():
+        np.testing.assert_allclose(swing.start_in_world, where[swing.foot], atol=1e-12)
+        assert swing.end_in_world[0] >= swing.start_in_world[0] - 1e-9
+        where[swing.foot] = swing.end_in_world
+    # The same swings as the velocity that came first, ``late_s`` later.
+    early_swings, late_swings = list(plan_first.swings()), list(plan_late.swings())
+    for a, b in zip(early_swings[:4], late_swings[:4], strict=True):
+        assert a.foot == b.foot
+        assert b.lift_off_s == pytest.approx(a.lift_off_s + late_s, abs=1e-9)
+        np.testing.assert_allclose(b.end_in_world, a.end_in_world, atol=0.1 * late_s + 1e-9)
+    # The ZMP reference is continuous through the cut.
+    times = np.linspace(0.0, 3.0, 3001)
+    assert np.abs(np.diff(late.zmp(times), axis=0)).max() < 0.01
+
+
+def test_a_velocity_after_the_first_lift_off_lets_the_stopping_step_end():
+    feet, yaws, zmp, pose = _mid_walk(5.0)
+    planner = GaitPlanner(QUADRUPED, PARAMS, base_pose=pose, start=MeasuredStart(feet, yaws, zmp))
+    planner.set_velocity(Twist2D(), 0.0)
+    planner.advance(5.0)
+    stop = planner.steps[0]
+    lifted = stop.slots[0].lift_off_s + 0.01
+    planner.set_velocity(Twist2D(0.1), lifted)
+    planner.advance(20.0)
+    # The foot in the air lands where the stopping step put it; the walk starts after.
+    assert planner.steps[0] == stop
+    assert planner.steps[1].start_s == stop.end_s
+
+
 def test_a_malformed_start_is_refused():
     from gait_nodes.errors import GaitParameterError
 

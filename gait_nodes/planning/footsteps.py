@@ -533,16 +533,31 @@ class GaitPlanner:
         """Drop the steps that have not started by ``now_s``; end a standstill at ``now_s``.
 
         A step that holds the robot standing has nothing to finish: it is cut at ``now_s`` (its
-        ZMP where it is then), so that a command from standstill starts the walk at once.
+        ZMP where it is then), so that a command from standstill starts the walk at once. So is
+        a step squaring the feet up to stop whose first foot has not lifted yet, when the new
+        twist walks: the robot is still standing where it stood (a planner that joined a robot
+        mid-walk before its first /cmd_vel arrived would otherwise square up a whole group of
+        feet, then start from standstill).
         """
         self._steps = [step for step in self._steps if step.start_s <= now_s]
-        if self._steps and self._steps[-1].kind == 'stand' and self._steps[-1].end_s > now_s:
-            step = self._steps[-1]
+        if not self._steps or self._steps[-1].end_s <= now_s:
+            return
+        step = self._steps[-1]
+        unlifted_stop = (step.state_after.mode == 'stopping' and step.slots
+                         and step.slots[0].lift_off_s > now_s and not self._twist.is_zero())
+        if step.kind == 'stand' or unlifted_stop:
             cut = max(now_s, step.start_s)
             zmp = zmp_reference.sample(step.zmp_times_s, step.zmp_points, np.array([cut]))[0]
             times = np.array([step.start_s, cut]) if cut > step.start_s else np.array([cut])
             points = np.array([step.zmp_points[0], zmp]) if cut > step.start_s else zmp[None]
-            after = dataclasses.replace(step.state_after, time_s=cut, zmp=zmp)
+            if unlifted_stop:
+                before = self._steps[-2].state_after if len(self._steps) > 1 else self._initial
+                after = dataclasses.replace(before, time_s=cut, zmp=zmp)
+                step = dataclasses.replace(
+                    step, kind='stand', slots=(),
+                    zmp_margin_kept_m=self._all_down_margin(points, step.positions_start))
+            else:
+                after = dataclasses.replace(step.state_after, time_s=cut, zmp=zmp)
             self._steps[-1] = dataclasses.replace(step, end_s=cut, zmp_times_s=times,
                                                   zmp_points=points, state_after=after)
             if cut == step.start_s:
