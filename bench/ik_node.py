@@ -14,12 +14,21 @@ nothing else of the graph in the figure. Every replay's /joint_commands are chec
 to the graph run's (the same floats), so a figure is never that of a node that does otherwise.
 ``--profile`` adds a cProfile of one replay.
 
+``--cache FILE`` keeps the graph run's callbacks (messages as CDR) and commands in FILE and
+replays from there when FILE holds the same scenario and duration: a replay then runs without
+the graph run, e.g. under ``valgrind --tool=callgrind``, where the instructions of
+``--runs 2`` minus those of ``--runs 1`` are one replay's (the node alone, no wall-clock noise
+from the other processes of the machine). Valgrind has no AVX-512, so OpenBLAS picks another
+kernel there and the floats (and the commands) would differ from a native recording: set
+``OPENBLAS_CORETYPE=Haswell`` for the recording and the replays alike.
+
 Figures only: nothing is asserted but the equality of the commands.
 """
 
 from __future__ import annotations
 
 import argparse
+import pickle
 import sys
 import tempfile
 import time
@@ -93,6 +102,35 @@ def record(scenario_name: str, duration_s: float) -> tuple[list, list]:
     return events, commands
 
 
+def save(path: Path, scenario_name: str, duration_s: float, events: list,
+         commands: list) -> None:
+    """Keep :func:`record`'s results in ``path``, each message as its type and CDR bytes."""
+    from gait_nodes.interfaces import message_type_name, serialize_message
+
+    stored = [(now_ns, kind, None, None) if msg is None
+              else (now_ns, kind, message_type_name(msg), serialize_message(msg))
+              for now_ns, kind, msg in events]
+    with open(path, 'wb') as file:
+        pickle.dump({'scenario': scenario_name, 'duration_s': duration_s, 'events': stored,
+                     'commands': commands}, file)
+
+
+def load(path: Path, scenario_name: str, duration_s: float) -> tuple[list, list] | None:
+    """:func:`record`'s results kept by :func:`save`, or None if ``path`` holds another run."""
+    from gait_nodes.interfaces import get_message
+
+    if not path.exists():
+        return None
+    with open(path, 'rb') as file:
+        stored = pickle.load(file)  # noqa: S301 - a file this bench wrote
+    if stored['scenario'] != scenario_name or stored['duration_s'] != duration_s:
+        return None
+    events = [(now_ns, kind, None if type_name is None
+               else get_message(type_name).deserialize(data))
+              for now_ns, kind, type_name, data in stored['events']]
+    return events, stored['commands']
+
+
 def replay(scenario_name: str, events: list, profile: bool = False) -> tuple[dict, list]:
     """CPU time [s] per callback kind of a fresh node handed ``events``, and its commands."""
     from gait_nodes.whole_body_ik import WholeBodyIk
@@ -142,8 +180,15 @@ def main() -> int:
     parser.add_argument('--duration', type=float, default=20.0)
     parser.add_argument('--runs', type=int, default=5)
     parser.add_argument('--profile', action='store_true')
+    parser.add_argument('--cache', type=Path, help='file keeping the graph run (see above)')
     args = parser.parse_args()
-    events, commands = record(args.scenario, args.duration)
+    kept = load(args.cache, args.scenario, args.duration) if args.cache else None
+    if kept is None:
+        events, commands = record(args.scenario, args.duration)
+        if args.cache:
+            save(args.cache, args.scenario, args.duration, events, commands)
+    else:
+        events, commands = kept
     ticks = args.duration * RATE_HZ
     runs = []
     for run in range(args.runs):
