@@ -144,7 +144,8 @@ def joint_command_from_msg(msg, robot: RobotModel, previous: np.ndarray,
 
     Raises:
         ContractError: No joints, an unknown or repeated joint name, ``position`` (or a
-            non-empty ``velocity``) not one value per name, or a NaN/infinite value.
+            non-empty ``velocity`` or ``effort``) not one value per name, or a NaN/infinite
+            value.
     """
     count = len(msg.name)
     if not count:
@@ -153,6 +154,8 @@ def joint_command_from_msg(msg, robot: RobotModel, previous: np.ndarray,
         raise ContractError(f'{count} joint names but {len(msg.position)} positions')
     if len(msg.velocity) not in (0, count):
         raise ContractError(f'{count} joint names but {len(msg.velocity)} velocities')
+    if len(msg.effort) not in (0, count):  # unused, but a JointState of another layout
+        raise ContractError(f'{count} joint names but {len(msg.effort)} efforts')
     if tuple(msg.name) == robot.joint_names:
         # Every joint in the robot's order (what whole_body_ik sends): no lookups needed.
         if not _all_finite(msg.position, msg.velocity):

@@ -37,6 +37,7 @@ import numpy as np
 from gait_nodes.cli import run_node
 from gait_nodes.contract import (
     COM_JOINT_NAME,
+    UNIT_QUATERNION_TOLERANCE,
     WORLD_FRAME,
     ContractError,
     com_reference_from_msg,
@@ -530,7 +531,10 @@ def _com_track_as_expected(msg) -> ComTrack | None:
         v, a = twists[0].linear, accelerations[0].linear
         position = [float(t.x), float(t.y), float(t.z)]
         velocity = [float(v.x), float(v.y), float(v.z)]
-        yaw = quaternion_to_yaw(r.x, r.y, r.z, r.w)
+        x, y, z, w = r.x, r.y, r.z, r.w
+        if not abs(x * x + y * y + z * z + w * w - 1.0) <= UNIT_QUATERNION_TOLERANCE:
+            return None  # no yaw: the contract's reader names the rotation
+        yaw = quaternion_to_yaw(x, y, z, w)
         yaw_rate = float(twists[0].angular.z)
         total += (sum(position) + sum(velocity) + float(a.x) + float(a.y) + float(a.z) + yaw
                   + yaw_rate)
