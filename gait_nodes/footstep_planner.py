@@ -92,7 +92,7 @@ from gait_nodes.watchdog import InputWatchdog
 NODE_NAME = 'footstep_planner'
 GAIT_FIELDS = tuple(GaitParameters.__dataclass_fields__)
 #: Node settings: name -> (lowest, lowest included?, highest included, unit).
-NODE_SETTINGS = {'rate_hz': (0.0, False, 1000.0, 'Hz'), 'zmp_horizon_s': (1.6, True, 60.0, 's'),
+NODE_SETTINGS = {'rate_hz': (0.01, True, 1000.0, 'Hz'), 'zmp_horizon_s': (1.6, True, 60.0, 's'),
                  'zmp_sample_period_s': (0.0, False, 0.1, 's'),
                  'cmd_vel_timeout_s': (0.0, True, 60.0, 's')}
 #: Most samples in one /gait/zmp_reference.

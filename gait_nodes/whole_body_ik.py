@@ -111,7 +111,7 @@ class WholeBodyIkParams:
                                  f'{iterations!r}')
         return cls(
             robot=robot,
-            rate_hz=_number(values, 'rate_hz', 0.0, 2000.0, low_open=True),
+            rate_hz=_number(values, 'rate_hz', 0.01, 2000.0),  # 5e-324 Hz: no timer period
             ik_family=family,
             fallback_step_height_m=_number(values, 'fallback_step_height_m', 0.0, 0.5),
             max_iterations=iterations,

@@ -71,7 +71,9 @@ SWING_SLOTS = {'biped': 1, 'trot': 1, 'crawl': 2}
 NUMERIC_RANGES: dict[str, tuple[float, float, str]] = {
     'step_length_m': (0.0, 5.0, 'm'),
     'step_width_m': (0.0, 5.0, 'm'),
-    'step_height_m': (0.0, 2.0, 'm'),
+    # Below a millimetre the joint-limit rhythm's swing takes no time and the duty factor
+    # rounds to 1 (a 5e-324 m apex stopped the planner).
+    'step_height_m': (0.001, 2.0, 'm'),
     # A step shorter than 0.05 s (20 steps a second) is no gait, and the planner's work grows
     # as 1 / step_period_s: a step of 1e-6 s would take it hours per second walked.
     'step_period_s': (0.05, 60.0, 's'),
