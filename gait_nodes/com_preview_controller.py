@@ -173,12 +173,16 @@ class ComPreviewController(Node):
 
     @staticmethod
     def _make_settings(values: dict, robot) -> GeneratorSettings:
+        for name in ('com_height_m', 'status_period_s'):
+            if isinstance(values[name], bool) or not isinstance(values[name], (int, float)):
+                raise ComPlanningError(f'{name} must be a number, got {values[name]!r}')
         height = values['com_height_m'] or robot.com_height_m
         if values['com_height_m'] < 0:
             raise ComPlanningError(f'com_height_m must be >= 0 (0: the robot YAML), got '
                                    f'{values["com_height_m"]}')
-        if not 0 < values['status_period_s'] <= 60:
-            raise ComPlanningError(f'status_period_s must be in (0, 60], got '
+        # (a status timer of 5e-324 s has no period in nanoseconds)
+        if not 0.001 <= values['status_period_s'] <= 60:
+            raise ComPlanningError(f'status_period_s must be in [0.001, 60] s, got '
                                    f'{values["status_period_s"]}')
         stale = values['stale_after_s']
         if isinstance(stale, bool) or not isinstance(stale, (int, float)) \

@@ -56,6 +56,8 @@ SAME_PLACE_TOLERANCE = 1e-9
 _NS_PER_S = 1_000_000_000
 #: New poses a ZmpReferenceReader decodes one by one in floats (more: as arrays).
 _FEW_POSES = 16
+#: Largest | |q|^2 - 1 | of a rotation read from a message (tf2's test of a quaternion).
+UNIT_QUATERNION_TOLERANCE = 0.01
 
 
 class ContractError(GaitNodesError):
@@ -123,7 +125,12 @@ def _transform(position: Sequence[float], yaw_rad: float):
 
 def _transform_values(msg) -> tuple[list[float], float]:
     t, r = msg.translation, msg.rotation
-    return [t.x, t.y, t.z], quaternion_to_yaw(r.x, r.y, r.z, r.w)
+    x, y, z, w = r.x, r.y, r.z, r.w
+    # The yaw formula holds for unit quaternions only; a zero, NaN or infinite one has no yaw.
+    if not abs(x * x + y * y + z * z + w * w - 1.0) <= UNIT_QUATERNION_TOLERANCE:
+        raise ContractError(f'rotation ({x!r}, {y!r}, {z!r}, {w!r}) is not a unit quaternion: '
+                            f'|q|^2 must be within {UNIT_QUATERNION_TOLERANCE:g} of 1')
+    return [t.x, t.y, t.z], quaternion_to_yaw(x, y, z, w)
 
 
 def _twist(linear: Sequence[float], angular_z: float = 0.0):

@@ -92,7 +92,7 @@ from gait_nodes.watchdog import InputWatchdog
 NODE_NAME = 'footstep_planner'
 GAIT_FIELDS = tuple(GaitParameters.__dataclass_fields__)
 #: Node settings: name -> (lowest, lowest included?, highest included, unit).
-NODE_SETTINGS = {'rate_hz': (0.0, False, 1000.0, 'Hz'), 'zmp_horizon_s': (1.6, True, 60.0, 's'),
+NODE_SETTINGS = {'rate_hz': (0.01, True, 1000.0, 'Hz'), 'zmp_horizon_s': (1.6, True, 60.0, 's'),
                  'zmp_sample_period_s': (0.0, False, 0.1, 's'),
                  'cmd_vel_timeout_s': (0.0, True, 60.0, 's')}
 #: Most samples in one /gait/zmp_reference.
@@ -120,6 +120,8 @@ RESUME_AFTER_S = 0.5
 #: A planned swing with no /gait/swing_trajectory this long after its lift-off is missed [s].
 SWING_GRACE_S = 0.05
 SWING_TOPIC = '/gait/swing_trajectory'
+#: Characters of a /gait/command (and of the reason it was refused) echoed in the answer.
+ECHO_CHARACTERS = 500
 
 
 def shipped_defaults() -> dict[str, object]:
@@ -678,6 +680,7 @@ class FootstepPlanner(Node):
         return Parameter(name, value=value)
 
     def _answer(self, command: str, accepted: bool, reason: str) -> None:
+        command, reason = _shortened(command), _shortened(reason)
         params = self.planner.params.to_dict()
         status = {'accepted': accepted, 'reason': reason, 'params': params, 'command': command}
         self.status_publisher.publish(get_message('std_msgs/msg/String')(
@@ -853,6 +856,13 @@ class _HorizonCut:
                 plan.start_ns, plan.foot_names, plan.times_s[:last + 1],
                 plan.positions_in_world[:last + 1], plan.yaws_rad[:last + 1])
         return self._cuts[last]
+
+
+def _shortened(text: str) -> str:
+    """``text``, cut to ``ECHO_CHARACTERS`` with its length said when longer."""
+    if len(text) <= ECHO_CHARACTERS:
+        return text
+    return f'{text[:ECHO_CHARACTERS]}... ({len(text)} characters)'
 
 
 def _same_plan(a, b) -> bool:

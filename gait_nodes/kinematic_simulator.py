@@ -75,6 +75,8 @@ MAX_LAG_PERIODS = 10
 MAX_EXTRAPOLATION_PERIODS = 2
 #: Setpoints kept for interpolation (0.1 s of a 200 Hz stream).
 SETPOINT_BUFFER = 20
+#: Slowest rate [Hz] of the simulation and the markers (a 5e-324 Hz timer has no period).
+MIN_RATE_HZ = 0.01
 LEVEL_WORDS = {OK: 'OK', WARN: 'WARN', ERROR: 'ERROR'}
 
 
@@ -114,7 +116,7 @@ class KinematicSimulatorParams:
             raise ParameterError(f'robot must be a robot name or YAML path, got {robot!r}')
         return cls(
             robot=robot,
-            rate_hz=_number(values, 'rate_hz', 0.0, 2000.0, low_open=True),
+            rate_hz=_number(values, 'rate_hz', MIN_RATE_HZ, 2000.0),
             publish_clock=_flag(values, 'publish_clock'),
             warn_margin_m=_number(values, 'warn_margin_m', 0.0, 1.0),
             stale_after_s=_number(values, 'stale_after_s', 0.0, 60.0, low_open=True),
@@ -124,7 +126,7 @@ class KinematicSimulatorParams:
             contact_height_tolerance_m=_number(values, 'contact_height_tolerance_m', 0.0, 0.5),
             ground_height_m=_number(values, 'ground_height_m', -10.0, 10.0),
             publish_markers=_flag(values, 'publish_markers'),
-            markers_rate_hz=_number(values, 'markers_rate_hz', 0.0, 2000.0, low_open=True),
+            markers_rate_hz=_number(values, 'markers_rate_hz', MIN_RATE_HZ, 2000.0),
         )
 
     def simulation_settings(self) -> SimulationSettings:
@@ -144,7 +146,8 @@ def joint_command_from_msg(msg, robot: RobotModel, previous: np.ndarray,
 
     Raises:
         ContractError: No joints, an unknown or repeated joint name, ``position`` (or a
-            non-empty ``velocity``) not one value per name, or a NaN/infinite value.
+            non-empty ``velocity`` or ``effort``) not one value per name, or a NaN/infinite
+            value.
     """
     count = len(msg.name)
     if not count:
@@ -153,6 +156,8 @@ def joint_command_from_msg(msg, robot: RobotModel, previous: np.ndarray,
         raise ContractError(f'{count} joint names but {len(msg.position)} positions')
     if len(msg.velocity) not in (0, count):
         raise ContractError(f'{count} joint names but {len(msg.velocity)} velocities')
+    if len(msg.effort) not in (0, count):  # unused, but a JointState of another layout
+        raise ContractError(f'{count} joint names but {len(msg.effort)} efforts')
     if tuple(msg.name) == robot.joint_names:
         # Every joint in the robot's order (what whole_body_ik sends): no lookups needed.
         if not _all_finite(msg.position, msg.velocity):

@@ -83,8 +83,9 @@ def check_values(values: dict) -> None:
     number('step_height_m', 0.0, 1.0, low_open=True)
     number('joint_velocity_limit_rad_s', 0.0, 100.0)
     number('lead_time_s', 0.0, 10.0)
-    number('rate_hz', 0.0, 1000.0, low_open=True)
-    number('sample_period_s', 0.0, 0.1, low_open=True)
+    number('rate_hz', 0.01, 1000.0)  # 5e-324 Hz: no timer period
+    # A swing of 1 s at 5e-324 s is more waypoints than there is memory: 1 kHz at most.
+    number('sample_period_s', 0.001, 0.1)
     if isinstance(values['polynomial_samples'], bool) \
             or not isinstance(values['polynomial_samples'], int) \
             or not 3 <= values['polynomial_samples'] <= 1000:

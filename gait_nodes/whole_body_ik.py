@@ -37,6 +37,7 @@ import numpy as np
 from gait_nodes.cli import run_node
 from gait_nodes.contract import (
     COM_JOINT_NAME,
+    UNIT_QUATERNION_TOLERANCE,
     WORLD_FRAME,
     ContractError,
     com_reference_from_msg,
@@ -110,7 +111,7 @@ class WholeBodyIkParams:
                                  f'{iterations!r}')
         return cls(
             robot=robot,
-            rate_hz=_number(values, 'rate_hz', 0.0, 2000.0, low_open=True),
+            rate_hz=_number(values, 'rate_hz', 0.01, 2000.0),  # 5e-324 Hz: no timer period
             ik_family=family,
             fallback_step_height_m=_number(values, 'fallback_step_height_m', 0.0, 0.5),
             max_iterations=iterations,
@@ -530,7 +531,10 @@ def _com_track_as_expected(msg) -> ComTrack | None:
         v, a = twists[0].linear, accelerations[0].linear
         position = [float(t.x), float(t.y), float(t.z)]
         velocity = [float(v.x), float(v.y), float(v.z)]
-        yaw = quaternion_to_yaw(r.x, r.y, r.z, r.w)
+        x, y, z, w = r.x, r.y, r.z, r.w
+        if not abs(x * x + y * y + z * z + w * w - 1.0) <= UNIT_QUATERNION_TOLERANCE:
+            return None  # no yaw: the contract's reader names the rotation
+        yaw = quaternion_to_yaw(x, y, z, w)
         yaw_rate = float(twists[0].angular.z)
         total += (sum(position) + sum(velocity) + float(a.x) + float(a.y) + float(a.z) + yaw
                   + yaw_rate)

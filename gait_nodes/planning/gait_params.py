@@ -71,8 +71,12 @@ SWING_SLOTS = {'biped': 1, 'trot': 1, 'crawl': 2}
 NUMERIC_RANGES: dict[str, tuple[float, float, str]] = {
     'step_length_m': (0.0, 5.0, 'm'),
     'step_width_m': (0.0, 5.0, 'm'),
-    'step_height_m': (0.0, 2.0, 'm'),
-    'step_period_s': (0.0, 60.0, 's'),
+    # Below a millimetre the joint-limit rhythm's swing takes no time and the duty factor
+    # rounds to 1 (a 5e-324 m apex stopped the planner).
+    'step_height_m': (0.001, 2.0, 'm'),
+    # A step shorter than 0.05 s (20 steps a second) is no gait, and the planner's work grows
+    # as 1 / step_period_s: a step of 1e-6 s would take it hours per second walked.
+    'step_period_s': (0.05, 60.0, 's'),
     'duty_factor': (0.0, 1.0, ''),
     'com_height_m': (0.0, 5.0, 'm'),
     'body_height_m': (0.0, 5.0, 'm'),
@@ -311,8 +315,10 @@ def parse_command(text: str) -> dict[str, object]:
 
     try:
         values = json.loads(text)
-    except (json.JSONDecodeError, TypeError) as exc:
+    except (ValueError, TypeError) as exc:  # JSONDecodeError, or an integer of > 4300 digits
         raise GaitCommandError(f'invalid JSON: {exc}') from exc
+    except RecursionError as exc:
+        raise GaitCommandError(f'invalid JSON: nested too deeply ({exc})') from exc
     if not isinstance(values, dict):
         raise GaitCommandError(f'a gait command is a JSON object, got {type(values).__name__}')
     for key, value in values.items():

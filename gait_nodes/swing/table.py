@@ -87,6 +87,18 @@ class ValueTable:
                                   f'not match the grid {self.grid.shape}')
         if self.goal.shape != (4,):
             raise SwingTableError(f'table goal must be (x, y, z, yaw), got {self.goal.shape}')
+        # Times [s] and sizes: a swing takes no negative time, a limit and a height are > 0.
+        for name, value, low in (('joint_velocity_limit_rad_s', self.joint_velocity_limit_rad_s,
+                                  None), ('step_height_m', self.step_height_m, None),
+                                 ('lower_s', self.lower_s, 0.0),
+                                 ('ground_z_m', self.ground_z_m, -math.inf)):
+            if not (math.isfinite(value) and (value > 0.0 if low is None else value >= low)):
+                raise SwingTableError(f'table {name} must be finite and '
+                                      f'{"> 0" if low is None else f">= {low:g}"}, got {value!r}')
+        for name in ('values_s', 'lift_s'):
+            if not np.all(getattr(self, name) >= 0.0):
+                raise SwingTableError(f'table {name} must be times >= 0 s, got '
+                                      f'{float(np.min(getattr(self, name)))!r}')
 
     @property
     def total_s(self) -> np.ndarray:
@@ -204,7 +216,8 @@ def load_table(path: str | os.PathLike, robot=None,
     try:
         for name in _ARRAYS[:-1]:
             if not np.all(np.isfinite(np.asarray(arrays[name], dtype=float))):
-                raise SwingTableError(f'{path}: corrupt swing value table: {name} holds NaN')
+                raise SwingTableError(f'{path}: corrupt swing value table: {name} holds a NaN or '
+                                      f'infinite value')
         table = ValueTable(
             robot_name=str(meta['robot']), urdf_sha256=str(meta['urdf_sha256']),
             family=int(meta['family']),
