@@ -306,6 +306,22 @@ def test_parse_ros_args_accepts_rcl_flags():
     assert parsed.log_level == 'warn'
 
 
+@pytest.mark.parametrize('rule', ['__node:=', '__node:=2talker', '__node:=my-node',
+                                  '__name:=a/b', '__ns:=', '__ns:=/a//b', '__ns:=/a/',
+                                  'chatter:=', 'chatter:=/a//b', 'chatter:=a b',
+                                  'chatter:=/1x'])
+def test_remap_to_a_name_rcl_would_refuse_is_refused(rule):
+    with pytest.raises(ArgumentError, match='is not a'):
+        parse_ros_args(['-r', rule])
+
+
+@pytest.mark.parametrize('rule', ['__node:=talker_2', '__name:=_t', '__ns:=/', '__ns:=/a/b',
+                                  '__ns:=a', 'chatter:=other', 'chatter:=/a/b_1',
+                                  'chatter:=~/private', 'n:chatter:=x'])
+def test_remap_to_a_valid_name_is_taken(rule):
+    assert parse_ros_args(['-r', rule]).remaps
+
+
 def _spin_with_talker(publisher, nodes, seconds=2.0):
     """Spin ``nodes`` while a 1 Hz timer publishes 'hello' on ``publisher``."""
     executor = runtime.SingleThreadedExecutor()

@@ -17,6 +17,13 @@ import yaml
 from gait_nodes.errors import ArgumentError, ParameterError
 
 LOG_LEVELS = ('debug', 'info', 'warn', 'error', 'fatal')
+#: rcl's name rules: a node name is one token; a namespace or topic name is tokens joined by '/'
+#: (a topic may start with '~/', a namespace or topic with '/'); a token is letters, digits and
+#: underscores, not starting with a digit, and no '/' repeats or ends a name but the root.
+_TOKEN = r'[A-Za-z_][A-Za-z0-9_]*'
+_NODE_NAME = re.compile(_TOKEN)
+_NAMESPACE = re.compile(rf'/|/?{_TOKEN}(/{_TOKEN})*')
+_TOPIC_NAME = re.compile(rf'(/|~/)?{_TOKEN}(/{_TOKEN})*|~')
 
 
 class _RclYamlLoader(yaml.SafeLoader):
@@ -119,6 +126,21 @@ def _split_assignment(text: str, flag: str) -> tuple[str | None, str, str]:
     return node, left, right
 
 
+def _check_remap(flag: str, source: str, target: str) -> None:
+    """Refuse a remap whose target rcl would not take as a node name, namespace or topic."""
+    if source in ('__node', '__name'):
+        rule, what = _NODE_NAME, ('a node name: letters, digits and underscores, not starting '
+                                  'with a digit')
+    elif source == '__ns':
+        rule, what = _NAMESPACE, ("a namespace: '/' or names of letters, digits and "
+                                  "underscores joined by '/'")
+    else:
+        rule, what = _TOPIC_NAME, ("a topic name: names of letters, digits and underscores "
+                                   "joined by '/', optionally after '/' or '~/'")
+    if not rule.fullmatch(target):
+        raise ArgumentError(f'{flag} {source}:={target}: {target!r} is not {what}')
+
+
 def split_ros_args(argv: list[str]) -> tuple[list[str], list[str]]:
     """Separate ROS arguments (``--ros-args`` sections) from the rest, like rcl does."""
     user, ros = [], []
@@ -161,6 +183,7 @@ def parse_ros_args(ros: list[str]) -> RosArguments:
             parsed.file_params.extend(load_params_file(path))
         elif arg in ('-r', '--remap'):
             node, source, target = _split_assignment(operand(arg), arg)
+            _check_remap(arg, source, target)
             parsed.remaps.append((node, source, target))
         elif arg == '--log-level':
             level = operand(arg)
