@@ -298,7 +298,7 @@ class KinematicSimulator(Node):
         self._inputs_quiet_ns = (0, 0)
         self._stability_level: int | None = None
         # (stamp [ns], q, contact points, odom header or None) of the last three ticks, oldest
-        # first.
+        # first; None: an instant before the first step (not published, no monitor sample).
         self._history: deque = deque(maxlen=3)
         self._window = _Window()
         self._last_summary_ns: int | None = None
@@ -534,7 +534,10 @@ class KinematicSimulator(Node):
         self._account(step)
 
         (t0, q0, _, _), (t1, q1, points1, header1), (t2, q2, _, _) = self._history
-        if t0 < t1 < t2:
+        # header1 None: the instant before the first step, whose configuration (the initial
+        # one) was never published on /joint_states and /tf; its monitor sample would carry a
+        # stamp that no joint state and no base pose has.
+        if header1 is not None and t0 < t1 < t2:
             v, a = self._differences.at(q0, q1, q2, (t1 - t0) * 1e-9, (t2 - t1) * 1e-9)
             support = self._support_of(points1)
             state = self.monitor.evaluate(q1, v, a, support)
@@ -620,10 +623,8 @@ class KinematicSimulator(Node):
 
     def _publish_monitor(self, stamp_ns: int, header, state: ZmpState,
                          support: Support) -> None:
-        """Publish the monitor's view of ``stamp_ns`` (``header``: its odom header, or None)."""
+        """Publish the monitor's view of ``stamp_ns`` (``header``: its odom header)."""
         new = self._new
-        if header is None:
-            header = new['Header'](self._stamp(stamp_ns), WORLD_FRAME)
         zmp = state.zmp_in_world.tolist()
         zmp_finite = all(map(math.isfinite, zmp))
         com = state.com_in_world.tolist()

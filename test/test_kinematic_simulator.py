@@ -641,6 +641,26 @@ def test_a_gait_that_loses_balance_is_flagged_at_the_first_sample_outside(inproc
     assert all(level_value(s.level) == OK for s in before)
 
 
+def test_every_monitor_sample_is_of_a_published_joint_state_and_base_pose(inproc, robot,
+                                                                          q_nominal):
+    """The monitor's outputs are stamped at instants that /joint_states and /tf describe.
+
+    /gait/zmp, /gait/com, /gait/support_polygon, /gait/markers and the stability report: a user
+    pairs them by stamp (or looks the base up in tf at the ZMP's stamp) from the first sample on.
+    """
+    hold = joint_command(robot.joint_names, robot.joint_positions(q_nominal))
+    simulator, collector = run_simulator(0.1, [(k * NS // 200, hold) for k in range(20)])
+    states = [stamp_ns(m) for m in collector.messages['/joint_states']]
+    bases = [stamp_ns(t) for m in collector.messages['/tf'] for t in m.transforms]
+    assert bases == states
+    for topic in ('/gait/zmp', '/gait/com', '/gait/support_polygon'):
+        # Every instant but the newest, whose ZMP needs the next configuration.
+        assert [stamp_ns(m) for m in collector.messages[topic]] == states[:-1], topic
+    assert {stamp_ns(m.markers[0]) for m in collector.messages['/gait/markers']} <= set(states)
+    reports = [int(values_of(s)['sample_stamp_ns']) for _, s in collector.statuses('stability')]
+    assert reports and set(reports) <= set(states)
+
+
 def test_bad_joint_commands_are_rejected_and_the_state_is_held(inproc, robot, q_nominal):
     names = list(robot.joint_names)
     start = robot.joint_positions(q_nominal)
