@@ -244,7 +244,15 @@ class SwingLegPolicy(Node):
     def _publish(self, plan: contract.FootstepPlan, swing: contract.Swing, lift_ns: int) -> None:
         values = self._values
         trajectory = None
-        if self._policy is not None:
+        climb = float(swing.end_in_world[2] - swing.start_in_world[2])
+        if self._policy is not None and climb < -1e-9:
+            # A foot put down from where a pause or a restarted planner found it in the air (the
+            # planner refuses stairs with the value table): the table swings between footholds
+            # on the ground, the polynomial swing lowers it. Expected, not a failure.
+            self.diagnostics.report('swing', WARN, f'{swing.foot} at {swing.lift_off_s:.3f} s '
+                                    f'lands from {-climb:.4g} m above its foothold (left in '
+                                    f'the air): sending the polynomial swing')
+        elif self._policy is not None:
             try:
                 trajectory = self._value_table_swing(plan, swing, lift_ns)
             except GaitNodesError as exc:

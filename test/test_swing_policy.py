@@ -314,6 +314,39 @@ def test_node_publishes_one_trajectory_per_swing_from_lift_off_to_landing(start,
         assert trajectory.positions_in_world[:, 2].max() >= swing.start_in_world[2] + 0.099
 
 
+def test_node_lowers_a_foot_left_in_the_air_with_the_polynomial_swing(start, tmp_path):
+    # A planner restarted (or resumed) with a foot in the air puts it down first: a swing that
+    # descends onto flat ground, which the value table (footholds on the ground) does not
+    # hold. The polynomial swing lowers it, reported as a WARN, not a failure.
+    from gait_nodes.planning.footsteps import GaitPlanner, MeasuredStart, place
+    from gait_nodes.robot.description import load_robot_description
+
+    table, _ = tiny_table()
+    start('-p', f'table:={table.save(tmp_path / "tiny.npz")}', '-p',
+          'joint_velocity_limit_rad_s:=1.0')
+    description = load_robot_description('robosimian')
+    params = GaitParameters.for_robot(description, gait='crawl', step_length_m=0.3,
+                                      step_period_s=2.0)
+    planner = GaitPlanner(description, params)
+    feet = np.column_stack([place(np.zeros(3), planner.layout.offsets(params.step_width_m)),
+                            np.zeros(4)])
+    feet[0, 2] = 0.08
+    zmp = feet[1:, :2].mean(axis=0)
+    planner = GaitPlanner(description, params, start=MeasuredStart(feet, np.zeros(4), zmp))
+    planner.advance(5.0)
+    plan = planner.footstep_plan(0.0)
+    landing = plan.swings()[0]
+    assert landing.start_in_world[2] == pytest.approx(0.08)
+    _, harness = run_node(plan, landing.touch_down_s + 0.5)
+    _, trajectory = harness.received[0]
+    assert trajectory.foot == landing.foot
+    assert np.allclose(trajectory.positions_in_world[0], landing.start_in_world, atol=1e-9)
+    assert np.allclose(trajectory.positions_in_world[-1], landing.end_in_world, atol=1e-9)
+    swing_reports = [s for s in harness.statuses if s.name == 'swing_leg_policy: swing']
+    assert [level_value(s.level) for s in swing_reports] == [1]
+    assert 'lands from 0.08 m above its foothold' in swing_reports[0].message
+
+
 def test_node_reports_a_plan_faster_than_the_table(start, tmp_path):
     table, _ = tiny_table()
     path = table.save(tmp_path / 'tiny.npz')
