@@ -5,7 +5,11 @@ acceleration at lift-off, a position at an intermediate time ``t_i`` and the pos
 and acceleration at touch-down with one sixth-order polynomial (seven conditions). The foot is
 at rest on the ground at both ends (velocity and acceleration zero). Here the via point is at
 mid-swing: the horizontal position and yaw half-way, the height ``step_height_m`` above the
-higher of the two footholds.
+higher of the two footholds. A foot put down from the air (a planner resumed or restarted with
+it up there lowers it straight down, :data:`LANDING_TRAVEL_M`) has nothing to clear: its via
+point is half-way down, and it descends without first rising ``step_height_m`` (a rise the
+walk's swing time does not allow at the joint velocity limit: the foot then lagged and was
+still in the air at its touch-down).
 
 The whole-body IK follows the waypoints linearly (:func:`gait_nodes.robot.whole_body_ik.
 swing_pose_at`), so the swing is sampled at least every :data:`MAX_WAYPOINT_SPACING_S`, the IK
@@ -25,6 +29,8 @@ from gait_nodes.errors import SwingPolicyError
 
 #: Largest time between two waypoints of a polynomial swing [s] (the whole-body IK's period).
 MAX_WAYPOINT_SPACING_S = 0.005
+#: A swing that descends with at most this horizontal travel puts a foot down from the air [m].
+LANDING_TRAVEL_M = 1e-6
 
 
 def sixth_order_coefficients(start, end, via, duration_s: float, via_time_s: float
@@ -74,7 +80,8 @@ def polynomial_swing(swing: Swing, start_ns: int, step_height_m: float, samples:
     Args:
         swing: Planned swing (lift-off and landing places, yaws and times).
         start_ns: Lift-off time [ns].
-        step_height_m: Via height above the higher foothold [m].
+        step_height_m: Via height above the higher foothold [m] (none for a foot put down
+            from the air: see the module docstring).
         samples: Fewest waypoints (>= 3); more when the swing is longer than
             ``(samples - 1) * max_spacing_s``.
         max_spacing_s: Largest time between waypoints [s], > 0.
@@ -91,7 +98,8 @@ def polynomial_swing(swing: Swing, start_ns: int, step_height_m: float, samples:
     turn = math.remainder(swing.end_yaw_rad - swing.start_yaw_rad, 2 * math.pi)
     end = np.array([*swing.end_in_world, swing.start_yaw_rad + turn], dtype=float)
     via = 0.5 * (start + end)
-    via[2] = max(start[2], end[2]) + step_height_m
+    if not is_landing(swing):
+        via[2] = max(start[2], end[2]) + step_height_m
     duration = swing.duration_s
     coefficients = sixth_order_coefficients(start, end, via, duration, 0.5 * duration)
     samples = max(samples, math.ceil(duration / max_spacing_s - 1e-9) + 1)
@@ -100,3 +108,10 @@ def polynomial_swing(swing: Swing, start_ns: int, step_height_m: float, samples:
     values[0], values[-1] = start, end
     yaws = np.angle(np.exp(1j * values[:, 3]))
     return SwingTrajectory(swing.foot, int(start_ns), times, values[:, :3], yaws), coefficients
+
+
+def is_landing(swing: Swing) -> bool:
+    """Whether ``swing`` puts a foot down from the air: straight down, no horizontal travel."""
+    travel = np.asarray(swing.end_in_world[:2], dtype=float) - swing.start_in_world[:2]
+    return bool(swing.end_in_world[2] < swing.start_in_world[2]
+                and np.hypot(*travel) <= LANDING_TRAVEL_M)
