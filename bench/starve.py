@@ -18,7 +18,6 @@ import json
 import tempfile
 from pathlib import Path
 
-import numpy as np
 import yaml
 
 from gait_nodes import graph, runtime
@@ -39,6 +38,7 @@ class Starvation:
         self.saved: dict = {}
 
     def start(self) -> None:
+        """From now on the node's messages wait in its histories and its timers do not fire."""
         kept = {}
         for subscription in self.node._subscriptions:
             depth = max(getattr(subscription.qos_profile, 'depth', 1) or 1, 1)
@@ -53,6 +53,7 @@ class Starvation:
             timer.next_call_ns = 1 << 62
 
     def stop(self, now_ns: int) -> None:
+        """The node runs again at ``now_ns`` [ns]."""
         # Subscriptions first (what waited in the history), then the timers, once, on their grid.
         pending = []
         for subscription in self.node._subscriptions:
@@ -130,7 +131,7 @@ def measure(bag: str, back_s: float) -> dict:
     out_after = stamps[outside & after]
     diag = collections.Counter()
     messages = collections.Counter()
-    for stamp, name, level, message, *_ in series.diagnostics:
+    for _, name, level, message, *_ in series.diagnostics:
         if level >= 1:
             diag[(name.split('/')[-1].split(':')[0], level)] += 1
             messages[(level, message[:90])] += 1
@@ -151,6 +152,7 @@ def measure(bag: str, back_s: float) -> dict:
 
 
 def main() -> None:
+    """Command line: starve one node, print the measures as JSON."""
     parser = argparse.ArgumentParser()
     parser.add_argument('node', help="node to starve, or 'none'")
     parser.add_argument('at_s', type=float)
