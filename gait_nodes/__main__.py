@@ -124,7 +124,7 @@ class TopicCounter:
 
     def _counter(self, topic: str):
         def count(_data) -> None:
-            now = self._clock.now_ns()
+            now = self._clock.now().nanoseconds  # rclpy's Clock has no now_ns
             self.counts[topic] += 1
             self.first_ns.setdefault(topic, now)
             self.last_ns[topic] = now

@@ -22,19 +22,6 @@ STALE = 3
 LEVEL_NAMES = {OK: 'OK', WARN: 'WARN', ERROR: 'ERROR', STALE: 'STALE'}
 
 
-def _as_level(level: int) -> bytes:
-    # diagnostic_msgs/DiagnosticStatus.level is a ``byte``: bytes under rclpy, int-like here.
-    return bytes([level]) if _BYTE_LEVEL else level
-
-
-def _level_is_bytes() -> bool:
-    status = get_message('diagnostic_msgs/msg/DiagnosticStatus')()
-    return isinstance(status.level, bytes)
-
-
-_BYTE_LEVEL = _level_is_bytes()
-
-
 def level_value(level) -> int:
     """Integer level of a DiagnosticStatus.level as either runtime stores it."""
     return level[0] if isinstance(level, (bytes, bytearray)) else int(level)
@@ -54,7 +41,9 @@ def make_status(name: str, level: int, message: str, values: Mapping[str, object
     """diagnostic_msgs/DiagnosticStatus with ``values`` as string key values."""
     status = get_message('diagnostic_msgs/msg/DiagnosticStatus')()
     key_value = get_message('diagnostic_msgs/msg/KeyValue')
-    status.level = _as_level(level)
+    # DiagnosticStatus.level is a ``byte``: bytes in rclpy's class, an int in ours. Asked of
+    # each message, not once at import: the runtime is chosen after this module is loaded.
+    status.level = bytes([level]) if isinstance(status.level, bytes) else level
     status.name = name
     status.message = message
     status.hardware_id = hardware_id

@@ -38,9 +38,6 @@ from gait_nodes.contract import ComState, FootstepPlan, Swing, SwingTrajectory
 from gait_nodes.errors import ConfigError, ParameterError
 from gait_nodes.robot.model import RobotModel, yaw_rotation
 
-#: ``np.clip``'s ufunc (max with the lower bound, then min with the upper one, NaN kept),
-#: without ``np.clip``'s Python wrapper.
-_clip = np._core.umath.clip
 #: Sugihara's bias weight: keeps the damped system regular at singular configurations.
 DAMPING_BIAS = 1e-9
 #: Largest joint change in one Newton step [rad]; keeps a far target from jumping branches.
@@ -206,7 +203,7 @@ class WholeBodyIkSolver:
         else:
             return np.array(solutions[-1], dtype=float)
         # (the clip ufunc: maximum, then minimum, in one call)
-        return _clip(q, self._q_lower, self._q_upper, out=q)
+        return np.clip(q, self._q_lower, self._q_upper, out=q)
 
     def solve(self, targets: IkTargets, q_start: np.ndarray) -> IkResult:
         """Configuration reaching ``targets``, starting the iteration at ``q_start``.

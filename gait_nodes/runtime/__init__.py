@@ -52,7 +52,11 @@ def init(*, args=None, context: Context | None = None, domain_id: int | None = N
     """Start the runtime (``rclpy.init``); ``runtime`` overrides the default choice."""
     ctx = context or default_context()
     ctx.init(args=args, runtime=runtime, domain_id=domain_id)
-    if signal_handlers and ctx.runtime != 'rclpy':
+    if signal_handlers:
+        # Under rclpy too: rclpy's own handlers would raise KeyboardInterrupt wherever the
+        # signal lands (inside its message conversion, say) or shut the context down under the
+        # executor; ours ask the executor to return, and shutdown() then destroys the nodes
+        # (a recorder finishes its bag) before the rclpy context goes.
         install_signal_handlers(ctx)
 
 

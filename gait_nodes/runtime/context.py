@@ -36,8 +36,11 @@ class Context:
         if self.runtime == 'rclpy':
             import rclpy
 
+            from rclpy.signals import SignalHandlerOptions
+
             self.rclpy_context = rclpy.context.Context()
-            rclpy.init(args=list(args or []), context=self.rclpy_context, domain_id=domain_id)
+            rclpy.init(args=list(args or []), context=self.rclpy_context, domain_id=domain_id,
+                       signal_handler_options=SignalHandlerOptions.NO)
         elif self.runtime == 'dds':
             from gait_nodes.runtime.dds import DdsTransport
 

@@ -249,11 +249,17 @@ class SingleThreadedExecutor:
     def _spin_rclpy(self, duration_sec: float | None) -> None:
         import time
 
+        from rclpy.executors import ExternalShutdownException
+
         deadline = None if duration_sec is None else time.monotonic() + duration_sec
+        # A bounded wait: the signal handlers (Python's, see runtime.init) run between waits.
         while self._running():
             if deadline is not None and time.monotonic() >= deadline:
                 break
-            self._rclpy_executor.spin_once(timeout_sec=0.05)
+            try:
+                self._rclpy_executor.spin_once(timeout_sec=0.05)
+            except ExternalShutdownException:  # rclpy.shutdown() from elsewhere: a clean stop
+                break
 
     def shutdown(self, timeout_sec: float | None = None) -> bool:
         """Stop and forget the nodes."""

@@ -21,6 +21,7 @@ from gait_nodes.runtime.parameters import (
     SetParametersResult,
 )
 from gait_nodes.runtime.qos import QoSProfile, ReliabilityPolicy, as_profile
+from gait_nodes.runtime.qos import to_rclpy as to_rclpy_qos
 
 
 def _rclpy_forward(method):
@@ -180,6 +181,7 @@ class Node:
                 automatically_declare_parameters_from_overrides=(
                     automatically_declare_parameters_from_overrides),
             )
+            ctx.register_node(self)  # shutdown destroys it (a recorder finishes its bag then)
             return
         ros_args = ctx.ros_args if use_global_arguments else None
         if cli_args:
@@ -289,12 +291,16 @@ class Node:
         name = expand_topic_name(topic, self._name, self._namespace)
         return self._remaps.get(name, name)
 
-    @_rclpy_forward
     def create_publisher(self, msg_type, topic: str, qos_profile, *, callback_group=None,
                          event_callbacks=None, qos_overriding_options=None,
                          publisher_class=None) -> Publisher:
         """Publisher of ``msg_type`` on ``topic``; an int QoS is a keep-last depth."""
         message_type_name(msg_type)  # rejects non-message classes with a clear error
+        if self._rclpy_node is not None:
+            return self._rclpy_node.create_publisher(
+                msg_type, topic, to_rclpy_qos(qos_profile), callback_group=callback_group,
+                event_callbacks=event_callbacks, qos_overriding_options=qos_overriding_options,
+                **({'publisher_class': publisher_class} if publisher_class else {}))
         profile = as_profile(qos_profile)
         name = self._resolve(topic)
         publisher = Publisher(self, msg_type, name, profile, None)
@@ -302,25 +308,39 @@ class Node:
         self._publishers.append(publisher)
         return publisher
 
-    @_rclpy_forward
     def create_subscription(self, msg_type, topic: str, callback, qos_profile, *,
                             callback_group=None, event_callbacks=None,
                             qos_overriding_options=None, raw: bool = False) -> Subscription:
         """Subscription calling ``callback(msg)`` (``callback(bytes)`` when raw)."""
         message_type_name(msg_type)
+        if self._rclpy_node is not None:
+            return self._rclpy_node.create_subscription(
+                msg_type, topic, callback, to_rclpy_qos(qos_profile),
+                callback_group=callback_group, event_callbacks=event_callbacks,
+                qos_overriding_options=qos_overriding_options, raw=raw)
         profile = as_profile(qos_profile)
         subscription = Subscription(self, msg_type, self._resolve(topic), callback, profile, raw)
         subscription.impl = self._transport.create_subscription(self, subscription)
         self._subscriptions.append(subscription)
         return subscription
 
-    @_rclpy_forward
     def create_timer(self, timer_period_sec: float, callback, callback_group=None, clock=None,
                      autostart: bool = True) -> Timer:
-        """Timer calling ``callback()`` every ``timer_period_sec`` of ROS time."""
+        """Timer calling ``callback()`` every ``timer_period_sec`` of ROS time.
+
+        ``clock`` may be a clock of this runtime (under rclpy: one of the same type is made).
+        """
         if not (isinstance(timer_period_sec, (int, float)) and math.isfinite(timer_period_sec)):
             raise GaitNodesError(f'timer period must be a finite number of seconds, '
                                  f'got {timer_period_sec!r}')
+        if self._rclpy_node is not None:
+            if isinstance(clock, Clock):
+                from rclpy.clock import Clock as RclpyClock
+                from rclpy.clock import ClockType as RclpyClockType
+
+                clock = RclpyClock(clock_type=RclpyClockType(int(clock.clock_type)))
+            return self._rclpy_node.create_timer(timer_period_sec, callback, callback_group,
+                                                 clock, autostart)
         timer = Timer(callback, int(round(timer_period_sec * NS_PER_S)), clock or self._clock,
                       autostart)
         self._timers.append(timer)
@@ -482,17 +502,23 @@ class Node:
         self._parameters.post_callbacks.append(callback)
 
     def unused_parameter_overrides(self) -> list[str]:
-        """Overrides given for this node (``-p``, named params-file section) never declared."""
-        if self._rclpy_node is not None:
-            overrides = getattr(self._rclpy_node, '_parameter_overrides', {})
-            return sorted(set(overrides) - set(self._rclpy_node._parameters))
-        return self._parameters.unused_overrides()
+        """Overrides addressed to this node (``-p``, its params-file section) never declared.
+
+        Overrides for every node (the ``/**`` section of a params file) are not counted: each
+        node takes the ones it declares.
+        """
+        if self._rclpy_node is None:
+            return self._parameters.unused_overrides()
+        # rclpy keeps no record of which overrides named this node: read the same arguments.
+        _, addressed = self.context.ros_args.overrides_for(self.get_name(),
+                                                           self.get_namespace())
+        return sorted(name for name in addressed if not self._rclpy_node.has_parameter(name))
 
     def check_parameter_overrides(self) -> None:
         """Raise when an override names a parameter this node does not declare."""
         unused = self.unused_parameter_overrides()
         if unused:
-            declared = sorted(self._rclpy_node._parameters if self._rclpy_node
+            declared = sorted(self._rclpy_node.get_parameters_by_prefix('') if self._rclpy_node
                               else self._parameters.parameters)
             raise ParameterNotDeclaredError(
                 f'{self.get_fully_qualified_name()}: unknown parameter(s) '

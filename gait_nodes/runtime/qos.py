@@ -78,3 +78,22 @@ def offered_qos_yaml(profile: QoSProfile) -> dict:
         'liveliness_lease_duration': dict(infinite),
         'avoid_ros_namespace_conventions': False,
     }
+
+
+def to_rclpy(qos_or_depth):
+    """The same QoS as rclpy wants it: an int stays a depth, a profile becomes rclpy's own.
+
+    rclpy's ``create_publisher`` and ``create_subscription`` take only their own ``QoSProfile``
+    or an int (``TypeError: Expected QoSProfile or int`` otherwise). Policies map by name.
+    """
+    from rclpy import qos as rclpy_qos
+
+    if isinstance(qos_or_depth, rclpy_qos.QoSProfile):
+        return qos_or_depth
+    profile = as_profile(qos_or_depth)
+    return rclpy_qos.QoSProfile(
+        depth=profile.depth,
+        history=rclpy_qos.HistoryPolicy[profile.history.name],
+        reliability=rclpy_qos.ReliabilityPolicy[profile.reliability.name],
+        durability=rclpy_qos.DurabilityPolicy[profile.durability.name],
+    )

@@ -53,13 +53,6 @@ BASE_FIT_ITERATIONS = 10
 ORIENTATION_PRIOR_M = 1e-3
 #: LAPACK's SVD (divide and conquer), what numpy.linalg.svd runs.
 _DGESDD = lapack.dgesdd
-try:
-    # The ufunc np.clip calls, without np.clip's Python dispatch (which costs as much as the
-    # clipping of a robot's joints): np.minimum(np.maximum(x, low), high), bit for bit, signed
-    # zeros and NaN included (test_kinematic_simulator checks it).
-    from numpy._core.umath import clip as _clip
-except ImportError:  # another numpy's layout
-    _clip = np.clip
 
 
 def _skew(vectors: np.ndarray) -> np.ndarray:
@@ -160,7 +153,7 @@ class PositionActuators:
         if not dt_s > 0.0:
             raise ParameterError(f'dt_s must be > 0 s, got {dt_s!r}')
         commanded_rad = np.asarray(commanded_rad, dtype=float)
-        target = _clip(commanded_rad, self.lower, self.upper)
+        target = np.clip(commanded_rad, self.lower, self.upper)
         delta = target - positions_rad
         if self._any_continuous:
             wrapped = (delta + math.pi) % (2.0 * math.pi) - math.pi
@@ -170,8 +163,8 @@ class PositionActuators:
             allowed = self.velocity_limits_rad_s * dt_s
             minus_allowed = -allowed
             self._allowed = (dt_s, allowed, minus_allowed)
-        moved = _clip(delta, minus_allowed, allowed)
-        positions = _clip(positions_rad + moved, self.lower, self.upper)
+        moved = np.clip(delta, minus_allowed, allowed)
+        positions = np.clip(positions_rad + moved, self.lower, self.upper)
         velocities = (positions - positions_rad) / dt_s
         return ActuatorStep(positions, velocities, commanded_rad, target, delta, moved, allowed)
 
