@@ -666,18 +666,11 @@ class FootstepPlanner(Node):
         except GaitParameterError as exc:
             self._answer(msg.data, False, str(exc))
             return
-        parameters = [self._parameter(name, value) for name, value in changes.items()]
+        parameters = [Parameter(name, value=value) for name, value in changes.items()]
         result = (self.set_parameters_atomically(parameters) if parameters
                   else SetParametersResult(successful=True))
         self._answer(msg.data, result.successful,
                      result.reason if not result.successful else 'accepted')
-
-    def _parameter(self, name: str, value):
-        if self.rclpy_node is not None:
-            from rclpy.parameter import Parameter as RclpyParameter
-
-            return RclpyParameter(name, value=value)
-        return Parameter(name, value=value)
 
     def _answer(self, command: str, accepted: bool, reason: str) -> None:
         command, reason = _shortened(command), _shortened(reason)

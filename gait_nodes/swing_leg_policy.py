@@ -38,7 +38,7 @@ from gait_nodes.errors import GaitNodesError, ParameterError, SwingPolicyError
 from gait_nodes.interfaces import get_message
 from gait_nodes.paths import node_defaults
 from gait_nodes.robot.model import load_robot_model
-from gait_nodes.runtime import Node, SetParametersResult, qos_profile_latched
+from gait_nodes.runtime import Node, Parameter, SetParametersResult, qos_profile_latched
 from gait_nodes.swing.cache import load_or_build
 from gait_nodes.swing.policy import SwingPolicy, limb_step, place_swing
 from gait_nodes.swing.polynomial import polynomial_swing
@@ -110,6 +110,15 @@ class SwingLegPolicy(Node):
         check_values(values)
         self.robot = load_robot_model(values['robot'])
         self.diagnostics = DiagnosticsReporter(self, self.robot.name)
+        if values['swing'] == 'value_table' and self.robot.description.extra.get(
+                'limb_ik') is None:
+            # A default that cannot apply to this robot (e.g. the launch file's, for a biped):
+            # start with the swing it can have and say so. Asked for later, it is refused.
+            reason = (f'{self.robot.name} has no closed-form limb IK for the swing value '
+                      f'table: polynomial swings instead')
+            self.set_parameters([Parameter('swing', value='polynomial')])
+            values['swing'] = 'polynomial'
+            self.diagnostics.report('swing', WARN, reason)
         self._values = values
         self._policy, self._table_path = self._load_policy(values)
         self._plan = None

@@ -4,6 +4,10 @@ Usage::
 
     ros2 launch gait_nodes gait.launch.py robot:=robosimian gait:=crawl
     ros2 launch gait_nodes gait.launch.py record:=bags/walk   # also record to an MCAP bag
+    ros2 launch gait_nodes gait.launch.py robot:=biped gait:=biped swing:=polynomial
+
+The robot walks when it is asked to: ``ros2 topic pub /cmd_vel geometry_msgs/msg/Twist
+"{linear: {x: 0.04}}"`` or ``python -m gait_nodes.command --vel 0.04 0 0``.
 
 Each node loads ``share/gait_nodes/config/<node>.yaml`` when the package ships one, then the
 launch arguments. Without ROS, ``python -m gait_nodes run`` starts the same graph.
@@ -42,6 +46,7 @@ def generate_launch_description():
     # Typed, so that a robot or gait name is never read as YAML (`on` -> true).
     robot = ParameterValue(LaunchConfiguration('robot'), value_type=str)
     gait = ParameterValue(LaunchConfiguration('gait'), value_type=str)
+    swing = ParameterValue(LaunchConfiguration('swing'), value_type=str)
     use_sim_time = ParameterValue(LaunchConfiguration('use_sim_time'), value_type=bool)
     record = LaunchConfiguration('record')
 
@@ -55,6 +60,12 @@ def generate_launch_description():
             'gait',
             default_value='crawl',
             description='Initial gait of the footstep planner (crawl, trot, ...).',
+        ),
+        DeclareLaunchArgument(
+            'swing',
+            default_value='value_table',
+            description='Swing of the planner and the swing policy: value_table (robots with '
+                        'closed-form limb IK; others fall back to polynomial) or polynomial.',
         ),
         DeclareLaunchArgument(
             'use_sim_time',
@@ -73,6 +84,8 @@ def generate_launch_description():
         overrides = {'use_sim_time': use_sim_time, 'robot': robot}
         if node_name == 'footstep_planner':
             overrides['gait'] = gait
+        if node_name in ('footstep_planner', 'swing_leg_policy'):
+            overrides['swing'] = swing
         if node_name == 'kinematic_simulator':
             # The simulator owns simulated time: it publishes the /clock the others follow.
             overrides['publish_clock'] = use_sim_time

@@ -156,6 +156,7 @@ def test_launch_file_compiles_and_declares_its_arguments():
     assert defaults == {
         'robot': 'robosimian',
         'gait': 'crawl',
+        'swing': 'value_table',
         'use_sim_time': 'true',
         'record': '',
     }

@@ -13,7 +13,7 @@ from gait_nodes.errors import SwingTableError
 from gait_nodes.interfaces import get_message
 from gait_nodes.planning.footsteps import Twist2D, plan_walk
 from gait_nodes.planning.gait_params import GaitParameters
-from gait_nodes.runtime import QoSProfile, qos_profile_latched
+from gait_nodes.runtime import Parameter, QoSProfile, qos_profile_latched
 from gait_nodes.swing.kinematics import LimbTiming
 from gait_nodes.swing.policy import SwingPolicy, limb_step, place_swing
 from gait_nodes.swing.polynomial import evaluate, polynomial_swing
@@ -367,6 +367,32 @@ def test_node_refuses_a_table_for_another_limit(start, tmp_path):
     start('-p', f'table:={path}', '-p', 'joint_velocity_limit_rad_s:=1.7')
     with pytest.raises(SwingTableError, match=r'tiny\.npz.*1.0 rad/s, not 1.7'):
         SwingLegPolicy()
+
+
+def test_node_starts_a_robot_without_limb_ik_with_polynomial_swings(start):
+    """The value-table default (the launch file's) on a biped: polynomial swings and a WARN.
+
+    Asked for while it runs, the value table is refused with the reason and nothing changes.
+    """
+    from gait_nodes.swing_leg_policy import SwingLegPolicy
+
+    start('-p', 'robot:=biped', '-p', 'swing:=value_table')
+    listener = runtime.Node('listener', use_global_arguments=False)
+    statuses = []
+    listener.create_subscription(get_message('diagnostic_msgs/msg/DiagnosticArray'),
+                                 '/diagnostics', lambda m: statuses.extend(m.status), 10)
+    node = SwingLegPolicy()
+    executor = runtime.SingleThreadedExecutor()
+    executor.add_node(listener)
+    executor.spin_for(0.1)
+    assert [(level_value(s.level), s.message) for s in statuses] == [
+        (1, 'biped has no closed-form limb IK for the swing value table: polynomial swings '
+            'instead')]
+    assert node.get_parameter('swing').value == 'polynomial'
+    (refused,) = node.set_parameters([Parameter('swing', value='value_table')])
+    assert not refused.successful and 'no closed-form limb IK' in refused.reason
+    assert node.get_parameter('swing').value == 'polynomial'
+    assert node._policy is None
 
 
 def test_interpolated_lookahead_finds_the_same_swing_times_as_the_exact_ik():

@@ -35,7 +35,6 @@ class Context:
             node_logging.set_default_level(self.ros_args.log_level)
         if self.runtime == 'rclpy':
             import rclpy
-
             from rclpy.signals import SignalHandlerOptions
 
             self.rclpy_context = rclpy.context.Context()

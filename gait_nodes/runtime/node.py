@@ -469,14 +469,17 @@ class Node:
         self._parameters.get(name)
         return self._parameters.descriptors[name]
 
-    @_rclpy_forward
     def set_parameters(self, parameter_list) -> list[SetParametersResult]:
         """Set each parameter on its own; each result says whether it was accepted and why not."""
+        if self._rclpy_node is not None:
+            return self._rclpy_node.set_parameters(_to_rclpy_parameters(parameter_list))
         return [self._parameters.set_atomically([parameter]) for parameter in parameter_list]
 
-    @_rclpy_forward
     def set_parameters_atomically(self, parameter_list) -> SetParametersResult:
         """Set all parameters or none."""
+        if self._rclpy_node is not None:
+            return self._rclpy_node.set_parameters_atomically(
+                _to_rclpy_parameters(parameter_list))
         return self._parameters.set_atomically(list(parameter_list))
 
     def add_on_set_parameters_callback(self, callback) -> None:
@@ -523,6 +526,14 @@ class Node:
             raise ParameterNotDeclaredError(
                 f'{self.get_fully_qualified_name()}: unknown parameter(s) '
                 f'{", ".join(unused)}; this node declares: {", ".join(declared)}')
+
+
+def _to_rclpy_parameters(parameter_list) -> list:
+    """Our Parameters as rclpy's own (rclpy's pass as they are)."""
+    from rclpy.parameter import Parameter as RclpyParameter
+
+    return [RclpyParameter(parameter.name, value=parameter.value)
+            if isinstance(parameter, Parameter) else parameter for parameter in parameter_list]
 
 
 def _wrap_for_rclpy(callback):
