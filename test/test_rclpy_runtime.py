@@ -258,3 +258,36 @@ def test_rclpy_and_dds_nodes_share_one_graph(ros, started):
         for subscription in subscriptions:
             node.destroy_subscription(subscription)
         node.destroy_publisher(command)
+
+
+def test_the_launch_file_starts_the_graph_and_stops_it_cleanly(tmp_path):
+    from ament_index_python.packages import PackageNotFoundError, get_package_share_directory
+
+    try:
+        get_package_share_directory('gait_nodes')
+    except PackageNotFoundError:
+        pytest.skip('gait_nodes is not in the ament index: colcon build it and source the '
+                    'workspace to run `ros2 launch gait_nodes gait.launch.py`')
+    bag = tmp_path / 'launched'
+    launch = subprocess.Popen(['ros2', 'launch', 'gait_nodes', 'gait.launch.py',
+                               f'record:={bag}', 'robot:=robosimian', 'gait:=crawl'],
+                              env=ros_env(), cwd=tmp_path, stdout=subprocess.PIPE,
+                              stderr=subprocess.STDOUT, text=True)
+    try:
+        time.sleep(25.0)
+        velocity = subprocess.run(
+            [sys.executable, '-m', 'gait_nodes.command', '--vel', '0.04', '0', '0'],
+            env=ros_env(), capture_output=True, text=True, timeout=60)
+        assert velocity.returncode == 0, velocity.stderr
+        time.sleep(10.0)
+        launch.send_signal(signal.SIGINT)  # Ctrl-C
+        log, _ = launch.communicate(timeout=60)
+    finally:
+        if launch.poll() is None:
+            launch.kill()
+            launch.communicate()
+    assert launch.returncode == 0, log[-3000:]
+    for name in (*NODES, 'recorder'):
+        assert f'[{name}-' in log and 'process has died' not in log, log[-3000:]
+    assert log.count('process has finished cleanly') == len(NODES) + 1, log[-3000:]
+    assert (bag / 'metadata.yaml').exists()
