@@ -211,7 +211,8 @@ class _State:
     path_start_s: float = 0.0
     path_pose: np.ndarray | None = None
     path_twist: Twist2D = Twist2D()
-    measured: bool = False  # the feet where a MeasuredStart found them, not walked yet
+    # Feet still where a MeasuredStart found them: each waits while it is ahead of its foothold.
+    measured: frozenset[int] = frozenset()
 
 
 @dataclass(frozen=True)
@@ -347,7 +348,8 @@ class GaitPlanner:
             positions, yaws, zmp = start.check(self.layout.count)
         self._initial = _State(
             time_s=float(start_s), positions=positions, yaws=yaws, zmp=zmp, mode='standing',
-            next_group=0, rest_pose=pose, last_anchor=pose, measured=start is not None)
+            next_group=0, rest_pose=pose, last_anchor=pose,
+            measured=frozenset(range(self.layout.count)) if start is not None else frozenset())
         self._steps: list[Step] = []
         self._before: tuple[float, np.ndarray, np.ndarray] | None = None
         self._outputs: tuple = ((), {})  # see _memo
@@ -642,6 +644,11 @@ class GaitPlanner:
                 span = half + (len(groups[group_index]) - 1) * swing
                 start = first_touch_down + 0.5 * params.duty_factor * cycle + span - cycle
                 path_pose = state.last_anchor if state.mode == 'stopping' else rest
+                if state.measured:
+                    # Feet behind their places under the path: the path begins further back.
+                    path_pose = integrate_pose(path_pose, twist, -self._path_lead_s(
+                        state, groups, group_index, offsets, params, twist, first_touch_down,
+                        start))
                 path = dict(path_start_s=start, path_pose=path_pose, path_twist=twist)
             elif twist != state.path_twist:
                 path = dict(path_start_s=t0, path_pose=self._path_pose(state.path_start_s,
@@ -664,7 +671,8 @@ class GaitPlanner:
         t1 = t0 + params.transfer_s(gait) + extra
         positions, foot_yaws = state.positions.copy(), state.yaws.copy()
         slots, last_anchor = [], state.last_anchor
-        # From a measured start a foot ahead of its first foothold waits for the next cycle.
+        # From a measured start a foot ahead of its foothold waits until the path is past it:
+        # none steps back.
         forward = (_forward(state.rest_pose, offsets, params, twist)
                    if state.measured and mode == 'walking' else None)
         for j, feet in enumerate(groups[group_index]):
@@ -673,7 +681,8 @@ class GaitPlanner:
             after, after_yaws = positions.copy(), foot_yaws.copy()
             for foot in feet:
                 target, yaw, anchor = target_of(foot, touch_down)
-                if forward is not None and (target - positions[foot]) @ forward[foot] < 0.0:
+                if forward is not None and foot in state.measured \
+                        and (target - positions[foot]) @ forward[foot] < 0.0:
                     continue
                 target = self._on_tread(positions[foot],
                                         self._within_reach(positions[foot], target, yaw), yaw)
@@ -697,7 +706,9 @@ class GaitPlanner:
             kind = 'walk'
         after_state = _State(
             time_s=t_end, positions=positions, yaws=foot_yaws, zmp=points[-1], mode=mode,
-            next_group=group_index + 1, rest_pose=rest, last_anchor=last_anchor, **path)
+            next_group=group_index + 1, rest_pose=rest, last_anchor=last_anchor,
+            measured=(state.measured.difference(*(slot.feet for slot in slots))
+                      if mode == 'walking' else frozenset()), **path)
         needed = self._needed_swing_s(gait, state, slots, points, params.com_height_m)
         if needed > swing * (1.0 + 1e-9) and retimed < MAX_RETIMING:
             return self._next_step(state, needed * (1.0 + RETIMING_ALLOWANCE), retimed + 1)
@@ -738,6 +749,37 @@ class GaitPlanner:
             needed = max(needed, self._timing.step_s(swings, feet, yaws, body_yaw, com))
             positions, yaws = slot.positions_after, slot.yaws_after
         return needed
+
+    @staticmethod
+    def _path_lead_s(state: _State, groups, group_index: int, offsets: np.ndarray,
+                     params: GaitParameters, twist: Twist2D, first_touch_down_s: float,
+                     start_s: float) -> float:
+        """How far [s of walking] a measured start's path leads its feet; 0 if it does not.
+
+        The path starting at ``start_s`` from ``state.rest_pose`` puts the foothold of the first
+        cycle's last touch-down one stride ahead of the nominal stance, the earlier ones less. A
+        measured foot behind its nominal place (a walk paused across a contact change: the pose
+        is the footholds' centre, and a foot that had not stepped yet trails it) would step that
+        much further, beyond the stride the velocity was clamped to (and, re-timed for the
+        longer swing it needs, after a foothold that moves on with every re-timing, out of the
+        limbs' reach). Begun this much further back, the path gives no first step more than a
+        stride.
+        """
+        rest = state.rest_pose
+        nominal = place(rest, offsets)
+        motion = place(integrate_pose(rest, twist, params.cycle_s), offsets) - nominal
+        speed = np.linalg.norm(motion, axis=1) / params.cycle_s
+        behind = ((nominal - state.positions) * _forward(rest, offsets, params, twist)).sum(axis=1)
+        lead = 0.0
+        for g in range(len(groups)):
+            for j, feet in enumerate(groups[(group_index + g) % len(groups)]):
+                anchor = (first_touch_down_s + g * params.step_period_s + j * params.swing_s
+                          + 0.5 * params.duty_factor * params.cycle_s)
+                for foot in feet:
+                    if speed[foot] > 1e-12:
+                        lead = max(lead, anchor - start_s + behind[foot] / speed[foot]
+                                   - params.cycle_s)
+        return lead
 
     @staticmethod
     def _lagging_group(state: _State, groups, offsets: np.ndarray, params: GaitParameters,
