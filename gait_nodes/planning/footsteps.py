@@ -108,6 +108,17 @@ def place(pose: np.ndarray, offsets_in_base: np.ndarray) -> np.ndarray:
     return offsets_in_base @ rotation.T + pose[:2]
 
 
+def centred_pose(positions: np.ndarray, offsets_in_base: np.ndarray, yaw: float) -> np.ndarray:
+    """Pose (x, y, yaw) whose stance ``offsets_in_base`` is centred on the (F, 2) ``positions``.
+
+    Where a walk's path starts from feet that are not at their nominal places (a measured
+    stance): the body's yaw, the footholds' centre.
+    """
+    centre = np.asarray(positions, dtype=float)[:, :2].mean(axis=0) \
+        - place(np.array([0.0, 0.0, yaw]), offsets_in_base).mean(axis=0)
+    return np.array([centre[0], centre[1], yaw])
+
+
 def wrap_angle(angle: np.ndarray) -> np.ndarray:
     """Angles wrapped to [-pi, pi)."""
     return (np.asarray(angle) + np.pi) % (2.0 * np.pi) - np.pi
@@ -354,6 +365,7 @@ class GaitPlanner:
         self._before: tuple[float, np.ndarray, np.ndarray] | None = None
         self._outputs: tuple = ((), {})  # see _memo
         self._last_zmp_reference = None  # see zmp_reference
+        self._halted = False  # see stand
         self._check_footholds(self._terrain, [positions], compare_heights=False)
         if start is not None and start.airborne().any():
             self._steps.append(self._landing_step(start))
@@ -581,8 +593,55 @@ class GaitPlanner:
         added = False
         while self._state().time_s < until_s:
             self._steps.append(self._next_step(self._state()))
-            added = True
+            added, self._halted = True, False
         return added
+
+    @property
+    def halted(self) -> bool:
+        """Whether the plan ends in the stand of :meth:`stand` (no step planned after it)."""
+        return self._halted
+
+    def stand(self, now_s: float, hold_s: float) -> None:
+        """Stop at a safe stand from ``now_s`` and hold it for ``hold_s`` [s] (a failure's end).
+
+        No foot lifts off after ``now_s``: steps that have not started are dropped, and so are
+        the swings of the step under way that have not lifted off (a swing in the air lands
+        where it was going, with the ZMP the step planned for it). Then every foot stays down
+        while the ZMP moves, over ``hold_s``, to the stance's stand point (inside its support
+        polygon), and stays there. :meth:`advance` walks on after that stand, and a new
+        velocity at once, from standstill as from a measured stance: the path from the
+        footholds' centre, no first step longer than a stride, no foot stepping back.
+        """
+        self._steps = [step for step in self._steps if step.start_s <= now_s]
+        if self._steps and self._steps[-1].end_s > now_s:
+            step = self._steps[-1]
+            lifted = tuple(slot for slot in step.slots if slot.lift_off_s <= now_s)
+            if len(lifted) < len(step.slots) or not step.slots:  # (a stand ends now too)
+                cut = lifted[-1].touch_down_s if lifted else max(now_s, step.start_s)
+                zmp = zmp_reference.sample(step.zmp_times_s, step.zmp_points,
+                                           np.array([cut]))[0]
+                before = step.zmp_times_s < cut
+                positions = lifted[-1].positions_after if lifted else step.positions_start
+                yaws = lifted[-1].yaws_after if lifted else step.yaws_start
+                after = dataclasses.replace(step.state_after, time_s=cut, positions=positions,
+                                            yaws=yaws, zmp=zmp)
+                self._steps[-1] = dataclasses.replace(
+                    step, kind='walk' if lifted else 'stand', end_s=cut, slots=lifted,
+                    zmp_times_s=np.append(step.zmp_times_s[before], cut),
+                    zmp_points=np.vstack([step.zmp_points[before], zmp]), state_after=after)
+                if cut == step.start_s:
+                    self._steps.pop()
+                    if not self._steps:
+                        self._initial = dataclasses.replace(self._initial, time_s=cut, zmp=zmp)
+        state = self._state()
+        yaw = float(np.angle(np.exp(1j * state.yaws).sum()))
+        pose = centred_pose(state.positions, self.layout.offsets(self._params.step_width_m),
+                            yaw)
+        state = dataclasses.replace(state, mode='standing',
+                                    measured=frozenset(range(self.layout.count)))
+        self._steps.append(self._stand_step(state, self._params.resolved_gait(self.robot), pose,
+                                            hold_s))
+        self._halted = True
 
     def prune(self, before_s: float) -> None:
         """Forget steps that ended before ``before_s`` (the last contact change is kept)."""
@@ -833,8 +892,10 @@ class GaitPlanner:
         """Weight shift added before the first step from standstill [s]."""
         return min(params.step_period_s, START_SHIFT_S)
 
-    def _stand_step(self, state: _State, gait: str, rest: np.ndarray) -> Step:
-        t0, t_end = state.time_s, state.time_s + self._params.step_period_s
+    def _stand_step(self, state: _State, gait: str, rest: np.ndarray,
+                    duration_s: float | None = None) -> Step:
+        t0 = state.time_s
+        t_end = t0 + (self._params.step_period_s if duration_s is None else duration_s)
         settled = zmp_reference.stand_point(self.layout, state.positions)
         after = dataclasses.replace(state, time_s=t_end, zmp=settled, mode='standing',
                                     rest_pose=rest, last_anchor=rest)
