@@ -2,28 +2,23 @@
 
 Over DDS a node process can get no CPU for 50-300 ms. It then runs none of its callbacks: its
 timers fire once when it is back (on their period grid, no burst) and each subscription hands
-it what its history kept. :class:`Starvation` does exactly that to one node of the inproc graph,
-deterministically; the footstep planner follows the nodes' stale-input reports on /diagnostics
-as it does outside inproc, so a starved whole-body IK pauses the walk (the simulator's
-/joint_commands go stale) and the planner resumes it from the robot's measured state, putting
-down first a foot it finds in the air.
+it what its history kept. :mod:`gait_nodes.starvation` does exactly that to one node of the
+inproc graph, deterministically; the footstep planner follows the nodes' stale-input reports on
+/diagnostics as it does outside inproc, so a starved whole-body IK pauses the walk (the
+simulator's /joint_commands go stale) and the planner resumes it from the robot's measured
+state, putting down first a foot it finds in the air.
 """
 
 from __future__ import annotations
 
-import collections
-
 import numpy as np
 import pytest
-import yaml
 
-from gait_nodes import graph, runtime
 from gait_nodes.bag.analysis import inspect_bag, zmp_margins
 from gait_nodes.bag.consistency import configurations
 from gait_nodes.diagnostics import OK
-from gait_nodes.interfaces import get_message
 from gait_nodes.robot.model import load_robot_model
-from gait_nodes.scenarios import CommandDriver, get_scenario
+from gait_nodes.starvation import InprocGraph
 
 NS_PER_S = 10**9
 #: The crawl's first swing (rear left) is in the air from about 2.0 s to 4.3 s.
@@ -35,67 +30,17 @@ DURATION_S = 6.5
 ON_GROUND_M = 1e-3
 
 
-class Starvation:
-    """Holds back every callback of one node until :meth:`stop`, as a starved process."""
-
-    def __init__(self, node):
-        self.node = node
-        self.kept = {}
-        self.callbacks = {}
-        self.deadlines = {}
-        for subscription in node._subscriptions:
-            kept = collections.deque(maxlen=max(subscription.qos_profile.depth, 1))
-            self.kept[subscription] = kept
-            self.callbacks[subscription] = subscription.callback
-            subscription.callback = kept.append
-        for timer in node._timers:
-            self.deadlines[timer] = timer.next_call_ns
-            timer.next_call_ns = 1 << 62
-
-    def stop(self, now_ns: int) -> None:
-        """What the histories kept is handled, then each timer fires on its grid."""
-        for subscription, callback in self.callbacks.items():
-            subscription.callback = callback
-        for subscription, kept in self.kept.items():
-            for msg in kept:
-                subscription.callback(msg)
-        for timer, deadline_ns in self.deadlines.items():
-            period = timer.timer_period_ns
-            timer.next_call_ns = deadline_ns + max(-(-(now_ns - deadline_ns) // period), 0) \
-                * period
-
-
 @pytest.fixture
 def starved_run(tmp_path):
     """``run(node_name)``: the polynomial crawl with that node starved; the bag's path."""
 
     def run(node_name: str):
-        scenario = get_scenario('robosimian_crawl_polynomial')
-        params = tmp_path / 'params.yaml'
-        params.write_text(yaml.safe_dump({'/**': {'ros__parameters': {
-            'robot': scenario.robot, 'cmd_vel_timeout_s': 2.0, **scenario.settings}}}))
         bag = tmp_path / 'bag'
-        runtime.init(args=['test', '--ros-args', '--params-file', str(params)],
-                     runtime='inproc', signal_handlers=False)
-        try:
-            executor = runtime.SingleThreadedExecutor()
-            nodes = {name: graph.load_class(graph.NODES[name])() for name in graph.NODES}
-            for node in nodes.values():
-                executor.add_node(node)
-            executor.add_node(graph.load_class(graph.RECORDER)(output=str(bag)))
-            planner = nodes['footstep_planner']
-            planner.create_subscription(get_message('diagnostic_msgs/msg/DiagnosticArray'),
-                                        '/diagnostics', planner.on_diagnostics, 50)
-            driver_node = runtime.Node('driver', use_global_arguments=False)
-            CommandDriver(driver_node, scenario.commands).start()
-            executor.add_node(driver_node)
-            executor.spin_for(STARVED_AT_S)
-            starvation = Starvation(nodes[node_name])
-            executor.spin_for(STARVED_FOR_S)
-            starvation.stop(runtime.default_context().transport.now_ns)
-            executor.spin_for(DURATION_S - STARVED_AT_S - STARVED_FOR_S)
-        finally:
-            runtime.shutdown()
+        with InprocGraph('robosimian_crawl_polynomial', bag=str(bag), pause=True,
+                         prog='test') as graph:
+            graph.spin(STARVED_AT_S)
+            graph.starve(node_name, STARVED_FOR_S)
+            graph.spin(DURATION_S - STARVED_AT_S - STARVED_FOR_S)
         return bag
 
     return run
