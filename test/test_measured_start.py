@@ -161,6 +161,21 @@ def test_a_foot_in_the_air_is_put_down_first_inside_the_support(height):
     assert np.all(plan.positions_in_world[plan.index_at(first.touch_down_s):, :, 2] == 0.0)
 
 
+def test_a_foot_slightly_off_the_ground_stays_where_it_is_until_it_steps():
+    # A foot lifting or landing when the walk paused, below the height from which it is in the
+    # air: planned at its measured height until its first swing lands it (put on the ground in
+    # one tick, it jolted the stance: the simulated ZMP went 51 m out).
+    feet, yaws, zmp, body = _mid_walk(4.0)
+    feet[1, 2] = 0.003
+    planner, plan = _plan_from(MeasuredStart(feet, yaws, zmp), Twist2D(0.1), body)
+    first = next(s for s in plan.swings() if s.foot == plan.foot_names[1])
+    before = plan.times_s <= first.lift_off_s
+    np.testing.assert_array_equal(plan.positions_in_world[before, 1, 2], 0.003)
+    np.testing.assert_array_equal(plan.positions_in_world[before][:, [0, 2, 3], 2], 0.0)
+    assert first.start_in_world[2] == 0.003 and first.end_in_world[2] == 0.0
+    assert np.all(plan.positions_in_world[plan.times_s >= first.touch_down_s, :, 2] == 0.0)
+
+
 def test_standing_still_mid_walk_with_a_zero_twist_closes_the_stance():
     feet, yaws, zmp, pose = _mid_walk(5.0)
     planner, plan = _plan_from(MeasuredStart(feet, yaws, zmp), Twist2D(), pose)

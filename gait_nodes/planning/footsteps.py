@@ -56,6 +56,10 @@ RETIMING_ALLOWANCE = 0.02
 MAX_RETIMING = 4
 #: Time from a measured start with feet in the air to their landing swing's lift-off [s].
 LANDING_LEAD_S = 0.2
+#: A measured foot on the ground further than this from it [m] is planned where it is (its
+#: measured height kept) until it first steps: a foothold put this much lower in one tick would
+#: jolt the stance.
+KEPT_HEIGHT_M = 1e-5
 NS_PER_S = 1_000_000_000
 
 
@@ -355,8 +359,10 @@ class GaitPlanner:
         yaws = np.full(self.layout.count, pose[2])
         zmp = zmp_reference.stand_point(self.layout, positions)
         self._airborne: tuple[np.ndarray, float] | None = None
+        self._kept_heights: tuple[np.ndarray, np.ndarray] | None = None
         if start is not None:
             positions, yaws, zmp = start.check(self.layout.count)
+            self._keep_heights(start, positions)
         self._initial = _State(
             time_s=float(start_s), positions=positions, yaws=yaws, zmp=zmp, mode='standing',
             next_group=0, rest_pose=pose, last_anchor=pose,
@@ -855,6 +861,20 @@ class GaitPlanner:
         scores = [float(np.mean([lag[f] for f in group[0]])) for group in groups]
         return int(np.argmax(scores))
 
+    def _keep_heights(self, start: MeasuredStart, positions: np.ndarray) -> None:
+        """Plan the measured feet on the ground at their measured heights until they step.
+
+        A foot counts as on the ground up to ``start.airborne_m`` above it (a foot just lifting
+        or landing when the walk paused): planned on the ground at once, it would be pushed
+        down (or up) that much in one tick, a jolt of the whole stance (the simulated robot's
+        ZMP went 51 m out). Its measured height is kept until its first swing lands it.
+        """
+        heights = np.asarray(start.feet_in_world, dtype=float)[:, 2] \
+            - np.broadcast_to(np.asarray(start.ground_height_m, dtype=float), positions.shape[:1])
+        kept = ~start.airborne() & (np.abs(heights) > KEPT_HEIGHT_M)
+        if kept.any():
+            self._kept_heights = (np.where(kept, heights, 0.0), positions.copy())
+
     def _landing_step(self, start: MeasuredStart) -> Step:
         """First step of a plan started with feet in the air: each is put down straight below.
 
@@ -973,7 +993,8 @@ class GaitPlanner:
         them, the airborne start and the terrain; none is ever edited in place (a change
         replaces the object), so the plan is unchanged while they are the same objects.
         """
-        parts = (self._before, self._initial, self._airborne, self._terrain, *self._steps)
+        parts = (self._before, self._initial, self._airborne, self._kept_heights, self._terrain,
+                 *self._steps)
         known, outputs = self._outputs
         if len(known) != len(parts) or not all(map(operator.is_, known, parts)):
             outputs = {}
@@ -1130,6 +1151,13 @@ class GaitPlanner:
             for k, (t_s, _, _) in enumerate(events):
                 if t_s < landed_s - 1e-12:
                     positions[k, :, 2] += heights
+        if self._kept_heights is not None:
+            # A measured start's feet slightly off the ground: where they are until they step.
+            heights, where = self._kept_heights
+            unmoved = np.ones(len(heights), dtype=bool)
+            for k, (_, xy, _) in enumerate(events):
+                unmoved &= (xy == where).all(axis=1)
+                positions[k, unmoved, 2] += heights[unmoved]
         yaws = wrap_angle(np.array([y for _, _, y in events]))
         return FootstepPlan(start_ns, self.layout.names, times, positions, yaws)
 
