@@ -117,6 +117,34 @@ def test_a_walk_paused_across_a_contact_change_resumes_within_a_stride():
     assert plan.positions_in_world[-1][:, 0].min() > feet[:, 0].min() + 3 * stride
 
 
+def test_a_resumed_walk_starts_with_the_group_that_need_not_wait():
+    # A crawl paused mid-swing of the rear right foot (its COM controller starved 1.5 s at
+    # 7 s): the front right foot trails its nominal place by 0.105 m. Started with the rear
+    # left group (whose first foot lags most), the path had to begin 3 s further back for the
+    # front right's first step to stay within a stride, which put the rear left and front left
+    # feet ahead of their footholds: a whole step without a swing, the first lift-off 5.6 s
+    # after the landing. Started with the front right's group, none waits.
+    from gait_nodes.robot.model import load_robot_model
+    from gait_nodes.swing.timing import PolynomialSwingTiming
+
+    model = load_robot_model('robosimian')
+    params = GaitParameters.for_robot(model.description, gait='crawl', timing='joint_limit',
+                                      swing='polynomial')
+    feet = np.array([[0.65, 0.525, 0.0], [0.5, -0.525, 0.0], [-0.419057, 0.525, 0.0],
+                     [-0.309391, -0.525, 0.0621674]])
+    start = MeasuredStart(feet, np.zeros(4), np.array([0.115, -0.0701]))
+    timing = PolynomialSwingTiming(model, 2, 1.0, params.step_height_m)
+    planner = GaitPlanner(model.description, params, base_pose=(0.105388, 0.0, 0.0),
+                          swing_timing=timing, start=start)
+    twist, _ = planner.set_velocity(Twist2D(0.04), 0.0)
+    planner.advance(30.0)
+    landing, walk = planner.footstep_plan().swings()[:2]
+    assert landing.foot == 'rear_right' and walk.foot != 'rear_right'
+    assert walk.lift_off_s - landing.touch_down_s < planner.rhythm().step_period_s
+    stride = twist.vx_m_s * planner.rhythm().cycle_s
+    assert max(_swing_lengths(planner.footstep_plan())) <= stride + 1e-9
+
+
 @settings(max_examples=40, deadline=None)
 @given(ahead=st.lists(st.floats(-1.0, 1.0), min_size=4, max_size=4), vx=st.floats(0.02, 0.1))
 def test_no_first_step_from_a_measured_stance_is_longer_than_a_stride(ahead, vx):

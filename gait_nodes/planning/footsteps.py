@@ -695,25 +695,30 @@ class GaitPlanner:
 
             mode = 'stopping'
         else:
-            half, cycle, swing = params.step_period_s, params.cycle_s, params.swing_s
+            cycle, swing = params.cycle_s, params.swing_s
             starting = state.mode != 'walking'
             rest = state.rest_pose
             group_index = ((0 if _leads_left(twist) else 1) if starting
                            else state.next_group % len(groups))
-            if starting and state.measured:
-                group_index = self._lagging_group(state, groups, offsets, params, twist)
             extra = self._start_shift_s(params) if state.mode == 'standing' else 0.0
             first_touch_down = t0 + params.transfer_s(gait) + extra + swing
+
+            def first_cycle(g):
+                return self._first_cycle_path_s(state, groups, g, offsets, params, twist,
+                                                first_touch_down)
+
+            if starting and state.measured:
+                # From a measured stance: the group whose first cycle lets the path begin
+                # soonest (the less it must wait for feet that trail it, the fewer feet ahead
+                # of it wait a step); of equals, the one whose feet lag most.
+                lagging = self._lagging_group(state, groups, offsets, params, twist)
+                group_index = min(range(len(groups)),
+                                  key=lambda g: (round(first_cycle(g)[1], 6), g != lagging))
             if starting:
-                # The body starts so that no foot of the first cycle moves more than a stride.
-                span = half + (len(groups[group_index]) - 1) * swing
-                start = first_touch_down + 0.5 * params.duty_factor * cycle + span - cycle
+                start, lead = first_cycle(group_index)
                 path_pose = state.last_anchor if state.mode == 'stopping' else rest
-                if state.measured:
-                    # Feet behind their places under the path: the path begins further back.
-                    path_pose = integrate_pose(path_pose, twist, -self._path_lead_s(
-                        state, groups, group_index, offsets, params, twist, first_touch_down,
-                        start))
+                if lead > 0.0:
+                    path_pose = integrate_pose(path_pose, twist, -lead)
                 path = dict(path_start_s=start, path_pose=path_pose, path_twist=twist)
             elif twist != state.path_twist:
                 path = dict(path_start_s=t0, path_pose=self._path_pose(state.path_start_s,
@@ -816,20 +821,26 @@ class GaitPlanner:
         return needed
 
     @staticmethod
-    def _path_lead_s(state: _State, groups, group_index: int, offsets: np.ndarray,
-                     params: GaitParameters, twist: Twist2D, first_touch_down_s: float,
-                     start_s: float) -> float:
-        """How far [s of walking] a measured start's path leads its feet; 0 if it does not.
+    def _first_cycle_path_s(state: _State, groups, group_index: int, offsets: np.ndarray,
+                            params: GaitParameters, twist: Twist2D, first_touch_down_s: float
+                            ) -> tuple[float, float]:
+        """(start [s], lead [s of walking]) of a walk's path from standstill.
 
-        The path starting at ``start_s`` from ``state.rest_pose`` puts the foothold of the first
-        cycle's last touch-down one stride ahead of the nominal stance, the earlier ones less. A
-        measured foot behind its nominal place (a walk paused across a contact change: the pose
-        is the footholds' centre, and a foot that had not stepped yet trails it) would step that
-        much further, beyond the stride the velocity was clamped to (and, re-timed for the
-        longer swing it needs, after a foothold that moves on with every re-timing, out of the
-        limbs' reach). Begun this much further back, the path gives no first step more than a
-        stride.
+        The path starts from ``state.rest_pose`` when the foothold of the first cycle's last
+        touch-down is one stride ahead of the nominal stance under it: no foot of the first
+        cycle, ``groups[group_index]`` first, moves more than a stride. From a measured stance
+        a foot behind its nominal place (a walk paused across a contact change: the pose is the
+        footholds' centre, and a foot that had not stepped yet trails it) would step that much
+        further, beyond the stride the velocity was clamped to (and, re-timed for the longer
+        swing it needs, after a foothold that moves on with every re-timing, out of the limbs'
+        reach): the path begins as far back as ``lead`` of walking, so that none does (0 from
+        the nominal stance).
         """
+        span = params.step_period_s + (len(groups[group_index]) - 1) * params.swing_s
+        start = first_touch_down_s + 0.5 * params.duty_factor * params.cycle_s + span \
+            - params.cycle_s
+        if not state.measured:
+            return start, 0.0
         rest = state.rest_pose
         nominal = place(rest, offsets)
         motion = place(integrate_pose(rest, twist, params.cycle_s), offsets) - nominal
@@ -842,9 +853,9 @@ class GaitPlanner:
                           + 0.5 * params.duty_factor * params.cycle_s)
                 for foot in feet:
                     if speed[foot] > 1e-12:
-                        lead = max(lead, anchor - start_s + behind[foot] / speed[foot]
+                        lead = max(lead, anchor - start + behind[foot] / speed[foot]
                                    - params.cycle_s)
-        return lead
+        return start, lead
 
     @staticmethod
     def _lagging_group(state: _State, groups, offsets: np.ndarray, params: GaitParameters,
