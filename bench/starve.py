@@ -3,9 +3,9 @@
 A node process starved of CPU over DDS runs none of its callbacks: its timers fire once when it
 is back (on their period grid, no burst), and each subscription hands it what its history kept
 (the last ``depth`` messages). This script does exactly that to one node of the inproc graph
-(deterministic), records the bag and prints how the walk recovered: ZMP samples outside the
-support polygon after the node is back, the least margin, the ERROR/WARN statuses, the planner's
-pauses.
+(deterministic, :mod:`gait_nodes.starvation`), records the bag and prints how the walk
+recovered: ZMP samples outside the support polygon after the node is back, the least margin,
+the ERROR/WARN statuses, the planner's pauses.
 
 Usage: PYTHONPATH=. python bench/starve.py NODE AT_S GAP_S [--scenario NAME] [--duration S]
 """
@@ -16,56 +16,12 @@ import argparse
 import collections
 import json
 import tempfile
-from pathlib import Path
 
-import yaml
-
-from gait_nodes import graph, runtime
-from gait_nodes.__main__ import PROG, TopicCounter, _graph_params
+from gait_nodes.__main__ import PROG
 from gait_nodes.bag.analysis import inspect_bag, zmp_margins
-from gait_nodes.interfaces import get_message
-from gait_nodes.scenarios import CommandDriver, get_scenario
+from gait_nodes.starvation import InprocGraph
 
 NS = 10**9
-
-
-class Starvation:
-    """Holds back every callback of one node between two instants, then lets it go."""
-
-    def __init__(self, node):
-        self.node = node
-        self.held: list = []  # (subscription, message) in arrival order
-        self.saved: dict = {}
-
-    def start(self) -> None:
-        """From now on the node's messages wait in its histories and its timers do not fire."""
-        kept = {}
-        for subscription in self.node._subscriptions:
-            depth = max(getattr(subscription.qos_profile, 'depth', 1) or 1, 1)
-            kept[id(subscription)] = collections.deque(maxlen=depth)
-            self.saved[id(subscription)] = subscription.callback
-            queue = kept[id(subscription)]
-            subscription.callback = (lambda q: lambda msg: q.append(msg))(queue)
-        self.kept = kept
-        self.arrivals = []
-        for timer in self.node._timers:
-            timer._starved_next = timer.next_call_ns
-            timer.next_call_ns = 1 << 62
-
-    def stop(self, now_ns: int) -> None:
-        """The node runs again at ``now_ns`` [ns]."""
-        # Subscriptions first (what waited in the history), then the timers, once, on their grid.
-        pending = []
-        for subscription in self.node._subscriptions:
-            pending.extend((subscription, m) for m in self.kept[id(subscription)])
-            subscription.callback = self.saved[id(subscription)]
-        for subscription, msg in pending:
-            subscription.callback(msg)
-        for timer in self.node._timers:
-            nxt = timer._starved_next
-            if nxt < now_ns:
-                nxt += -(-(now_ns - nxt) // timer.timer_period_ns) * timer.timer_period_ns
-            timer.next_call_ns = nxt
 
 
 def run(scenario: str, node_name: str | None, at_s: float, gap_s: float, duration_s: float,
@@ -75,50 +31,13 @@ def run(scenario: str, node_name: str | None, at_s: float, gap_s: float, duratio
     ``pause``: the planner follows the stale-input reports on /diagnostics as it does outside
     inproc (it pauses the walk while the robot is held).
     """
-
-    class Options:
-        pass
-
-    options = Options()
-    options.scenario, options.robot, options.gait = scenario, None, None
-    values = _graph_params(options)
-    if params:
-        values['/**']['ros__parameters'].update(params)
-    with tempfile.TemporaryDirectory() as tmp:
-        params_file = Path(tmp) / 'p.yaml'
-        params_file.write_text(yaml.safe_dump(values))
-        runtime.init(args=[PROG, '--ros-args', '--params-file', str(params_file)],
-                     runtime='inproc')
-    try:
-        executor = runtime.SingleThreadedExecutor()
-        nodes = {}
-        for name in graph.available_nodes():
-            nodes[name] = graph.load_class(graph.NODES[name])()
-            executor.add_node(nodes[name])
-        executor.add_node(graph.load_class(graph.RECORDER)(output=bag))
-        if pause:
-            planner = nodes['footstep_planner']
-            planner.create_subscription(
-                get_message('diagnostic_msgs/msg/DiagnosticArray'), '/diagnostics',
-                planner.on_diagnostics, 50)
-        monitor = runtime.Node('gait_run_monitor', use_global_arguments=False)
-        TopicCounter(monitor)
-        driver = CommandDriver(monitor, get_scenario(scenario).commands)
-        executor.add_node(monitor)
-        driver.start()
-        transport = runtime.default_context().transport
+    with InprocGraph(scenario, params, bag, pause, prog=PROG) as graph:
         if node_name:
-            executor.spin_for(at_s)
-            starvation = Starvation(nodes[node_name])
-            starvation.start()
-            executor.spin_for(gap_s)
-            starvation.stop(transport.now_ns)
-            executor._drain()
-            executor.spin_for(duration_s - at_s - gap_s)
+            graph.spin(at_s)
+            graph.starve(node_name, gap_s)
+            graph.spin(duration_s - at_s - gap_s)
         else:
-            executor.spin_for(duration_s)
-    finally:
-        runtime.shutdown()
+            graph.spin(duration_s)
 
 
 def measure(bag: str, back_s: float) -> dict:

@@ -46,9 +46,10 @@ from gait_nodes.com.preview import PreviewSettings, preview_gains
 from gait_nodes.com.support_height import SupportHeight
 from gait_nodes.diagnostics import ERROR, OK, WARN, DiagnosticsReporter
 from gait_nodes.errors import ComPlanningError, GaitNodesError
+from gait_nodes.faults import FaultGuard, GuardedNode
 from gait_nodes.interfaces import get_message
 from gait_nodes.robot.description import load_robot_description
-from gait_nodes.runtime import DurabilityPolicy, Node, QoSProfile, SetParametersResult
+from gait_nodes.runtime import DurabilityPolicy, QoSProfile, SetParametersResult
 from gait_nodes.watchdog import InputWatchdog
 
 NODE_NAME = 'com_preview_controller'
@@ -119,7 +120,7 @@ class PlanYaw:
         return rate * (t_s - start_s) + start, rate
 
 
-class ComPreviewController(Node):
+class ComPreviewController(GuardedNode):
     """Generates the COM reference from the ZMP reference (see the module docstring)."""
 
     def __init__(self):
@@ -131,6 +132,7 @@ class ComPreviewController(Node):
         self._settings = self._make_settings(values, self._robot)  # raises when invalid
         preview_gains(self._settings.preview)
         self.diagnostics = DiagnosticsReporter(self, self._robot.name)
+        self.faults = FaultGuard(self, self.diagnostics)
         self.inputs = InputWatchdog([ZMP_TOPIC], values['stale_after_s'],
                                     self.get_clock().now().nanoseconds,
                                     holding='running on the last reference, held at its end')

@@ -43,6 +43,15 @@ also checks that each planned swing gets its /gait/swing_trajectory: one missing
 lifts off (the swing-leg policy is down; the whole-body IK follows its fallback swing) is reported
 as a stale input (WARN, ``footstep_planner: inputs``) until the next one arrives.
 
+Failures: a plan that cannot be made (a swing beyond the limbs' reach, any failure of the
+planning core) ends the walk in a safe stand, not the process (:mod:`gait_nodes.faults`): no
+foot lifts off any more (a swing in the air lands where it was going), the ZMP reference moves
+to the stand point of the feet, inside their support polygon, and an ERROR (``footstep_planner:
+faults``) names the reason. The planner plans again ``RETRY_AFTER_S`` later, or at once on a new
+velocity, from the stance it stands in (as from a measured start: no first step beyond a
+stride), and reports OK once it has. A failure to resume a paused walk keeps it paused; the
+resume is tried again with the next fresh measured state.
+
 With ``timing: joint_limit`` (the shipped default) on a robot with closed-form limb IK, the
 rhythm follows from the joint velocity limit and the swing method
 (:mod:`gait_nodes.swing.timing`): the value table's swings (the cached table of
@@ -75,9 +84,16 @@ from gait_nodes.contract import (
 )
 from gait_nodes.diagnostics import OK, WARN, DiagnosticsReporter, level_value
 from gait_nodes.errors import GaitNodesError, GaitParameterError, ParameterError
+from gait_nodes.faults import FaultGuard, GuardedNode
 from gait_nodes.interfaces import get_message
 from gait_nodes.paths import node_defaults
-from gait_nodes.planning.footsteps import GaitPlanner, MeasuredStart, Twist2D, place
+from gait_nodes.planning.footsteps import (
+    GaitPlanner,
+    MeasuredStart,
+    Twist2D,
+    centred_pose,
+    place,
+)
 from gait_nodes.planning.gait_params import (
     NUMERIC_RANGES,
     GaitParameters,
@@ -86,7 +102,7 @@ from gait_nodes.planning.gait_params import (
 )
 from gait_nodes.planning.terrain import STAIRS_DEFAULTS, Staircase, check_walkable
 from gait_nodes.robot.description import load_robot_description
-from gait_nodes.runtime import Node, Parameter, SetParametersResult, qos_profile_latched
+from gait_nodes.runtime import Parameter, SetParametersResult, qos_profile_latched
 from gait_nodes.watchdog import InputWatchdog
 
 NODE_NAME = 'footstep_planner'
@@ -120,6 +136,8 @@ RESUME_AFTER_S = 0.5
 #: A planned swing with no /gait/swing_trajectory this long after its lift-off is missed [s].
 SWING_GRACE_S = 0.05
 SWING_TOPIC = '/gait/swing_trajectory'
+#: After a planning failure the plan stands still this long before it is tried again [s].
+RETRY_AFTER_S = 1.0
 #: Characters of a /gait/command (and of the reason it was refused) echoed in the answer.
 ECHO_CHARACTERS = 500
 
@@ -231,7 +249,7 @@ def measured_start(feet: np.ndarray, yaws: np.ndarray, com: np.ndarray,
     return MeasuredStart(feet, yaws, zmp, ground_height_m, AIRBORNE_M)
 
 
-class FootstepPlanner(Node):
+class FootstepPlanner(GuardedNode):
     """Plans footsteps and the ZMP reference from /cmd_vel and /gait/command."""
 
     def __init__(self):
@@ -263,6 +281,8 @@ class FootstepPlanner(Node):
 
         self.origin_ns = self.get_clock().now().nanoseconds
         self.diagnostics = DiagnosticsReporter(self, self.robot.name)
+        self.faults = FaultGuard(self, self.diagnostics, hold=self._hold,
+                                 recovered=self._recovered)
         self._robot_model = None
         self._timing_key, self._timing_model, self._timing_final = None, None, True
         self._timing_reason = 'fixed timing'
@@ -494,10 +514,9 @@ class FootstepPlanner(Node):
         if start is not None:
             # The walk's path starts where the footholds are centred, with the base's yaw: the
             # base itself may lean off them (the IK keeps the COM where the reference was).
-            offsets = self.planner.layout.offsets(self.planner.params.step_width_m)
-            centre = start.feet_in_world[:, :2].mean(axis=0) - place(
-                np.array([0.0, 0.0, pose[2]]), offsets).mean(axis=0)
-            pose = (float(centre[0]), float(centre[1]), float(pose[2]))
+            pose = tuple(float(v) for v in centred_pose(
+                start.feet_in_world, self.planner.layout.offsets(self.planner.params.step_width_m),
+                pose[2]))
         self.planner = GaitPlanner(self.robot, self.planner.params, base_pose=pose,
                                    swing_timing=self.planner.swing_timing, start=start,
                                    terrain=self.planner.terrain)
@@ -602,14 +621,33 @@ class FootstepPlanner(Node):
         if pause['hold'] is not None and not self._measured.since(pause['fresh_ns']):
             return True
         held_s = (now_ns - pause['since_ns']) * 1e-9
-        self._pause = None
         if pause['hold'] is not None:
-            self._plan_from_robot(now_ns)
+            self._plan_from_robot(now_ns)  # (if this fails, the walk stays paused)
+        self._pause = None
         self._listen(False)
         self.diagnostics.report('walk', OK, f'walking on after a pause of {held_s:.2f} s, '
                                 f'planned from the robot\'s measured state',
                                 {'paused_s': held_s})
         return False
+
+    # --- failures ------------------------------------------------------------------------------
+
+    def _hold(self, exc: Exception) -> str:
+        """After a failure (see the module docstring): what the planner holds."""
+        now_ns, now_s = self.now_s()
+        if self._pause is not None:
+            self._pause['fresh_ns'] = now_ns
+            return 'the walk stays paused, the robot held where it stands; resuming again later'
+        if not self._joined:
+            return 'not planning yet; joining again at the next tick'
+        self.planner.stand(now_s, self.settings['zmp_horizon_s']
+                           + self.planner.params.step_period_s + RETRY_AFTER_S)
+        self._last_plan = None
+        return (f'stopped at a safe stand (no foot lifts off, the ZMP to the stand point of '
+                f'the feet); planning again in {RETRY_AFTER_S:g} s or at a new velocity')
+
+    def _recovered(self) -> bool:
+        return self._pause is None and not self.planner.halted
 
     # --- swing trajectories --------------------------------------------------------------------
 

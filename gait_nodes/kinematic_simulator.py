@@ -51,6 +51,7 @@ from gait_nodes.contract import (
 )
 from gait_nodes.diagnostics import ERROR, OK, WARN, DiagnosticsReporter
 from gait_nodes.errors import GaitNodesError, ParameterError
+from gait_nodes.faults import FaultGuard, GuardedNode
 from gait_nodes.interfaces import get_constructor, get_message
 from gait_nodes.paths import node_defaults as shipped_node_defaults
 from gait_nodes.robot.model import RobotModel, load_robot_model
@@ -59,7 +60,6 @@ from gait_nodes.runtime import (
     Clock,
     ClockType,
     DurabilityPolicy,
-    Node,
     QoSProfile,
     SetParametersResult,
 )
@@ -265,7 +265,7 @@ class _Window:
         self.touch_downs = 0
 
 
-class KinematicSimulator(Node):
+class KinematicSimulator(GuardedNode):
     """The kinematic simulator and ZMP monitor node (see the module docstring)."""
 
     def __init__(self):
@@ -321,6 +321,7 @@ class KinematicSimulator(Node):
             self.get_clock().set_source(lambda: self._sim_ns)
 
         self.diagnostics = DiagnosticsReporter(self, self.robot.name)
+        self.faults = FaultGuard(self, self.diagnostics)
         self._msg = {name.rsplit('/', 1)[1]: get_message(name) for name in (
             'sensor_msgs/msg/JointState', 'geometry_msgs/msg/PointStamped',
             'geometry_msgs/msg/PolygonStamped', 'geometry_msgs/msg/Point32',

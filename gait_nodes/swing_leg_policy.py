@@ -35,10 +35,11 @@ from gait_nodes import contract
 from gait_nodes.cli import run_node
 from gait_nodes.diagnostics import ERROR, OK, WARN, DiagnosticsReporter
 from gait_nodes.errors import GaitNodesError, ParameterError, SwingPolicyError
+from gait_nodes.faults import FaultGuard, GuardedNode
 from gait_nodes.interfaces import get_message
 from gait_nodes.paths import node_defaults
 from gait_nodes.robot.model import load_robot_model
-from gait_nodes.runtime import Node, Parameter, SetParametersResult, qos_profile_latched
+from gait_nodes.runtime import Parameter, SetParametersResult, qos_profile_latched
 from gait_nodes.swing.cache import load_or_build
 from gait_nodes.swing.policy import SwingPolicy, limb_step, place_swing
 from gait_nodes.swing.polynomial import polynomial_swing
@@ -99,7 +100,7 @@ def body_yaw(plan: contract.FootstepPlan, t_s: float) -> float:
     return float(np.angle(np.exp(1j * yaws).sum()))
 
 
-class SwingLegPolicy(Node):
+class SwingLegPolicy(GuardedNode):
     """Publishes a swing trajectory for every planned swing (see the module docstring)."""
 
     def __init__(self):
@@ -119,6 +120,7 @@ class SwingLegPolicy(Node):
             self.set_parameters([Parameter('swing', value='polynomial')])
             values['swing'] = 'polynomial'
             self.diagnostics.report('swing', WARN, reason)
+        self.faults = FaultGuard(self, self.diagnostics)
         self._values = values
         self._policy, self._table_path = self._load_policy(values)
         self._plan = None

@@ -49,6 +49,7 @@ from gait_nodes.contract import (
 )
 from gait_nodes.diagnostics import OK, WARN, DiagnosticsReporter
 from gait_nodes.errors import GaitNodesError, ParameterError
+from gait_nodes.faults import FaultGuard, GuardedNode
 from gait_nodes.interfaces import get_constructor, get_message
 from gait_nodes.paths import node_defaults as shipped_node_defaults
 from gait_nodes.robot.model import load_robot_model
@@ -65,7 +66,7 @@ from gait_nodes.robot.whole_body_ik import (
     robosimian_limb_ik,
     seed_configuration,
 )
-from gait_nodes.runtime import Node, QoSProfile, SetParametersResult, qos_profile_latched
+from gait_nodes.runtime import QoSProfile, SetParametersResult, qos_profile_latched
 from gait_nodes.settings import checked_number as _number
 from gait_nodes.watchdog import InputWatchdog
 
@@ -147,7 +148,7 @@ class _Window:
         self.fallback_ticks = 0
 
 
-class WholeBodyIk(Node):
+class WholeBodyIk(GuardedNode):
     """The whole-body IK node (see the module docstring)."""
 
     def __init__(self):
@@ -187,6 +188,7 @@ class WholeBodyIk(Node):
         self.add_on_set_parameters_callback(self._on_set_parameters)
 
         self.diagnostics = DiagnosticsReporter(self, self.robot.name)
+        self.faults = FaultGuard(self, self.diagnostics)
         self._new = {name.rsplit('/', 1)[1]: get_constructor(name) for name in (
             'sensor_msgs/msg/JointState', 'std_msgs/msg/Header', 'builtin_interfaces/msg/Time')}
         # Shared by every /joint_commands message (published messages are read-only).

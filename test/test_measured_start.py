@@ -74,6 +74,99 @@ def test_the_plan_starts_from_the_measured_footholds_and_no_foot_steps_back(stop
     assert plan.positions_in_world[-1][:, 0].mean() > feet[:, 0].mean() + 0.1 * 10.0
 
 
+def _swing_lengths(plan) -> list[float]:
+    return [float(np.linalg.norm(s.end_in_world[:2] - s.start_in_world[:2]))
+            for s in plan.swings()]
+
+
+def _centred_pose(planner: GaitPlanner, feet: np.ndarray, yaw: float = 0.0) -> tuple:
+    """The path's pose the planner node takes: the footholds' centre, the base's yaw."""
+    offsets = planner.layout.offsets(planner.params.step_width_m)
+    centre = feet[:, :2].mean(axis=0) - place(np.array([0.0, 0.0, yaw]), offsets).mean(axis=0)
+    return (float(centre[0]), float(centre[1]), yaw)
+
+
+def test_a_walk_paused_across_a_contact_change_resumes_within_a_stride():
+    # bench/starve.py whole_body_ik 4.10 0.15 --pause: the crawl paused just after the rear left
+    # foot landed 8.3 cm ahead of its nominal place. The path restarted from the footholds'
+    # centre, 2.1 cm ahead of where the front left foot's nominal place puts it: that foot's
+    # first step was a stride plus 2.1 cm (0.321 m for a 0.3 m stride), re-timed for the longer
+    # swing, its foothold moved on with the longer cycle, re-timed again, until the swing left
+    # the reach of the limbs (SwingPolicyError with the value-table timing: the planner died).
+    from gait_nodes.robot.model import load_robot_model
+    from gait_nodes.swing.timing import PolynomialSwingTiming
+
+    model = load_robot_model('robosimian')
+    params = GaitParameters.for_robot(model.description, gait='crawl', timing='joint_limit',
+                                      swing='polynomial')
+    feet = np.array([[0.5, 0.525, 0.0], [0.5, -0.525, 0.0], [-0.4165, 0.525, 0.0],
+                     [-0.5, -0.525, 0.0]])
+    start = MeasuredStart(feet, np.zeros(4), np.array([0.0215, 0.008]))
+    timing = PolynomialSwingTiming(model, 2, 1.0, params.step_height_m)
+    nominal = GaitPlanner(model.description, params, swing_timing=timing)
+    planner = GaitPlanner(model.description, params, base_pose=_centred_pose(nominal, feet),
+                          swing_timing=timing, start=start)
+    twist, _ = planner.set_velocity(Twist2D(0.04), 0.0)
+    planner.advance(40.0)
+    plan = planner.footstep_plan()
+    stride = twist.vx_m_s * planner.rhythm().cycle_s
+    assert stride <= params.step_length_m
+    assert max(_swing_lengths(plan)) <= stride + 1e-9
+    # No foot steps back, and the walk goes on: four cycles, every foot a stride a cycle.
+    assert all(s.end_in_world[0] >= s.start_in_world[0] - 1e-9 for s in plan.swings())
+    assert plan.positions_in_world[-1][:, 0].min() > feet[:, 0].min() + 3 * stride
+
+
+def test_a_resumed_walk_starts_with_the_group_that_need_not_wait():
+    # A crawl paused mid-swing of the rear right foot (its COM controller starved 1.5 s at
+    # 7 s): the front right foot trails its nominal place by 0.105 m. Started with the rear
+    # left group (whose first foot lags most), the path had to begin 3 s further back for the
+    # front right's first step to stay within a stride, which put the rear left and front left
+    # feet ahead of their footholds: a whole step without a swing, the first lift-off 5.6 s
+    # after the landing. Started with the front right's group, none waits.
+    from gait_nodes.robot.model import load_robot_model
+    from gait_nodes.swing.timing import PolynomialSwingTiming
+
+    model = load_robot_model('robosimian')
+    params = GaitParameters.for_robot(model.description, gait='crawl', timing='joint_limit',
+                                      swing='polynomial')
+    feet = np.array([[0.65, 0.525, 0.0], [0.5, -0.525, 0.0], [-0.419057, 0.525, 0.0],
+                     [-0.309391, -0.525, 0.0621674]])
+    start = MeasuredStart(feet, np.zeros(4), np.array([0.115, -0.0701]))
+    timing = PolynomialSwingTiming(model, 2, 1.0, params.step_height_m)
+    planner = GaitPlanner(model.description, params, base_pose=(0.105388, 0.0, 0.0),
+                          swing_timing=timing, start=start)
+    twist, _ = planner.set_velocity(Twist2D(0.04), 0.0)
+    planner.advance(30.0)
+    landing, walk = planner.footstep_plan().swings()[:2]
+    assert landing.foot == 'rear_right' and walk.foot != 'rear_right'
+    assert walk.lift_off_s - landing.touch_down_s < planner.rhythm().step_period_s
+    stride = twist.vx_m_s * planner.rhythm().cycle_s
+    assert max(_swing_lengths(planner.footstep_plan())) <= stride + 1e-9
+
+
+@settings(max_examples=40, deadline=None)
+@given(ahead=st.lists(st.floats(-1.0, 1.0), min_size=4, max_size=4), vx=st.floats(0.02, 0.1))
+def test_no_first_step_from_a_measured_stance_is_longer_than_a_stride(ahead, vx):
+    # Feet anywhere within a stride of their nominal places along the walk (where a walk
+    # stopped at any instant leaves them), the path from their centre (as the planner node
+    # resumes a paused walk): no step is longer than the steady walk's, none steps back, and
+    # the walk goes on.
+    planner = GaitPlanner(QUADRUPED, PARAMS)
+    twist, _ = planner.set_velocity(Twist2D(vx), 0.0)
+    stride = twist.vx_m_s * PARAMS.cycle_s
+    feet = np.column_stack([planner.layout.offsets(PARAMS.step_width_m), np.zeros(4)])
+    feet[:, 0] += stride * np.array(ahead)
+    start = MeasuredStart(feet, np.zeros(4), feet[:, :2].mean(axis=0))
+    planner = GaitPlanner(QUADRUPED, PARAMS, base_pose=_centred_pose(planner, feet), start=start)
+    planner.set_velocity(twist, 0.0)
+    planner.advance(20.0)
+    plan = planner.footstep_plan()
+    assert max(_swing_lengths(plan)) <= stride + 1e-9
+    assert all(s.end_in_world[0] >= s.start_in_world[0] - 1e-9 for s in plan.swings())
+    assert plan.positions_in_world[-1][:, 0].min() > feet[:, 0].min() + 3 * stride
+
+
 @pytest.mark.parametrize('height', [0.03, 0.1])
 def test_a_foot_in_the_air_is_put_down_first_inside_the_support(height):
     feet, yaws, zmp, body = _mid_walk(4.0)
@@ -94,6 +187,21 @@ def test_a_foot_in_the_air_is_put_down_first_inside_the_support(height):
         assert support.support_margin(point, grounded, QUADRUPED.foot_radius_m) > 0.0
     # After the landing every foothold is on the ground.
     assert np.all(plan.positions_in_world[plan.index_at(first.touch_down_s):, :, 2] == 0.0)
+
+
+def test_a_foot_slightly_off_the_ground_stays_where_it_is_until_it_steps():
+    # A foot lifting or landing when the walk paused, below the height from which it is in the
+    # air: planned at its measured height until its first swing lands it (put on the ground in
+    # one tick, it jolted the stance: the simulated ZMP went 51 m out).
+    feet, yaws, zmp, body = _mid_walk(4.0)
+    feet[1, 2] = 0.003
+    planner, plan = _plan_from(MeasuredStart(feet, yaws, zmp), Twist2D(0.1), body)
+    first = next(s for s in plan.swings() if s.foot == plan.foot_names[1])
+    before = plan.times_s <= first.lift_off_s
+    np.testing.assert_array_equal(plan.positions_in_world[before, 1, 2], 0.003)
+    np.testing.assert_array_equal(plan.positions_in_world[before][:, [0, 2, 3], 2], 0.0)
+    assert first.start_in_world[2] == 0.003 and first.end_in_world[2] == 0.0
+    assert np.all(plan.positions_in_world[plan.times_s >= first.touch_down_s, :, 2] == 0.0)
 
 
 def test_standing_still_mid_walk_with_a_zero_twist_closes_the_stance():

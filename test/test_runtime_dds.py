@@ -584,3 +584,19 @@ def test_nodes_stop_when_their_launcher_is_killed(tmp_path):
         if process.poll() is None:
             process.kill()
             process.wait()
+
+
+def test_a_guarded_node_starts_on_sim_time_given_at_start(monkeypatch):
+    """use_sim_time:=true at start: the runtime subscribes /clock before the node's guard is up."""
+    from gait_nodes.com_preview_controller import ComPreviewController
+
+    monkeypatch.delenv('CYCLONEDDS_URI', raising=False)
+    monkeypatch.setenv('GAIT_NODES_DDS_LOCALHOST', '1')
+    runtime.init(args=['test', '--ros-args', '-p', 'use_sim_time:=true'], runtime='dds',
+                 domain_id=DOMAIN, signal_handlers=False)
+    try:
+        node = ComPreviewController()
+        assert node.get_parameter('use_sim_time').value is True
+        assert node.get_clock().ros_time_is_active
+    finally:
+        runtime.shutdown()

@@ -56,6 +56,10 @@ RETIMING_ALLOWANCE = 0.02
 MAX_RETIMING = 4
 #: Time from a measured start with feet in the air to their landing swing's lift-off [s].
 LANDING_LEAD_S = 0.2
+#: A measured foot on the ground further than this from it [m] is planned where it is (its
+#: measured height kept) until it first steps: a foothold put this much lower in one tick would
+#: jolt the stance.
+KEPT_HEIGHT_M = 1e-5
 NS_PER_S = 1_000_000_000
 
 
@@ -106,6 +110,17 @@ def place(pose: np.ndarray, offsets_in_base: np.ndarray) -> np.ndarray:
     c, s = math.cos(pose[2]), math.sin(pose[2])
     rotation = np.array([[c, -s], [s, c]])
     return offsets_in_base @ rotation.T + pose[:2]
+
+
+def centred_pose(positions: np.ndarray, offsets_in_base: np.ndarray, yaw: float) -> np.ndarray:
+    """Pose (x, y, yaw) whose stance ``offsets_in_base`` is centred on the (F, 2) ``positions``.
+
+    Where a walk's path starts from feet that are not at their nominal places (a measured
+    stance): the body's yaw, the footholds' centre.
+    """
+    centre = np.asarray(positions, dtype=float)[:, :2].mean(axis=0) \
+        - place(np.array([0.0, 0.0, yaw]), offsets_in_base).mean(axis=0)
+    return np.array([centre[0], centre[1], yaw])
 
 
 def wrap_angle(angle: np.ndarray) -> np.ndarray:
@@ -211,7 +226,8 @@ class _State:
     path_start_s: float = 0.0
     path_pose: np.ndarray | None = None
     path_twist: Twist2D = Twist2D()
-    measured: bool = False  # the feet where a MeasuredStart found them, not walked yet
+    # Feet still where a MeasuredStart found them: each waits while it is ahead of its foothold.
+    measured: frozenset[int] = frozenset()
 
 
 @dataclass(frozen=True)
@@ -343,15 +359,19 @@ class GaitPlanner:
         yaws = np.full(self.layout.count, pose[2])
         zmp = zmp_reference.stand_point(self.layout, positions)
         self._airborne: tuple[np.ndarray, float] | None = None
+        self._kept_heights: tuple[np.ndarray, np.ndarray] | None = None
         if start is not None:
             positions, yaws, zmp = start.check(self.layout.count)
+            self._keep_heights(start, positions)
         self._initial = _State(
             time_s=float(start_s), positions=positions, yaws=yaws, zmp=zmp, mode='standing',
-            next_group=0, rest_pose=pose, last_anchor=pose, measured=start is not None)
+            next_group=0, rest_pose=pose, last_anchor=pose,
+            measured=frozenset(range(self.layout.count)) if start is not None else frozenset())
         self._steps: list[Step] = []
         self._before: tuple[float, np.ndarray, np.ndarray] | None = None
         self._outputs: tuple = ((), {})  # see _memo
         self._last_zmp_reference = None  # see zmp_reference
+        self._halted = False  # see stand
         self._check_footholds(self._terrain, [positions], compare_heights=False)
         if start is not None and start.airborne().any():
             self._steps.append(self._landing_step(start))
@@ -579,8 +599,55 @@ class GaitPlanner:
         added = False
         while self._state().time_s < until_s:
             self._steps.append(self._next_step(self._state()))
-            added = True
+            added, self._halted = True, False
         return added
+
+    @property
+    def halted(self) -> bool:
+        """Whether the plan ends in the stand of :meth:`stand` (no step planned after it)."""
+        return self._halted
+
+    def stand(self, now_s: float, hold_s: float) -> None:
+        """Stop at a safe stand from ``now_s`` and hold it for ``hold_s`` [s] (a failure's end).
+
+        No foot lifts off after ``now_s``: steps that have not started are dropped, and so are
+        the swings of the step under way that have not lifted off (a swing in the air lands
+        where it was going, with the ZMP the step planned for it). Then every foot stays down
+        while the ZMP moves, over ``hold_s``, to the stance's stand point (inside its support
+        polygon), and stays there. :meth:`advance` walks on after that stand, and a new
+        velocity at once, from standstill as from a measured stance: the path from the
+        footholds' centre, no first step longer than a stride, no foot stepping back.
+        """
+        self._steps = [step for step in self._steps if step.start_s <= now_s]
+        if self._steps and self._steps[-1].end_s > now_s:
+            step = self._steps[-1]
+            lifted = tuple(slot for slot in step.slots if slot.lift_off_s <= now_s)
+            if len(lifted) < len(step.slots) or not step.slots:  # (a stand ends now too)
+                cut = lifted[-1].touch_down_s if lifted else max(now_s, step.start_s)
+                zmp = zmp_reference.sample(step.zmp_times_s, step.zmp_points,
+                                           np.array([cut]))[0]
+                before = step.zmp_times_s < cut
+                positions = lifted[-1].positions_after if lifted else step.positions_start
+                yaws = lifted[-1].yaws_after if lifted else step.yaws_start
+                after = dataclasses.replace(step.state_after, time_s=cut, positions=positions,
+                                            yaws=yaws, zmp=zmp)
+                self._steps[-1] = dataclasses.replace(
+                    step, kind='walk' if lifted else 'stand', end_s=cut, slots=lifted,
+                    zmp_times_s=np.append(step.zmp_times_s[before], cut),
+                    zmp_points=np.vstack([step.zmp_points[before], zmp]), state_after=after)
+                if cut == step.start_s:
+                    self._steps.pop()
+                    if not self._steps:
+                        self._initial = dataclasses.replace(self._initial, time_s=cut, zmp=zmp)
+        state = self._state()
+        yaw = float(np.angle(np.exp(1j * state.yaws).sum()))
+        pose = centred_pose(state.positions, self.layout.offsets(self._params.step_width_m),
+                            yaw)
+        state = dataclasses.replace(state, mode='standing',
+                                    measured=frozenset(range(self.layout.count)))
+        self._steps.append(self._stand_step(state, self._params.resolved_gait(self.robot), pose,
+                                            hold_s))
+        self._halted = True
 
     def prune(self, before_s: float) -> None:
         """Forget steps that ended before ``before_s`` (the last contact change is kept)."""
@@ -628,20 +695,30 @@ class GaitPlanner:
 
             mode = 'stopping'
         else:
-            half, cycle, swing = params.step_period_s, params.cycle_s, params.swing_s
+            cycle, swing = params.cycle_s, params.swing_s
             starting = state.mode != 'walking'
             rest = state.rest_pose
             group_index = ((0 if _leads_left(twist) else 1) if starting
                            else state.next_group % len(groups))
-            if starting and state.measured:
-                group_index = self._lagging_group(state, groups, offsets, params, twist)
             extra = self._start_shift_s(params) if state.mode == 'standing' else 0.0
             first_touch_down = t0 + params.transfer_s(gait) + extra + swing
+
+            def first_cycle(g):
+                return self._first_cycle_path_s(state, groups, g, offsets, params, twist,
+                                                first_touch_down)
+
+            if starting and state.measured:
+                # From a measured stance: the group whose first cycle lets the path begin
+                # soonest (the less it must wait for feet that trail it, the fewer feet ahead
+                # of it wait a step); of equals, the one whose feet lag most.
+                lagging = self._lagging_group(state, groups, offsets, params, twist)
+                group_index = min(range(len(groups)),
+                                  key=lambda g: (round(first_cycle(g)[1], 6), g != lagging))
             if starting:
-                # The body starts so that no foot of the first cycle moves more than a stride.
-                span = half + (len(groups[group_index]) - 1) * swing
-                start = first_touch_down + 0.5 * params.duty_factor * cycle + span - cycle
+                start, lead = first_cycle(group_index)
                 path_pose = state.last_anchor if state.mode == 'stopping' else rest
+                if lead > 0.0:
+                    path_pose = integrate_pose(path_pose, twist, -lead)
                 path = dict(path_start_s=start, path_pose=path_pose, path_twist=twist)
             elif twist != state.path_twist:
                 path = dict(path_start_s=t0, path_pose=self._path_pose(state.path_start_s,
@@ -664,7 +741,8 @@ class GaitPlanner:
         t1 = t0 + params.transfer_s(gait) + extra
         positions, foot_yaws = state.positions.copy(), state.yaws.copy()
         slots, last_anchor = [], state.last_anchor
-        # From a measured start a foot ahead of its first foothold waits for the next cycle.
+        # From a measured start a foot ahead of its foothold waits until the path is past it:
+        # none steps back.
         forward = (_forward(state.rest_pose, offsets, params, twist)
                    if state.measured and mode == 'walking' else None)
         for j, feet in enumerate(groups[group_index]):
@@ -673,7 +751,8 @@ class GaitPlanner:
             after, after_yaws = positions.copy(), foot_yaws.copy()
             for foot in feet:
                 target, yaw, anchor = target_of(foot, touch_down)
-                if forward is not None and (target - positions[foot]) @ forward[foot] < 0.0:
+                if forward is not None and foot in state.measured \
+                        and (target - positions[foot]) @ forward[foot] < 0.0:
                     continue
                 target = self._on_tread(positions[foot],
                                         self._within_reach(positions[foot], target, yaw), yaw)
@@ -697,7 +776,9 @@ class GaitPlanner:
             kind = 'walk'
         after_state = _State(
             time_s=t_end, positions=positions, yaws=foot_yaws, zmp=points[-1], mode=mode,
-            next_group=group_index + 1, rest_pose=rest, last_anchor=last_anchor, **path)
+            next_group=group_index + 1, rest_pose=rest, last_anchor=last_anchor,
+            measured=(state.measured.difference(*(slot.feet for slot in slots))
+                      if mode == 'walking' else frozenset()), **path)
         needed = self._needed_swing_s(gait, state, slots, points, params.com_height_m)
         if needed > swing * (1.0 + 1e-9) and retimed < MAX_RETIMING:
             return self._next_step(state, needed * (1.0 + RETIMING_ALLOWANCE), retimed + 1)
@@ -740,6 +821,43 @@ class GaitPlanner:
         return needed
 
     @staticmethod
+    def _first_cycle_path_s(state: _State, groups, group_index: int, offsets: np.ndarray,
+                            params: GaitParameters, twist: Twist2D, first_touch_down_s: float
+                            ) -> tuple[float, float]:
+        """(start [s], lead [s of walking]) of a walk's path from standstill.
+
+        The path starts from ``state.rest_pose`` when the foothold of the first cycle's last
+        touch-down is one stride ahead of the nominal stance under it: no foot of the first
+        cycle, ``groups[group_index]`` first, moves more than a stride. From a measured stance
+        a foot behind its nominal place (a walk paused across a contact change: the pose is the
+        footholds' centre, and a foot that had not stepped yet trails it) would step that much
+        further, beyond the stride the velocity was clamped to (and, re-timed for the longer
+        swing it needs, after a foothold that moves on with every re-timing, out of the limbs'
+        reach): the path begins as far back as ``lead`` of walking, so that none does (0 from
+        the nominal stance).
+        """
+        span = params.step_period_s + (len(groups[group_index]) - 1) * params.swing_s
+        start = first_touch_down_s + 0.5 * params.duty_factor * params.cycle_s + span \
+            - params.cycle_s
+        if not state.measured:
+            return start, 0.0
+        rest = state.rest_pose
+        nominal = place(rest, offsets)
+        motion = place(integrate_pose(rest, twist, params.cycle_s), offsets) - nominal
+        speed = np.linalg.norm(motion, axis=1) / params.cycle_s
+        behind = ((nominal - state.positions) * _forward(rest, offsets, params, twist)).sum(axis=1)
+        lead = 0.0
+        for g in range(len(groups)):
+            for j, feet in enumerate(groups[(group_index + g) % len(groups)]):
+                anchor = (first_touch_down_s + g * params.step_period_s + j * params.swing_s
+                          + 0.5 * params.duty_factor * params.cycle_s)
+                for foot in feet:
+                    if speed[foot] > 1e-12:
+                        lead = max(lead, anchor - start + behind[foot] / speed[foot]
+                                   - params.cycle_s)
+        return start, lead
+
+    @staticmethod
     def _lagging_group(state: _State, groups, offsets: np.ndarray, params: GaitParameters,
                        twist: Twist2D) -> int:
         """The swing group to start a measured start's walk with: the feet furthest behind.
@@ -753,6 +871,20 @@ class GaitPlanner:
         lag = ((now - state.positions) * _forward(rest, offsets, params, twist)).sum(axis=1)
         scores = [float(np.mean([lag[f] for f in group[0]])) for group in groups]
         return int(np.argmax(scores))
+
+    def _keep_heights(self, start: MeasuredStart, positions: np.ndarray) -> None:
+        """Plan the measured feet on the ground at their measured heights until they step.
+
+        A foot counts as on the ground up to ``start.airborne_m`` above it (a foot just lifting
+        or landing when the walk paused): planned on the ground at once, it would be pushed
+        down (or up) that much in one tick, a jolt of the whole stance (the simulated robot's
+        ZMP went 51 m out). Its measured height is kept until its first swing lands it.
+        """
+        heights = np.asarray(start.feet_in_world, dtype=float)[:, 2] \
+            - np.broadcast_to(np.asarray(start.ground_height_m, dtype=float), positions.shape[:1])
+        kept = ~start.airborne() & (np.abs(heights) > KEPT_HEIGHT_M)
+        if kept.any():
+            self._kept_heights = (np.where(kept, heights, 0.0), positions.copy())
 
     def _landing_step(self, start: MeasuredStart) -> Step:
         """First step of a plan started with feet in the air: each is put down straight below.
@@ -791,8 +923,10 @@ class GaitPlanner:
         """Weight shift added before the first step from standstill [s]."""
         return min(params.step_period_s, START_SHIFT_S)
 
-    def _stand_step(self, state: _State, gait: str, rest: np.ndarray) -> Step:
-        t0, t_end = state.time_s, state.time_s + self._params.step_period_s
+    def _stand_step(self, state: _State, gait: str, rest: np.ndarray,
+                    duration_s: float | None = None) -> Step:
+        t0 = state.time_s
+        t_end = t0 + (self._params.step_period_s if duration_s is None else duration_s)
         settled = zmp_reference.stand_point(self.layout, state.positions)
         after = dataclasses.replace(state, time_s=t_end, zmp=settled, mode='standing',
                                     rest_pose=rest, last_anchor=rest)
@@ -870,7 +1004,8 @@ class GaitPlanner:
         them, the airborne start and the terrain; none is ever edited in place (a change
         replaces the object), so the plan is unchanged while they are the same objects.
         """
-        parts = (self._before, self._initial, self._airborne, self._terrain, *self._steps)
+        parts = (self._before, self._initial, self._airborne, self._kept_heights, self._terrain,
+                 *self._steps)
         known, outputs = self._outputs
         if len(known) != len(parts) or not all(map(operator.is_, known, parts)):
             outputs = {}
@@ -1027,6 +1162,13 @@ class GaitPlanner:
             for k, (t_s, _, _) in enumerate(events):
                 if t_s < landed_s - 1e-12:
                     positions[k, :, 2] += heights
+        if self._kept_heights is not None:
+            # A measured start's feet slightly off the ground: where they are until they step.
+            heights, where = self._kept_heights
+            unmoved = np.ones(len(heights), dtype=bool)
+            for k, (_, xy, _) in enumerate(events):
+                unmoved &= (xy == where).all(axis=1)
+                positions[k, unmoved, 2] += heights[unmoved]
         yaws = wrap_angle(np.array([y for _, _, y in events]))
         return FootstepPlan(start_ns, self.layout.names, times, positions, yaws)
 
