@@ -421,6 +421,37 @@ def test_in_process_delivery_over_dds(dds):
     assert received and set(received) == {'ping'}
 
 
+def test_a_spinning_node_process_collects_garbage_less_often(dds):
+    """As inproc: a node's ticks are not stalled by full collections (thresholds restored)."""
+    import gc
+
+    from gait_nodes.runtime.executors import SPIN_GC_THRESHOLD
+
+    node = runtime.Node('ticker')
+    seen = []
+
+    def tick():
+        seen.append(gc.get_threshold())
+        if len(seen) >= 5:
+            raise RuntimeError('callback failure')
+
+    node.create_timer(0.01, tick)
+    executor = runtime.SingleThreadedExecutor()
+    executor.add_node(node)
+    before = gc.get_threshold()
+    try:
+        gc.set_threshold(700, 11, 12)
+        executor.spin_for(0.025)
+        assert 1 <= len(seen) < 5
+        assert gc.get_threshold() == (700, 11, 12)
+        with pytest.raises(RuntimeError, match='callback failure'):
+            executor.spin()
+        assert seen == [(SPIN_GC_THRESHOLD, 11, 12)] * 5
+        assert gc.get_threshold() == (700, 11, 12)
+    finally:
+        gc.set_threshold(*before)
+
+
 # --- (d) ROS_DOMAIN_ID isolation ---------------------------------------------------------------
 
 def test_domains_are_isolated(tmp_path):

@@ -367,7 +367,7 @@ def test_spinning_collects_garbage_less_often_and_restores_the_thresholds(inproc
     """The young generation's threshold is raised while spinning, and put back after."""
     import gc
 
-    from gait_nodes.runtime.executors import INPROC_GC_THRESHOLD
+    from gait_nodes.runtime.executors import SPIN_GC_THRESHOLD
 
     node = runtime.Node('ticker')
     seen = []
@@ -383,7 +383,7 @@ def test_spinning_collects_garbage_less_often_and_restores_the_thresholds(inproc
     try:
         gc.set_threshold(700, 11, 12)
         executor.spin_for(0.25)
-        assert seen == [(INPROC_GC_THRESHOLD, 11, 12)] * 2
+        assert seen == [(SPIN_GC_THRESHOLD, 11, 12)] * 2
         assert gc.get_threshold() == (700, 11, 12)
         with pytest.raises(RuntimeError, match='callback failure'):
             executor.spin()

@@ -14,25 +14,29 @@ from gait_nodes.runtime import context as context_module
 from gait_nodes.runtime.clock import NS_PER_S
 
 #: Allocations (less deallocations) of container objects between two collections of the
-#: youngest generation while an inproc executor spins (Python's default: 700).
-INPROC_GC_THRESHOLD = 10_000
+#: youngest generation while an executor spins (Python's default: 700).
+SPIN_GC_THRESHOLD = 10_000
 
 
 @contextlib.contextmanager
 def _fewer_collections():
     """Run Python's cyclic garbage collector less often meanwhile (its thresholds restored after).
 
-    A lockstep graph allocates thousands of short-lived messages per simulated second. With
-    the default threshold most of them are still referenced when a collection of the young
-    generation comes, survive it and age into the old generations, whose full collections then
-    walk every object of the process (the nodes' models included: 30-80 ms each, several per
-    20 s of a walk, ~0.1 ms per 5 ms tick on average). Collecting the young generation every
-    10000 allocations lets the messages die first: the run then makes no full collection at
-    all. The collector's results are the same, only later.
+    A lockstep graph allocates thousands of short-lived messages per simulated second, and a
+    node process (dds, rclpy) hundreds per second. With the default threshold most of them are
+    still referenced when a collection of the young generation comes, survive it and age into
+    the old generations, whose full collections then walk every object of the process (the
+    nodes' models included: 30-90 ms each, one every ~5 s of a walk). Inproc that is ~0.1 ms per
+    5 ms tick on average; in a node process it is a stall of the node's ticks: the COM
+    controller's, if it falls when the COM moves fastest, makes the IK jump 2 cm at once and the
+    ZMP leave the support polygon (the default walk on Python 3.12, whose allocations put the
+    stalls there). Collecting the young generation every 10000 allocations lets the messages
+    die first: a walk then makes no full collection at all. The collector's results are the
+    same, only later.
     """
     thresholds = gc.get_threshold()
-    if 0 < thresholds[0] < INPROC_GC_THRESHOLD:
-        gc.set_threshold(INPROC_GC_THRESHOLD, *thresholds[1:])
+    if 0 < thresholds[0] < SPIN_GC_THRESHOLD:
+        gc.set_threshold(SPIN_GC_THRESHOLD, *thresholds[1:])
     try:
         yield
     finally:
@@ -214,26 +218,28 @@ class SingleThreadedExecutor:
 
     def spin(self) -> None:
         """Run callbacks until shutdown (under inproc: until no timer is left)."""
-        if self._rclpy_executor is not None:
-            self._spin_rclpy(None)
-            return
-        if self.inproc:
-            with _fewer_collections():
+        with _fewer_collections():
+            if self._rclpy_executor is not None:
+                self._spin_rclpy(None)
+            elif self.inproc:
                 self._spin_inproc(None)
-            return
-        while self._running():
-            self._dds_step(None)
+            else:
+                while self._running():
+                    self._dds_step(None)
 
     def spin_for(self, duration_sec: float) -> None:
         """Run callbacks for ``duration_sec`` of ROS time (simulated under inproc)."""
+        with _fewer_collections():
+            self._spin_for(duration_sec)
+
+    def _spin_for(self, duration_sec: float) -> None:
         if self._rclpy_executor is not None:
             self._spin_rclpy(duration_sec)
             return
         if self.inproc:
             transport = self.context.transport
             end_ns = transport.now_ns + int(round(duration_sec * NS_PER_S))
-            with _fewer_collections():
-                self._spin_inproc(end_ns)
+            self._spin_inproc(end_ns)
             if self._running():
                 transport.now_ns = max(transport.now_ns, end_ns)
             return
