@@ -86,6 +86,19 @@ def _centred_pose(planner: GaitPlanner, feet: np.ndarray, yaw: float = 0.0) -> t
     return (float(centre[0]), float(centre[1]), yaw)
 
 
+def _resumed_crawl(start, base_pose) -> tuple:
+    """RoboSimian's crawl with the joint-limit rhythm, resumed from ``start`` (None: nominal)."""
+    from gait_nodes.robot.model import load_robot_model
+    from gait_nodes.swing.timing import PolynomialSwingTiming
+
+    model = load_robot_model('robosimian')
+    params = GaitParameters.for_robot(model.description, gait='crawl', timing='joint_limit',
+                                      swing='polynomial')
+    timing = PolynomialSwingTiming(model, 2, 1.0, params.step_height_m)
+    kwargs = {} if start is None else {'base_pose': base_pose, 'start': start}
+    return params, GaitPlanner(model.description, params, swing_timing=timing, **kwargs)
+
+
 def test_a_walk_paused_across_a_contact_change_resumes_within_a_stride():
     # bench/starve.py whole_body_ik 4.10 0.15 --pause: the crawl paused just after the rear left
     # foot landed 8.3 cm ahead of its nominal place. The path restarted from the footholds'
@@ -93,19 +106,11 @@ def test_a_walk_paused_across_a_contact_change_resumes_within_a_stride():
     # first step was a stride plus 2.1 cm (0.321 m for a 0.3 m stride), re-timed for the longer
     # swing, its foothold moved on with the longer cycle, re-timed again, until the swing left
     # the reach of the limbs (SwingPolicyError with the value-table timing: the planner died).
-    from gait_nodes.robot.model import load_robot_model
-    from gait_nodes.swing.timing import PolynomialSwingTiming
-
-    model = load_robot_model('robosimian')
-    params = GaitParameters.for_robot(model.description, gait='crawl', timing='joint_limit',
-                                      swing='polynomial')
     feet = np.array([[0.5, 0.525, 0.0], [0.5, -0.525, 0.0], [-0.4165, 0.525, 0.0],
                      [-0.5, -0.525, 0.0]])
     start = MeasuredStart(feet, np.zeros(4), np.array([0.0215, 0.008]))
-    timing = PolynomialSwingTiming(model, 2, 1.0, params.step_height_m)
-    nominal = GaitPlanner(model.description, params, swing_timing=timing)
-    planner = GaitPlanner(model.description, params, base_pose=_centred_pose(nominal, feet),
-                          swing_timing=timing, start=start)
+    params, nominal = _resumed_crawl(None, None)
+    _, planner = _resumed_crawl(start, _centred_pose(nominal, feet))
     twist, _ = planner.set_velocity(Twist2D(0.04), 0.0)
     planner.advance(40.0)
     plan = planner.footstep_plan()
@@ -124,18 +129,10 @@ def test_a_resumed_walk_starts_with_the_group_that_need_not_wait():
     # front right's first step to stay within a stride, which put the rear left and front left
     # feet ahead of their footholds: a whole step without a swing, the first lift-off 5.6 s
     # after the landing. Started with the front right's group, none waits.
-    from gait_nodes.robot.model import load_robot_model
-    from gait_nodes.swing.timing import PolynomialSwingTiming
-
-    model = load_robot_model('robosimian')
-    params = GaitParameters.for_robot(model.description, gait='crawl', timing='joint_limit',
-                                      swing='polynomial')
     feet = np.array([[0.65, 0.525, 0.0], [0.5, -0.525, 0.0], [-0.419057, 0.525, 0.0],
                      [-0.309391, -0.525, 0.0621674]])
     start = MeasuredStart(feet, np.zeros(4), np.array([0.115, -0.0701]))
-    timing = PolynomialSwingTiming(model, 2, 1.0, params.step_height_m)
-    planner = GaitPlanner(model.description, params, base_pose=(0.105388, 0.0, 0.0),
-                          swing_timing=timing, start=start)
+    params, planner = _resumed_crawl(start, (0.105388, 0.0, 0.0))
     twist, _ = planner.set_velocity(Twist2D(0.04), 0.0)
     planner.advance(30.0)
     landing, walk = planner.footstep_plan().swings()[:2]
