@@ -371,15 +371,8 @@ class KinematicSimulator(GuardedNode):
     def _make_timer(self, rate_hz: float):
         # Owning time, the simulator is paced by the steady clock: its own ROS time is what it
         # publishes on /clock, and a timer on it would wait for itself.
-        clock = None
-        if self._owns_time:
-            if self.context.runtime == 'rclpy':
-                from rclpy.clock import Clock as RclpyClock
-                from rclpy.clock import ClockType as RclpyClockType
-
-                clock = RclpyClock(clock_type=RclpyClockType.STEADY_TIME)
-            else:
-                clock = Clock(clock_type=ClockType.STEADY_TIME)
+        # (Under rclpy, Node.create_timer makes rclpy's own steady clock of it.)
+        clock = Clock(clock_type=ClockType.STEADY_TIME) if self._owns_time else None
         return self.create_timer(1.0 / rate_hz, self.tick, clock=clock)
 
     def _stamp(self, stamp_ns: int):
