@@ -20,7 +20,7 @@ from pathlib import Path
 import pytest
 
 from gait_nodes import runtime
-from gait_nodes.interfaces import geometry_msgs, std_msgs
+from gait_nodes.interfaces import geometry_msgs, raw_twins, std_msgs
 from gait_nodes.runtime import qos_profile_latched
 
 REPO = Path(__file__).resolve().parent.parent
@@ -334,13 +334,11 @@ def test_independent_cyclonedds_program_reads_and_writes_our_topics(dds, tmp_pat
 # --- (c) what our entities look like on the wire -----------------------------------------------
 
 def _take_raw(reader, timeout_s: float = 5.0) -> list[bytes]:
-    from cyclonedds._clayer import ddspy_take
-    from cyclonedds.core import InstanceState, SampleState, ViewState
-
-    mask = SampleState.Any | ViewState.Any | InstanceState.Any
+    """CDR bytes taken by a DataReader on a raw twin's Topic (public cyclonedds API only)."""
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:
-        taken = [data for data, info in ddspy_take(reader._ref, mask, 10) if info.valid_data]
+        taken = [sample.data for sample in reader.take(N=10)
+                 if sample.sample_info is not None and sample.sample_info.valid_data]
         if taken:
             return taken
         time.sleep(0.01)
@@ -356,11 +354,11 @@ def test_topic_type_qos_and_payload_follow_ros2_conventions(dds):
     node.create_subscription(std_msgs.msg.String, 'gait/command', lambda msg: None, 10)
     node.create_publisher(std_msgs.msg.String, '/gait/command_status', qos_profile_latched)
 
-    zmp_topic = dds.topics['/gait/zmp']
+    zmp_topic = dds.topics['/gait/zmp', False]
     assert zmp_topic.name == 'rt/gait/zmp'
     assert zmp_topic.typename == 'geometry_msgs::msg::dds_::PointStamped_'
-    assert dds.topics['/gait/command'].name == 'rt/gait/command'
-    assert dds.topics['/gait/command'].typename == 'std_msgs::msg::dds_::String_'
+    assert dds.topics['/gait/command', False].name == 'rt/gait/command'
+    assert dds.topics['/gait/command', False].typename == 'std_msgs::msg::dds_::String_'
 
     writer = next(w for w in dds.writers if w.topic.name == 'rt/gait/zmp')
     writer_qos = writer.get_qos()
@@ -384,7 +382,10 @@ def test_topic_type_qos_and_payload_follow_ros2_conventions(dds):
     assert latched.get_qos()[Policy.History] == Policy.History.KeepLast(1)
 
     # The payload on the wire: XCDR1 little endian (0x0001), the bytes ROS 2 would send.
-    probe = DataReader(dds.participant, zmp_topic)
+    from cyclonedds.topic import Topic
+
+    raw_type, _ = raw_twins(geometry_msgs.msg.PointStamped)
+    probe = DataReader(dds.participant, Topic(dds.participant, 'rt/gait/zmp', raw_type))
     msg = zmp_sample(3)
     publisher.publish(msg)
     [payload] = _take_raw(probe)

@@ -19,7 +19,7 @@ from gait_nodes.interfaces.msgdef import MsgDef, available_types, load_msg
 
 __all__ = [
     'available_types', 'definition_text', 'deserialize_message', 'get_constructor', 'get_message',
-    'is_message', 'message_type_name', 'msgdef', 'serialize_message', 'type_hash',
+    'is_message', 'message_type_name', 'msgdef', 'raw_twins', 'serialize_message', 'type_hash',
     'validate_message',
 ]
 
@@ -144,6 +144,60 @@ def _resolve_message(type_name: str, rclpy_active: bool) -> type:
         except (ImportError, AttributeError) as exc:
             raise InterfaceError(f'message type {type_name!r} not found in ROS: {exc}') from exc
     return generated_class(type_name)
+
+
+class RawSample:
+    """CDR bytes of one message as DDS delivered them (encapsulation header, padding)."""
+
+    __slots__ = ('data', 'sample_info')
+
+    def __init__(self, data: bytes):
+        self.data = bytes(data)
+        self.sample_info = None
+
+
+#: (reader twin, writer twin) of each generated class, by class.
+_raw_twins: dict[type, tuple[type, type]] = {}
+
+
+def raw_twins(cls: type) -> tuple[type, type]:
+    """Two classes of ``cls``'s DDS type for moving CDR bytes without decoding them.
+
+    The first is a class generated anew from the same definition (the same DDS type) whose
+    ``deserialize`` keeps the bytes (a :class:`RawSample`): a Cyclone DataReader on a Topic of
+    it hands them over through its public ``take``. The second is a subclass of ``cls`` whose
+    instances (made by ``of(data)``) ``serialize`` to the bytes they hold, which a DataWriter
+    of ``cls`` writes through its public ``write``.
+    """
+    with _lock:
+        twins = _raw_twins.get(cls)
+        if twins is not None:
+            return twins
+        from gait_nodes.interfaces.generate import make_class
+
+        type_name = cls.__ros_type__
+        classes = {name: value for name, value in _classes.items() if name != type_name}
+        reader_twin = make_class(msgdef(type_name), _definitions, classes)
+
+        def keep_bytes(_cls, data, has_header=True, use_version_2=None) -> RawSample:
+            return RawSample(data)
+
+        reader_twin.deserialize = classmethod(keep_bytes)
+
+        class RawMessage(cls):
+            """A message given as its CDR bytes."""
+
+            @classmethod
+            def of(cls_, data: bytes):
+                message = cls_.__new__(cls_)
+                message.__dict__['cdr'] = bytes(data)
+                return message
+
+            def serialize(self, buffer=None, endianness=None, use_version_2=None) -> bytes:
+                return self.__dict__['cdr']
+
+        twins = _raw_twins[cls] = (reader_twin, RawMessage)
+        return twins
 
 
 def is_message(obj: object) -> bool:

@@ -12,7 +12,7 @@ import os
 from pathlib import Path
 
 from gait_nodes.errors import GaitNodesError, RuntimeSelectionError
-from gait_nodes.interfaces import message_type_name, type_hash
+from gait_nodes.interfaces import message_type_name, raw_twins, type_hash
 from gait_nodes.runtime.qos import DurabilityPolicy, HistoryPolicy, ReliabilityPolicy
 
 #: Longest single wait, so that a signal handler runs within this time [ns].
@@ -61,11 +61,6 @@ def _qos(profile, user_data: bytes):
     return Qos(*policies)
 
 
-#: Sample, view and instance state "any" (SampleState.Any | ViewState.Any | InstanceState.Any
-#: of cyclonedds.core), for raw takes.
-_ANY_STATE = 0x3 | 0xC | 0x70
-
-
 def dds_topic_name(topic: str) -> str:
     """ROS topic ``/a/b`` -> DDS topic ``rt/a/b``."""
     return 'rt' + topic
@@ -80,13 +75,8 @@ class _DdsPublisher:
         self.writer.write(msg)
 
     def publish_raw(self, data: bytes) -> None:
-        from cyclonedds._clayer import ddspy_write
-
-        # The writer pads to 4 bytes as cyclonedds-python's own write() does.
-        padded = data + b'\0' * (-len(data) % 4)
-        ret = ddspy_write(self.writer._ref, padded)
-        if ret < 0:
-            raise GaitNodesError(f'DDS write failed with code {ret}')
+        # (the writer pads to 4 bytes)
+        self.writer.write(raw_twins(self.writer.topic.data_type)[1].of(data))
 
     def subscription_count(self) -> int:
         return len(self.writer.get_matched_subscriptions())
@@ -138,20 +128,25 @@ class DdsTransport:
         self.waitset = WaitSet(self.participant)
         self.guard = GuardCondition(self.participant)
         self.waitset.attach(self.guard)
-        self.topics: dict[str, object] = {}
+        self.topics: dict[tuple[str, bool], object] = {}
+        self.topic_types: dict[tuple[str, bool], type] = {}  # the message class of each
         self.readers: list[_DdsSubscription] = []
         self.writers: list = []
 
-    def _topic(self, name: str, msg_type: type):
+    def _topic(self, name: str, msg_type: type, raw: bool = False):
+        """The process's Topic of ``name`` (its raw twin's for raw subscriptions)."""
         from cyclonedds.topic import Topic
 
-        topic = self.topics.get(name)
+        key = (name, raw)
+        topic = self.topics.get(key)
         if topic is None:
-            topic = self.topics[name] = Topic(self.participant, dds_topic_name(name), msg_type)
-        elif topic.data_type is not msg_type:
+            data_type = raw_twins(msg_type)[0] if raw else msg_type
+            topic = self.topics[key] = Topic(self.participant, dds_topic_name(name), data_type)
+            self.topic_types[key] = msg_type
+        elif self.topic_types[key] is not msg_type:
             raise GaitNodesError(
-                f'topic {name} already carries {message_type_name(topic.data_type)} in this '
-                f'process, cannot also use {message_type_name(msg_type)}')
+                f'topic {name} already carries {message_type_name(self.topic_types[key])} in '
+                f'this process, cannot also use {message_type_name(msg_type)}')
         return topic
 
     @staticmethod
@@ -173,7 +168,10 @@ class DdsTransport:
         from cyclonedds.sub import DataReader
 
         msg_type = subscription.msg_type
-        reader = DataReader(self.participant, self._topic(subscription.topic_name, msg_type),
+        # A raw subscription (a recorder) reads the CDR bytes as Cyclone holds them (4-byte
+        # padded, as rmw_cyclonedds hands them to rosbag2), without a decode and an encode.
+        topic = self._topic(subscription.topic_name, msg_type, subscription.raw)
+        reader = DataReader(self.participant, topic,
                             _qos(subscription.qos_profile, self._user_data(msg_type)))
         condition = ReadCondition(reader, SampleState.Any | ViewState.Any | InstanceState.Any)
         self.waitset.attach(condition)
@@ -199,8 +197,6 @@ class DdsTransport:
 
         Raw subscriptions get the CDR bytes (encapsulation header included) as the message.
         """
-        from cyclonedds._clayer import ddspy_take
-
         if timeout_ns > 0:
             self.waitset.wait(min(timeout_ns, WAIT_SLICE_NS))
         self.guard.set(False)
@@ -209,21 +205,12 @@ class DdsTransport:
             if not entry.condition.triggered:
                 continue
             depth = max(entry.subscription.qos_profile.depth, 1)
-            if entry.subscription.raw:
-                # A recorder wants the CDR bytes: take them as Cyclone holds them (4-byte
-                # padded, as rmw_cyclonedds hands them to rosbag2) without a decode/encode.
-                taken = ddspy_take(entry.reader._ref, _ANY_STATE, depth)
-                if isinstance(taken, int):
-                    raise GaitNodesError(f'DDS take failed with code {taken} on '
-                                         f'{entry.subscription.topic_name}')
-                ready.extend((entry.subscription, data) for data, info in taken
-                             if info.valid_data)
-                continue
+            raw = entry.subscription.raw
             for sample in entry.reader.take(N=depth):
                 if getattr(sample, 'sample_info', None) is None or not \
                         sample.sample_info.valid_data:
                     continue
-                ready.append((entry.subscription, sample))
+                ready.append((entry.subscription, sample.data if raw else sample))
         return ready
 
     def count(self, name: str, kind: str) -> int:
@@ -244,6 +231,7 @@ class DdsTransport:
         self.readers.clear()
         self.writers.clear()
         self.topics.clear()
+        self.topic_types.clear()
         if participant is not None:
             participant.__del__()
 
