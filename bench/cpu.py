@@ -579,6 +579,12 @@ def main() -> None:
               f'window from {args.settle:g} s to {args.duration - END_MARGIN_S:g} s of each '
               f'walk; ROS_DOMAIN_ID={os.environ.get("ROS_DOMAIN_ID", "unset")}; bags in '
               f'{workdir}', flush=True)
+        import gait_nodes
+
+        print(f'gait_nodes from {Path(gait_nodes.__file__).parent}; Python '
+              f'{sys.version.split()[0]}'
+              + (f'; RMW_IMPLEMENTATION={os.environ.get("RMW_IMPLEMENTATION", "unset")}'
+                 if 'rclpy' in runtimes else ''), flush=True)
         for note in notes:
             print(note, flush=True)
         for index in range(args.runs):
