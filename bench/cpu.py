@@ -2,7 +2,7 @@
 """CPU budget of the node graph, per node and whole, and how the walk went (issue 18, 2 and 3).
 
     python bench/cpu.py [--runtimes dds,rclpy] [--duration 40] [--runs 3] [--busy N]
-                        [--scenario NAME] [--settle 10] [--inproc-durations 10 40] [--keep DIR]
+                        [--scenario NAME] [--settle 10] [--inproc-durations 10 60] [--keep DIR]
 
 1. Steady CPU per node: ``python -m gait_nodes run --runtime R --scenario S --duration D
    --record BAG`` (one process per node), and each node process's own CPU time (utime + stime
@@ -61,7 +61,9 @@ END_MARGIN_S = 3.0
 START_TIMEOUT_S = 900.0
 #: Time after its end for the launcher to stop the nodes and inspect the bag [s].
 FINISH_TIMEOUT_S = 600.0
-#: Streams published on a period, and the node parameter that sets it.
+#: A stream this far below its nominal rate [%] means its node did not get the CPU it needed.
+SATURATED_PERCENT = 2.0
+#: Streams the simulator publishes once a tick (rate_hz).
 SIMULATOR_TOPICS = ('/joint_states', '/tf', '/gait/zmp', '/gait/com', '/gait/support_polygon')
 
 
@@ -540,9 +542,9 @@ def main() -> None:
     parser.add_argument('--runs', type=int, default=3, help='runs per runtime (default 3)')
     parser.add_argument('--busy', type=int, default=0, choices=(0, 1, 2),
                         help='competing busy processes during the whole bench (default 0)')
-    parser.add_argument('--inproc-durations', type=float, nargs=2, default=(10.0, 40.0),
+    parser.add_argument('--inproc-durations', type=float, nargs=2, default=(10.0, 60.0),
                         metavar=('SHORT', 'LONG'),
-                        help='simulated seconds of the two inproc runs (default 10 40)')
+                        help='simulated seconds of the two inproc runs (default 10 60)')
     parser.add_argument('--no-inproc', action='store_true', help='skip the inproc figure')
     parser.add_argument('--keep', metavar='DIR', default=None,
                         help='keep the bags and logs in DIR (default: a temporary directory)')
@@ -571,6 +573,7 @@ def main() -> None:
     nominal = nominal_rates(defaults, get_scenario(scenario).settings)
     foot_radius = load_robot_description(get_scenario(scenario).robot).foot_radius_m
 
+    load_at_start = os.getloadavg()
     results: dict[str, list[GraphRun]] = {rt: [] for rt in runtimes}
     inproc = None
     with BusyLoad(args.busy) as load:
@@ -602,6 +605,17 @@ def main() -> None:
     print_cpu_table(results, inproc)
     print_rate_table(results, nominal)
     print_walk_table(results, foot_radius)
+    late = sorted({rt for rt, runs in results.items() for run in runs for topic, rate in
+                   run.rates_hz.items() if (deviation_percent(rate, nominal.get(topic)) or 0.0)
+                   < -SATURATED_PERCENT})
+    if late:
+        print(f'\nNote: streams ran more than {SATURATED_PERCENT:g} % below nominal under '
+              f'{", ".join(late)}: the nodes did not get the CPU they asked for, so their '
+              f'figures are what they got, not what they need.')
+    print('Load average (1, 5, 15 min) at the start: '
+          + ' '.join(f'{v:.2f}' for v in load_at_start)
+          + '; at the end: ' + ' '.join(f'{v:.2f}' for v in os.getloadavg())
+          + f' ({os.cpu_count()} CPUs; other jobs on the machine count too)')
 
 
 if __name__ == '__main__':
