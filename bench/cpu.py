@@ -61,7 +61,7 @@ END_MARGIN_S = 3.0
 START_TIMEOUT_S = 900.0
 #: Time after its end for the launcher to stop the nodes and inspect the bag [s].
 FINISH_TIMEOUT_S = 600.0
-#: A stream this far below its nominal rate [%] means its node did not get the CPU it needed.
+#: A stream this far below its nominal rate [%] means its node fell behind its period.
 SATURATED_PERCENT = 2.0
 #: Streams the simulator publishes once a tick (rate_hz).
 SIMULATOR_TOPICS = ('/joint_states', '/tf', '/gait/zmp', '/gait/com', '/gait/support_polygon')
@@ -610,8 +610,9 @@ def main() -> None:
                    < -SATURATED_PERCENT})
     if late:
         print(f'\nNote: streams ran more than {SATURATED_PERCENT:g} % below nominal under '
-              f'{", ".join(late)}: the nodes did not get the CPU they asked for, so their '
-              f'figures are what they got, not what they need.')
+              f'{", ".join(late)}: their nodes fell behind their periods (too little CPU, or '
+              f'late timers), so those CPU figures are what the nodes used, not what they '
+              f'would need at the nominal rates.')
     print('Load average (1, 5, 15 min) at the start: '
           + ' '.join(f'{v:.2f}' for v in load_at_start)
           + '; at the end: ' + ' '.join(f'{v:.2f}' for v in os.getloadavg())
