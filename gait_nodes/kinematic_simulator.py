@@ -417,8 +417,9 @@ class KinematicSimulator(GuardedNode):
             self._clock_publisher.publish(clock)
         if self._started_ns is None:
             self._started_ns = now_ns
-            self.inputs = InputWatchdog(['/joint_commands'], self.params.stale_after_s, now_ns,
-                                        holding='holding the last good command')
+            self.inputs = InputWatchdog(
+                ['/joint_commands'], self.params.stale_after_s, now_ns,
+                holding='following the held trajectory, then holding its last point')
             if self._last_command_ns is not None:
                 self.inputs.heard('/joint_commands', self._last_command_ns)
             q0 = self.simulation.q.copy()

@@ -84,6 +84,7 @@ class ActuatorStep:
         previous_velocities_rad_s: (J,) mean joint velocities over the step before [rad/s].
         velocity_limits_rad_s: (J,) [rad/s or m/s].
         velocity_change_limits_rad_s: (J,) the acceleration limits times the step [rad/s].
+        exact: Every joint moved at its demanded velocity (then none saturated).
     """
 
     positions_rad: np.ndarray
@@ -94,6 +95,7 @@ class ActuatorStep:
     previous_velocities_rad_s: np.ndarray
     velocity_limits_rad_s: np.ndarray
     velocity_change_limits_rad_s: np.ndarray
+    exact: bool = False
 
     @property
     def demanded_velocity_over_limit(self) -> np.ndarray:
@@ -135,7 +137,7 @@ class ActuatorStep:
     @property
     def any_saturated(self) -> bool:
         """Whether any joint saturated (``saturated.any()``)."""
-        return bool(np.count_nonzero(self.saturated))
+        return not self.exact and bool(np.count_nonzero(self.saturated))
 
     @property
     def any_clamped(self) -> bool:
@@ -197,8 +199,8 @@ class PositionActuators:
         self.upper = np.array(robot.upper_limits)
         self.velocity_limits_rad_s = np.array(robot.velocity_limits_rad_s)
         self.acceleration_limits_rad_s2 = np.array(robot.acceleration_limits_rad_s2)
-        # (dt [s], velocity change allowed per step) of the last step: it is nearly always fixed.
-        self._change: tuple[float, np.ndarray] = (math.nan, self.lower)
+        # (dt, a_max dt, a_max dt^2): the velocity change and the error a step may close.
+        self._change: tuple[float, np.ndarray, np.ndarray] = (math.nan, self.lower, self.lower)
 
     def step(self, positions_rad: np.ndarray, velocities_rad_s: np.ndarray,
              commanded_rad: np.ndarray, dt_s: float,
@@ -223,10 +225,11 @@ class PositionActuators:
         if self._any_continuous:
             wrapped = (delta + math.pi) % (2.0 * math.pi) - math.pi
             delta = np.where(self.continuous, wrapped, delta)
-        cached_dt, change = self._change
+        cached_dt, change, one_step = self._change
         if dt_s != cached_dt:
             change = self.acceleration_limits_rad_s2 * dt_s
-            self._change = (dt_s, change)
+            one_step = change * dt_s
+            self._change = (dt_s, change, one_step)
         demanded = delta / dt_s
         if commanded_velocities_rad_s is None:
             feed_forward = 0.0
@@ -237,16 +240,25 @@ class PositionActuators:
             correction = delta - feed_forward * dt_s
         # The error beyond the feed-forward, closed no faster than the joint can stop on it
         # (exactly, where the error is within one step of the acceleration limit).
-        stopping = stopping_velocity(correction, change, dt_s)
-        closes = (np.abs(correction) <= change * dt_s) | (np.abs(correction) <= stopping * dt_s)
-        wanted = np.where(closes, demanded, feed_forward + np.copysign(stopping, correction))
-        velocity = np.clip(np.clip(wanted, velocities_rad_s - change, velocities_rad_s + change),
-                           -self.velocity_limits_rad_s, self.velocity_limits_rad_s)
-        positions = np.clip(positions_rad + velocity * dt_s, self.lower, self.upper)
+        # (np.minimum/np.maximum: np.clip's dispatch costs more than the arithmetic here.)
+        magnitude = np.abs(correction)
+        if np.less_equal(magnitude, one_step).all():
+            wanted = demanded  # every joint closes its error this step (tracking)
+        else:
+            stopping = stopping_velocity(correction, change, dt_s)
+            closes = (magnitude <= one_step) | (magnitude <= stopping * dt_s)
+            wanted = np.where(closes, demanded, feed_forward + np.copysign(stopping, correction))
+        previous = np.asarray(velocities_rad_s, dtype=float)
+        limit = self.velocity_limits_rad_s
+        velocity = np.minimum(np.maximum(np.minimum(np.maximum(wanted, previous - change),
+                                                    previous + change), -limit), limit)
+        # Where nothing limited the step, every joint moved as demanded (bit for bit).
+        exact = velocity.tobytes() == demanded.tobytes()
+        positions = np.minimum(np.maximum(positions_rad + velocity * dt_s, self.lower),
+                               self.upper)
         velocities = (positions - positions_rad) / dt_s
-        return ActuatorStep(positions, velocities, commanded_rad, target, demanded,
-                            np.asarray(velocities_rad_s, dtype=float),
-                            self.velocity_limits_rad_s, change)
+        return ActuatorStep(positions, velocities, commanded_rad, target, demanded, previous,
+                            limit, change, exact)
 
 
 def kabsch(points_in_base: np.ndarray, points_in_world: np.ndarray) -> pin.SE3 | None:

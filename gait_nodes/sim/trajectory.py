@@ -92,8 +92,10 @@ class HeldTrajectory:
             velocity = self._velocities[-1] if t_ns == times[-1] else None
             return self._positions[-1], self._zero if velocity is None else velocity
         t0, t1 = times[k - 1], times[k]
-        p0, p1 = self._positions[k - 1], self._positions[k]
-        v0, v1 = self._velocities[k - 1], self._velocities[k]
+        p0, v0 = self._positions[k - 1], self._velocities[k - 1]
+        if t_ns == t0 and v0 is not None:
+            return p0, v0  # at a knot (every tick, when the knots are on the tick grid)
+        p1, v1 = self._positions[k], self._velocities[k]
         h_s = (t1 - t0) * 1e-9
         s = (t_ns - t0) / (t1 - t0)
         if v0 is None or v1 is None:
