@@ -390,3 +390,23 @@ def test_huge_finite_values_are_accepted(robot, start):
     command = joint_trajectory_from_msg(trajectory_msg(names, [huge, -huge],
                                                        velocities=[-huge, huge]), names)
     assert command.positions_rad[0, 0] == 1e308
+
+
+def test_bag_analysis_reads_overlapping_trajectories_once_per_instant(robot, start):
+    """The windows whole_body_ik publishes overlap; the bag's joint series has each knot once."""
+    from gait_nodes.bag.analysis import _Collector
+    from gait_nodes.interfaces import serialize_message
+
+    names = robot.joint_names
+    collector = _Collector()
+    for first in (0, 2):  # knots 0-3, then 2-5 (2 and 3 again, with the same values)
+        positions = np.array([start + 0.01 * k for k in range(first, first + 4)])
+        msg = trajectory_msg(names, positions, velocities=np.full_like(positions, 2.0),
+                             times_s=[0.005 * k for k in range(4)],
+                             stamp_ns=NS + first * DT_NS)
+        collector.message('/joint_commands', 'trajectory_msgs/msg/JointTrajectory',
+                          serialize_message(msg))
+    series = collector.series.joints['/joint_commands']
+    assert series.stamps_ns == [NS + k * DT_NS for k in range(6)]
+    np.testing.assert_allclose(np.array(series.positions)[:, 0], start[0] + 0.01 * np.arange(6))
+    assert series.names == list(names) and series.velocities[-1][0] == 2.0
