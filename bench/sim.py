@@ -10,7 +10,8 @@
    ``step``: :meth:`KinematicSimulation.step` (actuators, forward kinematics, base fit);
    ``monitor``: central differences + :meth:`ZmpMonitor.evaluate` (centroidal momentum rate,
    ZMP, margin); ``node``: the kinematic_simulator node's whole tick under inproc, messages
-   included (the trajectory replayed as /joint_commands). Median and p99 [ms].
+   included (the trajectory replayed as /joint_commands, as whole_body_ik publishes it: a
+   JointTrajectory of the next 0.3 s every 50 ms). Median and p99 [ms].
 2. The inproc graph of ``python -m gait_nodes run --runtime inproc --record DIR`` (every
    installed contract node, the recorder writing a bag, the scenario's parameters and commands;
    default ``robosimian_crawl``) at 200 Hz for ``--duration`` s of simulated time, ``--runs``
@@ -100,8 +101,10 @@ def core_costs(robot, q0, joints) -> dict[str, list[float]]:
 
 def node_costs(robot_name: str, joints: list[np.ndarray]) -> list[float]:
     """Seconds per tick of the node (inproc), replaying ``joints`` as /joint_commands."""
+    from sim_node import HORIZON_S, PUBLISH_PERIOD_S
+
     from gait_nodes import runtime
-    from gait_nodes.interfaces import get_message
+    from gait_nodes.contract import JointTrajectoryCommand, joint_trajectory_to_msg
 
     runtime.init(args=['bench', '--ros-args', '-p', f'robot:={robot_name}'], runtime='inproc',
                  signal_handlers=False)
@@ -109,22 +112,29 @@ def node_costs(robot_name: str, joints: list[np.ndarray]) -> list[float]:
         from gait_nodes.kinematic_simulator import KinematicSimulator
 
         simulator = KinematicSimulator()
-        names = list(simulator.robot.joint_names)
-        joint_state = get_message('sensor_msgs/msg/JointState')
-        messages = [joint_state(name=names, position=[float(v) for v in command])
-                    for command in joints]
+        names = tuple(simulator.robot.joint_names)
+        positions = np.array(joints)
+        velocities = np.gradient(positions, DT_S, axis=0)
+        every, ahead = round(PUBLISH_PERIOD_S / DT_S), round(HORIZON_S / DT_S) + 1
+        # Tick k (at (k + 1) dt) publishes the trajectory from its own instant on.
+        messages = {k: joint_trajectory_to_msg(JointTrajectoryCommand(
+            (k + 1) * NS // int(RATE_HZ), names,
+            np.arange(min(ahead, len(joints) - k)) * NS // int(RATE_HZ),
+            positions[k:k + ahead], velocities[k:k + ahead]))
+            for k in range(0, len(joints), every)}
+        message_type = type(next(iter(messages.values())))
 
         class Replay(runtime.Node):
             def __init__(self):
                 super().__init__('replay', use_global_arguments=False)
-                self.publisher = self.create_publisher(joint_state, '/joint_commands', 10)
+                self.publisher = self.create_publisher(message_type, '/joint_commands', 10)
                 self.index = 0
                 self.create_timer(DT_S, self.tick)
 
             def tick(self):
-                if self.index < len(messages):
+                if self.index in messages:
                     self.publisher.publish(messages[self.index])
-                    self.index += 1
+                self.index += 1
 
         costs = []
         tick = simulator.tick

@@ -15,6 +15,13 @@ as long as the bag recorded the simulator (or ``--duration`` s), and times the n
 /gait/markers are compared with the bag's, message by message and byte for byte: a speed change
 of the node must leave them as they were.
 
+A bag whose /joint_commands are sensor_msgs/JointState setpoints (recorded before they became
+trajectories) is replayed as whole_body_ik now publishes: every ``--period`` s a
+trajectory_msgs/JointTrajectory of the setpoints from that instant to ``--horizon`` s later,
+stamped at its first point, with their velocities. The outputs then differ from the bag's (the
+joints now have acceleration limits); ``--check`` prints how far /joint_states are from the
+setpoints and from the bag's /joint_states, and the monitor's least stability margin.
+
 Prints the CPU per tick of each run and their median. Figures only: nothing is asserted.
 """
 
@@ -31,6 +38,7 @@ REPO = Path(__file__).resolve().parent.parent
 if str(REPO) not in sys.path:
     sys.path.insert(0, str(REPO))
 
+import numpy as np  # noqa: E402
 import yaml  # noqa: E402
 
 from gait_nodes import runtime  # noqa: E402
@@ -40,24 +48,100 @@ from gait_nodes.runtime import DurabilityPolicy, QoSProfile  # noqa: E402
 from gait_nodes.scenarios import get_scenario  # noqa: E402
 
 RATE_HZ = 200.0
+#: whole_body_ik's publication period and horizon [s] (the agreed defaults).
+PUBLISH_PERIOD_S = 0.05
+HORIZON_S = 0.3
 INPUTS = {'/joint_commands': 10,
           '/gait/footsteps': QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)}
 OUTPUTS = ('/joint_states', '/tf', '/gait/zmp', '/gait/com', '/gait/support_polygon',
            '/gait/markers')
 
 
+def trajectories_from_setpoints(setpoints: list, publish_period_s: float = PUBLISH_PERIOD_S,
+                                horizon_s: float = HORIZON_S) -> list:
+    """(log time [ns], JointTrajectory) as whole_body_ik publishes them, from JointStates.
+
+    Args:
+        setpoints: (log time [ns], sensor_msgs/JointState) of one joint vector each, in stamp
+            order, every one naming the same joints.
+        publish_period_s: One trajectory per this much of the setpoints' stamps [s].
+        horizon_s: Each trajectory holds the setpoints from its first stamp to this later [s].
+
+    Returns:
+        The trajectories, each at the log time of its first setpoint.
+    """
+    from gait_nodes.contract import JointTrajectoryCommand, joint_trajectory_to_msg
+
+    stamps = np.array([msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec
+                       for _, msg in setpoints])
+    positions = np.array([list(msg.position) for _, msg in setpoints])
+    velocities = (np.array([list(msg.velocity) for _, msg in setpoints])
+                  if all(len(msg.velocity) for _, msg in setpoints)
+                  else np.gradient(positions, stamps * 1e-9, axis=0))
+    names = tuple(setpoints[0][1].name)
+    trajectories, next_ns = [], stamps[0]
+    for k, stamp in enumerate(stamps):
+        if stamp < next_ns:
+            continue
+        next_ns = stamp + int(publish_period_s * 1e9)
+        end = int(np.searchsorted(stamps, stamp + int(horizon_s * 1e9), side='right'))
+        trajectories.append((setpoints[k][0], joint_trajectory_to_msg(JointTrajectoryCommand(
+            int(stamp), names, stamps[k:end] - stamp, positions[k:end], velocities[k:end]))))
+    return trajectories
+
+
 def recorded(bag: Path) -> tuple[list, dict, dict]:
-    """(log time [ns], topic, message) of the inputs; CDR bytes of the outputs; topic types."""
-    inputs, outputs, types = [], {topic: [] for topic in OUTPUTS}, {}
+    """(log time [ns], topic, message) of the inputs; CDR bytes of the outputs; topic types.
+
+    JointState /joint_commands come back as the trajectories of
+    :func:`trajectories_from_setpoints`.
+    """
+    inputs, outputs, types, setpoints = [], {topic: [] for topic in OUTPUTS}, {}, []
     for channel, log_time_ns, _, data in BagReader(bag).messages():
         types[channel.topic] = channel.type_name
         if channel.topic in INPUTS:
-            inputs.append((log_time_ns, channel.topic,
-                           get_message(channel.type_name).deserialize(data)))
+            msg = get_message(channel.type_name).deserialize(data)
+            if channel.type_name == 'sensor_msgs/msg/JointState':
+                setpoints.append((log_time_ns, msg))
+            else:
+                inputs.append((log_time_ns, channel.topic, msg))
         elif channel.topic in outputs:
             outputs[channel.topic].append(bytes(data))
+    if setpoints:
+        inputs += [(log_ns, '/joint_commands', msg)
+                   for log_ns, msg in trajectories_from_setpoints(setpoints)]
+        types['/joint_commands'] = 'trajectory_msgs/msg/JointTrajectory'
     inputs.sort(key=lambda item: item[0])  # stable: messages of one instant keep their order
     return inputs, outputs, types
+
+
+def tracking(expected: dict, outputs: dict) -> str:
+    """How far the replayed /joint_states and /gait/zmp are from the bag's, stamp by stamp."""
+    from gait_nodes.interfaces import deserialize_message
+
+    def by_stamp(messages, type_name, values):
+        table = {}
+        for data in messages:
+            msg = deserialize_message(bytes(data), get_message(type_name))
+            table[msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec] = values(msg)
+        return table
+
+    lines = []
+    for topic, type_name, values, unit in (
+            ('/joint_states', 'sensor_msgs/msg/JointState',
+             lambda m: np.array(m.position), 'rad'),
+            ('/gait/zmp', 'geometry_msgs/msg/PointStamped',
+             lambda m: np.array([m.point.x, m.point.y]), 'm')):
+        now = by_stamp(outputs[topic], type_name, values)
+        before = by_stamp(expected[topic], type_name, values)
+        common = sorted(set(now) & set(before))
+        if not common:
+            continue
+        gaps = np.array([np.abs(now[t] - before[t]).max() for t in common])
+        lines.append(f'{topic}: {len(common)} common stamps, largest difference from the '
+                     f'bag\'s {gaps.max():.3e} {unit}, 99th percentile '
+                     f'{np.percentile(gaps, 99):.3e} {unit}')
+    return '\n'.join(lines)
 
 
 class Replay(runtime.Node):
@@ -165,6 +249,7 @@ def main() -> int:
         _, outputs = run(inputs, types, params_file, options.duration, options.check,
                          options.profile)
         if outputs is not None:
+            print(tracking(expected, outputs))
             for topic in OUTPUTS:
                 want, got = expected[topic], outputs[topic]
                 pairs = enumerate(zip(want, got, strict=False))

@@ -25,6 +25,15 @@ layout is spelled once (DESIGN.md, "Nodes and the public topic contract"):
     ``joint_names`` = ``[foot]``; ``header.stamp`` = lift-off time; one point per waypoint with
     the foot position and yaw (rotation about z) and ``time_from_start`` from lift-off. The first
     point is the lift-off place, the last the landing place.
+``/joint_commands`` (trajectory_msgs/JointTrajectory, what a ros2_control
+joint_trajectory_controller takes)
+    ``header.stamp`` = the absolute time of ``time_from_start`` 0 (a zero stamp: "start when
+    received", as the controller); ``joint_names`` = joints of the URDF, unique (every joint in
+    the robot's order from whole_body_ik; a subset is allowed: the other joints hold their last
+    command); points with ``time_from_start`` strictly increasing and >= 0, ``positions`` one per
+    joint, ``velocities`` and ``accelerations`` empty or one per joint (in every point alike),
+    ``effort`` empty. Between points a follower interpolates with cubic Hermite polynomials
+    (positions and velocities) or linearly (positions only).
 
 Times are integer nanoseconds at the message boundary and float seconds inside the arrays.
 Converters from messages validate what they read and raise :class:`ContractError` with the reason;
@@ -38,7 +47,7 @@ import operator
 import weakref
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from itertools import compress, count, repeat
+from itertools import chain, compress, count, repeat
 
 import numpy as np
 
@@ -938,3 +947,139 @@ def swing_trajectory_from_msg(msg) -> SwingTrajectory:
         yaws.append(yaw)
     return SwingTrajectory(msg.joint_names[0], time_msg_to_ns(msg.header.stamp),
                            np.array(times), np.array(positions).reshape(-1, 3), np.array(yaws))
+
+
+# -- /joint_commands -------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class JointTrajectoryCommand:
+    """A /joint_commands trajectory, validated (layout in the module docstring).
+
+    Attributes:
+        stamp_ns: ``header.stamp`` [ns]: the absolute time of ``time_from_start`` 0; 0 means
+            "start when received".
+        joint_names: The joints the trajectory commands, unique.
+        times_from_start_ns: (N,) int64, strictly increasing, >= 0 [ns].
+        positions_rad: (N, J) positions, one row per point [rad or m], read-only.
+        velocities_rad_s: (N, J) velocities [rad/s or m/s], read-only, or None (positions only).
+        accelerations_rad_s2: (N, J) accelerations [rad/s^2 or m/s^2], read-only, or None.
+    """
+
+    stamp_ns: int
+    joint_names: tuple[str, ...]
+    times_from_start_ns: np.ndarray
+    positions_rad: np.ndarray
+    velocities_rad_s: np.ndarray | None = None
+    accelerations_rad_s2: np.ndarray | None = None
+
+    def times_ns(self, received_ns: int) -> np.ndarray:
+        """(N,) absolute times of the points [ns]; a zero stamp counts from ``received_ns``."""
+        return self.times_from_start_ns + (self.stamp_ns if self.stamp_ns else received_ns)
+
+
+def _point_rows(rows: list, field_name: str, count: int, required: bool) -> np.ndarray | None:
+    """(N, count) read-only array of one field of every point, or None if empty in all.
+
+    Args:
+        rows: The field (a sequence of numbers) of each point.
+        field_name: Its name, for the errors.
+        count: Number of joint names.
+        required: Whether the field may be empty (in every point alike).
+
+    Raises:
+        ContractError: A point's field is neither ``count`` values nor (where ``required`` is
+            False) empty in every point, or a value is NaN or infinite.
+    """
+    sizes = set(map(len, rows))
+    if not required and sizes == {0}:
+        return None
+    if sizes != {count}:
+        k = next(k for k, row in enumerate(rows) if len(row) != count)
+        allowed = f'{count}' if required else f'0 (in every point) or {count}'
+        raise ContractError(f'point {k} has {len(rows[k])} {field_name} for {count} joint '
+                            f'names; allowed: {allowed}')
+    # fromiter over the chained rows: half the cost of np.array's look at every nested list.
+    array = np.fromiter(chain.from_iterable(rows), float, len(rows) * count).reshape(
+        len(rows), count)
+    finite = np.isfinite(array)
+    if not finite.all():
+        k = int(np.flatnonzero(~finite.all(axis=1))[0])
+        raise ContractError(f'point {k} {field_name} hold a NaN or infinite value')
+    array.setflags(write=False)
+    return array
+
+
+def joint_trajectory_from_msg(msg, known_joints: Sequence[str] | None = None
+                              ) -> JointTrajectoryCommand:
+    """The validated trajectory of a /joint_commands JointTrajectory.
+
+    The checks are those a ros2_control joint_trajectory_controller makes before it accepts a
+    trajectory (a bad message is refused whole).
+
+    Args:
+        msg: trajectory_msgs/msg/JointTrajectory.
+        known_joints: The joints a follower has; None accepts any names.
+
+    Raises:
+        ContractError: No joint names, a repeated or unknown one; no points; ``time_from_start``
+            negative or not strictly increasing; positions not one per joint name; velocities
+            or accelerations neither empty nor one per joint name; an effort; a NaN or
+            infinite value.
+    """
+    names = tuple(msg.joint_names)
+    if not names:
+        raise ContractError('a joint trajectory names no joints')
+    if len(set(names)) != len(names):
+        repeated = sorted({n for n in names if names.count(n) > 1})
+        raise ContractError(f'joint names repeat: {repeated}')
+    if known_joints is not None and names != tuple(known_joints):
+        known = set(known_joints)
+        unknown = [n for n in names if n not in known]
+        if unknown:
+            raise ContractError(f'unknown joints {unknown[:5]}; joints: {list(known_joints)}')
+    points = msg.points
+    if not len(points):
+        raise ContractError('a joint trajectory has no points')
+    times, positions, velocities, accelerations = [], [], [], []
+    for k, point in enumerate(points):
+        duration = point.time_from_start
+        times.append(duration.sec * _NS_PER_S + duration.nanosec)
+        positions.append(point.positions)
+        velocities.append(point.velocities)
+        accelerations.append(point.accelerations)
+        if len(point.effort):
+            raise ContractError(f'point {k} carries efforts; allowed: none (positions, '
+                                f'velocities, accelerations)')
+    if times[0] < 0:
+        raise ContractError(f'time_from_start of point 0 is {times[0] * 1e-9} s; allowed: >= 0')
+    for k in range(1, len(times)):
+        if times[k] <= times[k - 1]:
+            raise ContractError(f'time_from_start not strictly increasing: point {k} at '
+                                f'{times[k] * 1e-9} s after point {k - 1} at '
+                                f'{times[k - 1] * 1e-9} s')
+    count = len(names)
+    times_ns = np.array(times, dtype=np.int64)
+    times_ns.setflags(write=False)
+    return JointTrajectoryCommand(
+        time_msg_to_ns(msg.header.stamp), names, times_ns,
+        _point_rows(positions, 'positions', count, required=True),
+        _point_rows(velocities, 'velocities', count, required=False),
+        _point_rows(accelerations, 'accelerations', count, required=False))
+
+
+def joint_trajectory_to_msg(command: JointTrajectoryCommand):
+    """trajectory_msgs/JointTrajectory of ``command`` (the inverse of the reader)."""
+    point = get_constructor('trajectory_msgs/msg/JointTrajectoryPoint')
+    duration = get_constructor('builtin_interfaces/msg/Duration')
+    count = len(command.times_from_start_ns)
+    velocities = (command.velocities_rad_s.tolist() if command.velocities_rad_s is not None
+                  else [[]] * count)
+    accelerations = (command.accelerations_rad_s2.tolist()
+                     if command.accelerations_rad_s2 is not None else [[]] * count)
+    points = [point(positions, v, a, [], duration(*divmod(int(t), _NS_PER_S)))
+              for positions, v, a, t in zip(command.positions_rad.tolist(), velocities,
+                                            accelerations, command.times_from_start_ns.tolist(),
+                                            strict=True)]
+    return get_constructor('trajectory_msgs/msg/JointTrajectory')(
+        _header(command.stamp_ns, ''), list(command.joint_names), points)

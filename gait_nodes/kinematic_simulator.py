@@ -1,9 +1,16 @@
 """kinematic_simulator node: /joint_commands in; joint states, base pose and the ZMP monitor out.
 
 ``python -m gait_nodes.kinematic_simulator [--ros-args -p robot:=talos -p publish_clock:=true]``.
-Every tick (``rate_hz``) the simulator moves each joint toward its last commanded position as a
-position-controlled actuator with the robot's velocity limit would
-(:class:`gait_nodes.sim.kinematics.PositionActuators`), places the floating base on the stance
+/joint_commands is a trajectory_msgs/JointTrajectory, as a ros2_control
+joint_trajectory_controller takes it: the simulator holds one trajectory
+(:class:`gait_nodes.sim.trajectory.HeldTrajectory`); a new message replaces it from the message's
+first point's time on (the held points before that time are kept), a zero header stamp meaning
+"start when received". Every tick (``rate_hz``) the simulator samples the held trajectory at the
+tick's own stamp (cubic Hermite between points with velocities, linear without; past the end the
+last point, held) and moves each joint toward that as a position-controlled actuator with the
+robot's velocity and acceleration limits would, the trajectory's velocity as feed-forward
+(:class:`gait_nodes.sim.kinematics.PositionActuators`): the joints follow the stamps the
+commands carry, not the moments their messages arrive. It places the floating base on the stance
 feet so that they do not slip (:class:`gait_nodes.sim.kinematics.KinematicSimulation`; which
 feet stand comes from the latest /gait/footsteps plan, without one from the foot heights) and
 publishes /joint_states (positions, velocities) and /tf (odom -> base_link).
@@ -15,10 +22,13 @@ previous tick). /gait/markers (ZMP and COM spheres, support polygon outline, for
 Foxglove) comes at a display's rate, ``markers_rate_hz``: the first sample of each of its
 periods. /diagnostics: a stability report at once whenever the level changes (OK, WARN
 below ``warn_margin_m``, ERROR with the ZMP outside the support polygon) and a stale-input report
-when /joint_commands stop for ``stale_after_s``; every ``diagnostics_period_s`` a summary
-(stability margin, joint velocity saturation, foot slip, inputs). Joint commands with unknown
-joints, mismatched lengths, repeated names or NaN are dropped and reported; the simulator keeps
-tracking its last good command.
+when /joint_commands stop for ``stale_after_s`` (the simulator goes on following what it holds,
+then holds its last point); every ``diagnostics_period_s`` a summary (stability margin, joint
+velocity and acceleration saturation, foot slip, inputs). A trajectory that a
+joint_trajectory_controller would refuse (unknown or repeated joint names, no points,
+``time_from_start`` negative or not strictly increasing, positions not one per joint, velocities
+or accelerations neither empty nor one per joint, efforts, NaN) is dropped whole and reported
+with what was wrong; the held trajectory is unchanged. Accelerations are checked, not used.
 
 With ``publish_clock`` the simulator owns time: it advances by one period per tick (paced by the
 wall clock) and publishes /clock, which every node started with ``use_sim_time:=true`` follows.
@@ -33,7 +43,6 @@ from __future__ import annotations
 
 import bisect
 import math
-import struct
 import sys
 from collections import deque
 from dataclasses import dataclass
@@ -46,15 +55,16 @@ from gait_nodes.contract import (
     WORLD_FRAME,
     ContractError,
     FootstepPlan,
+    JointTrajectoryCommand,
     footsteps_from_msg,
-    time_msg_to_ns,
+    joint_trajectory_from_msg,
 )
 from gait_nodes.diagnostics import ERROR, OK, WARN, DiagnosticsReporter
 from gait_nodes.errors import GaitNodesError, ParameterError
 from gait_nodes.faults import FaultGuard, GuardedNode
 from gait_nodes.interfaces import get_constructor, get_message
 from gait_nodes.paths import node_defaults as shipped_node_defaults
-from gait_nodes.robot.model import RobotModel, load_robot_model
+from gait_nodes.robot.model import load_robot_model
 from gait_nodes.robot.whole_body_ik import nominal_configuration
 from gait_nodes.runtime import (
     Clock,
@@ -65,16 +75,13 @@ from gait_nodes.runtime import (
 )
 from gait_nodes.settings import checked_number as _number
 from gait_nodes.sim.kinematics import ActuatorStep, KinematicSimulation, SimulationSettings
+from gait_nodes.sim.trajectory import HeldTrajectory
 from gait_nodes.sim.zmp_monitor import SlidingDifferences, Support, ZmpMonitor, ZmpState
 from gait_nodes.watchdog import InputWatchdog
 
 NODE_NAME = 'kinematic_simulator'
 #: On the wall clock, how many periods the step grid may trail the clock before re-anchoring.
 MAX_LAG_PERIODS = 10
-#: How far [periods] a joint setpoint is carried forward with its velocity when the next is late.
-MAX_EXTRAPOLATION_PERIODS = 2
-#: Setpoints kept for interpolation (0.1 s of a 200 Hz stream).
-SETPOINT_BUFFER = 20
 #: Slowest rate [Hz] of the simulation and the markers (a 5e-324 Hz timer has no period).
 MIN_RATE_HZ = 0.01
 LEVEL_WORDS = {OK: 'OK', WARN: 'WARN', ERROR: 'ERROR'}
@@ -101,7 +108,6 @@ class KinematicSimulatorParams:
     publish_clock: bool
     warn_margin_m: float
     stale_after_s: float
-    command_delay_s: float
     diagnostics_period_s: float
     contact_height_tolerance_m: float
     ground_height_m: float
@@ -120,7 +126,6 @@ class KinematicSimulatorParams:
             publish_clock=_flag(values, 'publish_clock'),
             warn_margin_m=_number(values, 'warn_margin_m', 0.0, 1.0),
             stale_after_s=_number(values, 'stale_after_s', 0.0, 60.0, low_open=True),
-            command_delay_s=_number(values, 'command_delay_s', 0.0, 0.1),
             diagnostics_period_s=_number(values, 'diagnostics_period_s', 0.0, 60.0,
                                          low_open=True),
             contact_height_tolerance_m=_number(values, 'contact_height_tolerance_m', 0.0, 0.5),
@@ -133,83 +138,6 @@ class KinematicSimulatorParams:
         """Settings of the simulation core."""
         return SimulationSettings(ground_height_m=self.ground_height_m,
                                   contact_height_tolerance_m=self.contact_height_tolerance_m)
-
-
-def joint_command_from_msg(msg, robot: RobotModel, previous: np.ndarray,
-                           previous_velocity: np.ndarray | None = None
-                           ) -> tuple[np.ndarray, np.ndarray]:
-    """The commanded joint positions and velocities of a /joint_commands JointState.
-
-    A command may name a subset of the joints; the others keep their previous command
-    (``previous``, ``previous_velocity``: zero when None). A command without velocities
-    commands zero velocity for the joints it names. The arrays may be read-only.
-
-    Raises:
-        ContractError: No joints, an unknown or repeated joint name, ``position`` (or a
-            non-empty ``velocity`` or ``effort``) not one value per name, or a NaN/infinite
-            value.
-    """
-    count = len(msg.name)
-    if not count:
-        raise ContractError('a joint command names no joints')
-    if len(msg.position) != count:
-        raise ContractError(f'{count} joint names but {len(msg.position)} positions')
-    if len(msg.velocity) not in (0, count):
-        raise ContractError(f'{count} joint names but {len(msg.velocity)} velocities')
-    if len(msg.effort) not in (0, count):  # unused, but a JointState of another layout
-        raise ContractError(f'{count} joint names but {len(msg.effort)} efforts')
-    if tuple(msg.name) == robot.joint_names:
-        # Every joint in the robot's order (what whole_body_ik sends): no lookups needed.
-        if not _all_finite(msg.position, msg.velocity):
-            raise ContractError('a joint command holds a NaN or infinite value')
-        return (_float_array(msg.position),
-                _float_array(msg.velocity) if len(msg.velocity) else np.zeros(count))
-    names = list(msg.name)
-    if len(set(names)) != len(names):
-        repeated = sorted({n for n in names if names.count(n) > 1})
-        raise ContractError(f'joint names repeat: {repeated}')
-    unknown = [n for n in names if n not in robot.joint_names]
-    if unknown:
-        raise ContractError(f'unknown joints {unknown[:5]} for {robot.name}; joints: '
-                            f'{list(robot.joint_names)}')
-    positions = np.array(msg.position, dtype=float)
-    if not np.all(np.isfinite(positions)) or not np.all(np.isfinite(np.array(msg.velocity,
-                                                                              dtype=float))):
-        raise ContractError('a joint command holds a NaN or infinite value')
-    command = np.array(previous, dtype=float)
-    velocity = (np.zeros(len(command)) if previous_velocity is None
-                else np.array(previous_velocity, dtype=float))
-    indices = robot.indices(names)
-    command[indices] = positions
-    velocity[indices] = np.array(msg.velocity, dtype=float) if len(msg.velocity) else 0.0
-    return command, velocity
-
-
-def _float_array(values) -> np.ndarray:
-    """``np.array(values, dtype=float)`` of a sequence of numbers, read-only.
-
-    Packed as C doubles and viewed by numpy: half the cost of numpy's conversion of a list,
-    which looks at each element's type first; the same floats.
-    """
-    packer = _PACKERS.get(len(values))
-    if packer is None:
-        packer = _PACKERS[len(values)] = struct.Struct(f'{len(values)}d')
-    return np.frombuffer(packer.pack(*values))
-
-
-#: struct.Struct of n doubles, by n (_float_array).
-_PACKERS: dict[int, struct.Struct] = {}
-
-
-def _all_finite(values, more_values) -> bool:
-    """Whether every one of the floats ``values`` and ``more_values`` is finite.
-
-    A finite sum has finite terms (a NaN or an infinity makes the sum NaN or infinite), and
-    summing is cheaper than asking each number (or numpy's isfinite and its reduction); a
-    sum that overflows is checked term by term.
-    """
-    return (math.isfinite(sum(values) + sum(more_values))
-            or (all(map(math.isfinite, values)) and all(map(math.isfinite, more_values))))
 
 
 class PlanContacts:
@@ -254,6 +182,7 @@ class _Window:
     def __init__(self):
         self.ticks = 0
         self.saturated_ticks = 0
+        self.acceleration_saturated_ticks = 0
         self.max_ratio = 0.0
         self.saturated_joints: dict[str, float] = {}
         self.clamped_joints: set[str] = set()
@@ -283,11 +212,9 @@ class KinematicSimulator(GuardedNode):
                                   self.params.ground_height_m)
         # The monitor's finite differences, each configuration difference computed once.
         self._differences = SlidingDifferences(self.robot.model)
-        self._command = self.robot.joint_positions(q_initial)
-        self._command_velocity = np.zeros(len(self._command))
-        self._command_stamp_ns: int | None = None
-        #: (stamp [ns], joint vector) of the latest setpoints, oldest first.
-        self._setpoints: deque = deque(maxlen=SETPOINT_BUFFER)
+        #: The joint trajectory being followed (the initial configuration until a command).
+        self.trajectory = HeldTrajectory(self.robot.joint_positions(q_initial))
+        self._joint_index = {name: k for k, name in enumerate(self.robot.joint_names)}
         self._plan: FootstepPlan | None = None
         self._plan_contacts: PlanContacts | None = None
         self._last_command_ns: int | None = None
@@ -356,7 +283,8 @@ class KinematicSimulator(GuardedNode):
         self._clock_publisher = (
             self.create_publisher(get_message('rosgraph_msgs/msg/Clock'), '/clock', 10)
             if self.params.publish_clock else None)
-        self.create_subscription(joint_state, '/joint_commands', self._on_joint_commands, 10)
+        self.create_subscription(get_message('trajectory_msgs/msg/JointTrajectory'),
+                                 '/joint_commands', self._on_joint_commands, 10)
         self.create_subscription(get_message('trajectory_msgs/msg/MultiDOFJointTrajectory'),
                                  '/gait/footsteps', self._on_footsteps,
                                  QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL))
@@ -422,58 +350,39 @@ class KinematicSimulator(GuardedNode):
     # -- inputs --------------------------------------------------------------------------------
 
     def _on_joint_commands(self, msg) -> None:
-        stamp_ns = time_msg_to_ns(msg.header.stamp) or self._now_ns()
+        received_ns = self._now_ns()
         try:
-            # The joints a command does not name go on as they were (a command of every joint's
-            # length names them all, or is refused).
-            held = self._command if len(msg.name) == len(self._command) \
-                else self._command_at(stamp_ns)
-            self._command, self._command_velocity = joint_command_from_msg(
-                msg, self.robot, held, self._command_velocity)
+            command = joint_trajectory_from_msg(msg, self.robot.joint_names)
         except ContractError as exc:
             self.diagnostics.drop('/joint_commands', str(exc))
             return
-        if self._setpoints and stamp_ns <= self._setpoints[-1][0]:
-            self._setpoints.clear()  # a stamp out of order (a restarted publisher): start over
-        self._setpoints.append((stamp_ns, self._command))
-        self._command_stamp_ns = stamp_ns
-        self._last_command_ns = self._now_ns()
+        self._follow(command, received_ns)
+        self._last_command_ns = received_ns
         if self.inputs is not None:
-            self.inputs.heard('/joint_commands', self._last_command_ns)
+            self.inputs.heard('/joint_commands', received_ns)
             if self.inputs.stale:
                 self._inputs_quiet_ns = (0, 0)  # fresh again: the verdict changes
 
-    def _command_at(self, now_ns: int) -> np.ndarray:
-        """The command stream at ``now_ns - command_delay_s``, by its stamps.
+    def _follow(self, command: JointTrajectoryCommand, received_ns: int) -> None:
+        """Replace the held trajectory with ``command`` from its first point on.
 
-        A position servo fed by a stream of stamped setpoints (as a trajectory controller is)
-        interpolates between them: the joints follow the commanded motion, not the arrival
-        times of its messages. Between the two setpoints around that instant the command is
-        interpolated linearly; past the newest it is carried forward with its commanded
-        velocity for at most ``MAX_EXTRAPOLATION_PERIODS``. Under inproc delivery has no
-        latency and no delay is taken.
+        A trajectory of some joints only is completed as a joint_trajectory_controller does:
+        the other joints hold their command at receipt, at zero velocity.
         """
-        if self._command_stamp_ns is None:
-            return self._command
-        delay_ns = 0 if self.context.runtime == 'inproc' else self.params.command_delay_s * 1e9
-        at_ns = now_ns - delay_ns
-        if at_ns == self._command_stamp_ns:
-            return self._command  # at the newest setpoint (every tick under inproc)
-        setpoints = self._setpoints
-        if len(setpoints) > 1 and at_ns < setpoints[-1][0]:
-            for k in range(len(setpoints) - 1, 0, -1):
-                (t0, q0), (t1, q1) = setpoints[k - 1], setpoints[k]
-                if t0 <= at_ns:
-                    return q0 + (q1 - q0) * ((at_ns - t0) / (t1 - t0))
-            return setpoints[0][1]
-        period_ns = 1e9 / self.params.rate_hz
-        ahead_ns = min(max(at_ns - self._command_stamp_ns, 0), MAX_EXTRAPOLATION_PERIODS
-                       * period_ns)
-        if ahead_ns == 0:
-            # At the newest setpoint or before it: command + velocity * 0 is the command itself
-            # (up to the sign of a zero, which no joint position sees).
-            return self._command
-        return self._command + self._command_velocity * (ahead_ns * 1e-9)
+        positions, velocities = command.positions_rad, command.velocities_rad_s
+        if command.joint_names != self.robot.joint_names:
+            held, _ = self.trajectory.sample(received_ns)
+            count = len(command.times_from_start_ns)
+            indices = [self._joint_index[name] for name in command.joint_names]
+            full = np.repeat(held[None, :], count, axis=0)
+            full[:, indices] = positions
+            positions = full
+            if velocities is not None:
+                full = np.zeros_like(positions)
+                full[:, indices] = velocities
+                velocities = full
+        self.trajectory.replace(command.times_ns(received_ns), positions, velocities,
+                                received_ns)
 
     def _on_footsteps(self, msg) -> None:
         try:
@@ -508,8 +417,9 @@ class KinematicSimulator(GuardedNode):
             self._clock_publisher.publish(clock)
         if self._started_ns is None:
             self._started_ns = now_ns
-            self.inputs = InputWatchdog(['/joint_commands'], self.params.stale_after_s, now_ns,
-                                        holding='holding the last good command')
+            self.inputs = InputWatchdog(
+                ['/joint_commands'], self.params.stale_after_s, now_ns,
+                holding='following the held trajectory, then holding its last point')
             if self._last_command_ns is not None:
                 self.inputs.heard('/joint_commands', self._last_command_ns)
             q0 = self.simulation.q.copy()
@@ -522,7 +432,10 @@ class KinematicSimulator(GuardedNode):
         contacts = None
         if self._plan is not None:
             contacts = self._plan_contacts.at((now_ns - self._plan.start_ns) * 1e-9)
-        step = self.simulation.step(self._command_at(now_ns), dt_s, contacts)
+        trajectory = self.trajectory
+        command, command_velocity = trajectory.sample(now_ns)
+        trajectory.discard_before(now_ns)
+        step = self.simulation.step(command, dt_s, contacts, command_velocity)
         header = self._publish_state(now_ns, step.q, step.actuators)
         self._history.append((now_ns, step.q, step.contact_points_in_world, header))
         self._account(step)
@@ -575,6 +488,8 @@ class KinematicSimulator(GuardedNode):
         actuators = step.actuators
         if actuators.any_saturated:
             window.saturated_ticks += 1
+            window.acceleration_saturated_ticks += bool(
+                np.count_nonzero(actuators.acceleration_saturated))
             ratios = actuators.demanded_over_limit
             window.max_ratio = max(window.max_ratio, float(ratios.max()))
             for k in np.flatnonzero(actuators.saturated):
@@ -777,12 +692,16 @@ class KinematicSimulator(GuardedNode):
                  'samples_below_warn': window.samples_warn,
                  'warn_margin_m': self.params.warn_margin_m}))
         joints = sorted(window.saturated_joints, key=lambda j: -window.saturated_joints[j])
+        # The aspect keeps its name ('velocity saturation'); it counts the ticks where a joint
+        # lagged its command at its velocity or its acceleration limit.
         statuses.append((
             'velocity saturation', WARN if window.saturated_ticks else OK,
-            (f'{window.saturated_ticks} of {window.ticks} ticks saturated, commands up to '
+            (f'{window.saturated_ticks} of {window.ticks} ticks saturated '
+             f'({window.acceleration_saturated_ticks} at an acceleration limit), commands up to '
              f'{window.max_ratio:.3g}x the limit: {", ".join(joints)}')
-            if window.saturated_ticks else 'joint velocities within limits',
+            if window.saturated_ticks else 'joint velocities and accelerations within limits',
             {'saturated_ticks': window.saturated_ticks, 'ticks': window.ticks,
+             'acceleration_saturated_ticks': window.acceleration_saturated_ticks,
              'max_demanded_over_limit': window.max_ratio, 'joints': ','.join(joints),
              'clamped_to_position_limits': ','.join(sorted(window.clamped_joints))}))
         statuses.append((

@@ -15,6 +15,7 @@ from hypothesis import strategies as st
 from planning_helpers import QUADRUPED
 from test_footstep_planner_node import Graph
 from test_kinematic_simulator import NS, joint_command, run_simulator, stamp_ns, values_of
+from test_sim_trajectory import trajectory_msg
 
 from gait_nodes import graph, runtime
 from gait_nodes.contract import (
@@ -246,15 +247,18 @@ def inproc():
 
 
 def test_odd_joint_commands_are_refused_or_held_within_the_limits(inproc, robot_model):
-    """Efforts of another length: refused. Huge, subnormal, oddly stamped: within the limits."""
+    """Efforts: refused. Huge, subnormal, oddly stamped (far future, negative): within limits."""
     names = list(robot_model.joint_names)
     start = robot_model.joint_positions(nominal_configuration(robot_model))
     efforts = joint_command(names, start + 0.3)
-    efforts.effort = [1.0]
+    efforts.points[0].effort = [1.0]
     far_future = joint_command(names, start)
     far_future.header.stamp.sec, far_future.header.stamp.nanosec = 2**31 - 1, 999_999_999
     negative = joint_command(names, start)
     negative.header.stamp.sec = -5
+    long_ago = trajectory_msg(names, [start + 0.2, start + 0.25], times_s=[0.0, 0.01],
+                              stamp_ns=1)  # over before it arrives: its last point is held
+    far_end = trajectory_msg(names, [start, start + 0.3], times_s=[0.0, 1e6])
     schedule = [(NS // 10, efforts),
                 (NS // 5, joint_command(names, np.full(len(names), 1e308),
                                         np.full(len(names), -1e308))),
@@ -262,18 +266,25 @@ def test_odd_joint_commands_are_refused_or_held_within_the_limits(inproc, robot_
                 (NS // 5 + 2 * NS // 200, joint_command(names, start + 5e-324)),
                 (NS // 5 + 3 * NS // 200, far_future),
                 (NS // 5 + 4 * NS // 200, negative),
+                (NS // 5 + 5 * NS // 200, long_ago),
+                (NS // 5 + 6 * NS // 200, far_end),
                 (NS // 2, joint_command(names, start))]
     simulator, collector = run_simulator(1.0, schedule)
     drops = [s for _, s in collector.statuses('input /joint_commands')]
     assert len(drops) == 1 and 'efforts' in values_of(drops[0])['reason']
     lower, upper = robot_model.lower_limits, robot_model.upper_limits
     limits = robot_model.velocity_limits_rad_s
+    accelerations = robot_model.acceleration_limits_rad_s2
     states = collector.messages['/joint_states']
+    previous = np.zeros(len(names))
     for msg in states:
         positions = np.array(msg.position)
         assert np.all(np.isfinite(positions)) and np.all(np.isfinite(msg.velocity))
         assert np.all((positions >= lower - 1e-12) & (positions <= upper + 1e-12))
         assert np.all(np.abs(msg.velocity) <= limits * (1 + 1e-9))
+        assert np.all(np.abs(np.array(msg.velocity) - previous)
+                      <= accelerations * 0.005 * (1 + 1e-9))
+        previous = np.array(msg.velocity)
     before = [np.array(m.position) for m in states if stamp_ns(m) <= NS // 5]
     for positions in before:  # the refused command moved nothing
         np.testing.assert_allclose(positions, start, atol=1e-12)

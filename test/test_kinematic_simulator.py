@@ -6,6 +6,7 @@ by body from finite differences of those configurations.
 """
 
 import math
+import re
 from types import SimpleNamespace
 
 import numpy as np
@@ -13,6 +14,7 @@ import pinocchio as pin
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from test_sim_trajectory import bad_trajectories, trajectory_msg
 from test_zmp_monitor import body_by_body_zmp
 
 from gait_nodes import graph, runtime
@@ -58,29 +60,38 @@ def q_nominal(robot):
 
 
 @settings(max_examples=40, deadline=None)
-@given(seed=st.integers(0, 2**31), spread=st.floats(0.0, 4.0), dt=st.floats(1e-4, 0.05))
-def test_actuators_respect_velocity_and_position_limits(robot, q_nominal, seed, spread, dt):
+@given(seed=st.integers(0, 2**31), spread=st.floats(0.0, 4.0), dt=st.floats(1e-4, 0.05),
+       moving=st.booleans())
+def test_actuators_respect_velocity_acceleration_and_position_limits(robot, q_nominal, seed,
+                                                                     spread, dt, moving):
     rng = np.random.default_rng(seed)
     actuators = PositionActuators(robot)
     current = robot.joint_positions(q_nominal)
-    command = current + rng.uniform(-spread, spread, len(current))
-    step = actuators.step(current, command, dt)
     limits = robot.velocity_limits_rad_s
+    change = robot.acceleration_limits_rad_s2 * dt
+    before = rng.uniform(-limits, limits) if moving else np.zeros(len(current))
+    command = current + rng.uniform(-spread, spread, len(current))
+    step = actuators.step(current, before, command, dt)
     assert np.all(np.abs(step.velocities_rad_s) <= limits * (1 + 1e-12))
+    assert np.all(np.abs(step.velocities_rad_s - before) <= change * (1 + 1e-9) + 1e-12)
     np.testing.assert_allclose(step.positions_rad - current, step.velocities_rad_s * dt,
                                atol=1e-15)
     assert np.all(robot.within_limits(step.positions_rad))
     target = np.clip(command, robot.lower_limits, robot.upper_limits)
-    reachable = np.abs(target - current) <= limits * dt
+    demanded = (target - current) / dt
+    # A joint lands on its target when the velocity that does it is within both limits (and
+    # the joint could stop there: a still target, reached in one step at most a_max dt away).
+    reachable = ((np.abs(demanded) <= limits) & (np.abs(demanded - before) <= change)
+                 & (np.abs(target - current) <= change * dt))
     np.testing.assert_allclose(step.positions_rad[reachable], target[reachable], atol=1e-15)
-    # A joint that could not reach its command moved at exactly its limit, toward it.
-    lagging = ~reachable
-    np.testing.assert_allclose(np.abs(step.velocities_rad_s[lagging]), limits[lagging],
-                               rtol=1e-12)
-    assert np.all(np.sign(step.velocities_rad_s[lagging])
-                  == np.sign(target - current)[lagging])
-    np.testing.assert_array_equal(step.saturated, ~reachable & (
-        np.abs(target - current) > limits * dt * (1 + 1e-9)))
+    if not moving:  # from rest, a joint that does not land moves toward its target, not past it
+        lagging = ~reachable & (target != current)
+        assert np.all(np.sign(step.velocities_rad_s[lagging])
+                      == np.sign(target - current)[lagging])
+        assert np.all(np.abs(step.positions_rad - current)[lagging]
+                      <= np.abs(target - current)[lagging])
+        np.testing.assert_array_equal(step.saturated, np.abs(target - current)
+                                      > change * dt * (1 + 1e-9))
     np.testing.assert_array_equal(step.clamped_to_limits, target != command)
     assert step.any_saturated == bool(step.saturated.any())
     assert step.any_clamped == bool(step.clamped_to_limits.any())
@@ -549,8 +560,8 @@ class CommandSource(runtime.Node):
     def __init__(self, schedule, plan=None):
         super().__init__('command_source', use_global_arguments=False)
         self.schedule = sorted(schedule, key=lambda item: item[0])
-        self.publisher = self.create_publisher(get_message('sensor_msgs/msg/JointState'),
-                                               '/joint_commands', 10)
+        self.publisher = self.create_publisher(
+            get_message('trajectory_msgs/msg/JointTrajectory'), '/joint_commands', 10)
         if plan is not None:
             footsteps = self.create_publisher(
                 get_message('trajectory_msgs/msg/MultiDOFJointTrajectory'), '/gait/footsteps',
@@ -566,11 +577,9 @@ class CommandSource(runtime.Node):
 
 
 def joint_command(names, positions, velocities=()):
-    msg = get_message('sensor_msgs/msg/JointState')()
-    msg.name = list(names)
-    msg.position = [float(p) for p in positions]
-    msg.velocity = [float(v) for v in velocities]
-    return msg
+    """A one-point /joint_commands trajectory: be at ``positions`` now (zero stamp: receipt)."""
+    return trajectory_msg(names, [positions], [velocities] if len(velocities) else (),
+                          times_s=[0.0])
 
 
 def run_simulator(seconds, schedule=(), plan=None, parameters=()):
@@ -643,56 +652,27 @@ def test_every_monitor_sample_is_of_a_published_joint_state_and_base_pose(inproc
 
 
 def test_bad_joint_commands_are_rejected_and_the_state_is_held(inproc, robot, q_nominal):
+    """Every trajectory a joint_trajectory_controller refuses: dropped whole, reported, held."""
     names = list(robot.joint_names)
     start = robot.joint_positions(q_nominal)
     good = start.copy()
     good[names.index('fl_joint_1')] += 0.02
-    nan = good.copy()
-    nan[3] = float('nan')
-    schedule = [
-        (NS // 10, joint_command(names, good)),
-        (NS // 2, joint_command([*names[:-1], 'no_such_joint'], start + 0.3)),
-        (NS // 2 + NS // 200, joint_command(names, start + 0.3, velocities=[0.0] * 3)),
-        (NS // 2 + 2 * NS // 200, joint_command(names, nan + 0.3)),
-        (NS // 2 + 3 * NS // 200, joint_command(names[:-1], start + 0.3)),
-        (NS // 2 + 4 * NS // 200, joint_command([names[0], names[0]], [0.1, 0.2])),
-        (NS // 2 + 5 * NS // 200, joint_command([], [])),
-    ]
+    bad = bad_trajectories(names, start + 0.3)
+    schedule = [(NS // 10, joint_command(names, good))] + [
+        (NS // 2 + k * NS // 200, msg) for k, (_, msg, _) in enumerate(bad)]
     simulator, collector = run_simulator(1.0, schedule)
     drops = [s for _, s in collector.statuses('input /joint_commands')]
-    assert len(drops) == 6
+    assert len(drops) == len(bad)
     assert all(level_value(s.level) == WARN for s in drops)
-    assert int(values_of(drops[-1])['dropped_count']) == 6
+    assert int(values_of(drops[-1])['dropped_count']) == len(bad)
+    for (what, _, words), status in zip(bad, drops, strict=True):
+        assert re.search(words, values_of(status)['reason']), what
     states = collector.messages['/joint_states']
     after = [np.array(m.position) for m in states if stamp_ns(m) >= NS // 2 - NS // 10]
     for positions in after:  # the good command was reached and is held
         np.testing.assert_allclose(positions, good, atol=1e-12)
     for msg in states:
         assert np.all(np.isfinite(msg.position))
-
-
-def test_joint_commands_with_non_finite_values_and_only_those_are_refused(robot, q_nominal):
-    """The finiteness check (a sum first, term by term when the sum is not finite).
-
-    Huge finite values whose sum overflows are accepted; a NaN, an infinity or infinities of
-    both signs (whose sum is NaN) in positions or velocities are refused.
-    """
-    from gait_nodes.contract import ContractError
-    from gait_nodes.kinematic_simulator import joint_command_from_msg
-
-    names, start = list(robot.joint_names), robot.joint_positions(q_nominal)
-    huge = np.full(len(names), 1e308)
-    for positions, velocities in ((start, ()), (start, huge), (huge, -huge)):
-        command, velocity = joint_command_from_msg(joint_command(names, positions, velocities),
-                                                   robot, start)
-        assert command.tobytes() == np.asarray(positions, dtype=float).tobytes()
-        assert np.all(velocity == (velocities if len(velocities) else 0.0))
-    for bad in ([math.nan], [math.inf], [-math.inf], [math.inf, -math.inf]):
-        values = start.copy()
-        values[:len(bad)] = bad
-        for positions, velocities in ((values, ()), (start, values)):
-            with pytest.raises(ContractError, match='NaN or infinite'):
-                joint_command_from_msg(joint_command(names, positions, velocities), robot, start)
 
 
 def test_a_subset_command_moves_only_its_joints(inproc, robot, q_nominal):
@@ -760,24 +740,33 @@ def test_clock_is_published_every_tick_with_the_simulated_time(inproc):
     assert clocks == [stamp_ns(m) for m in collector.messages['/joint_states']]
 
 
-def test_a_command_beyond_the_velocity_limit_saturates_and_is_reported(inproc, robot,
-                                                                        q_nominal):
+def test_a_command_beyond_the_limits_saturates_and_is_reported(inproc, robot, q_nominal):
+    """A 0.5 rad jump: 1 rad/s reached in 0.05 s at 20 rad/s^2, 0.45 s at 1 rad/s, braking."""
     start = robot.joint_positions(q_nominal)
     jump = start.copy()
     k = robot.joint_names.index('fr_joint_1')
-    jump[k] += 0.5  # 0.5 s at 1 rad/s
+    jump[k] += 0.5
     simulator, collector = run_simulator(1.2, [(NS // 10, joint_command(robot.joint_names,
                                                                         jump))])
-    velocities = np.array([m.velocity[k] for m in collector.messages['/joint_states']])
-    limit = robot.velocity_limits_rad_s[k]
+    states = collector.messages['/joint_states']
+    velocities = np.array([m.velocity[k] for m in states])
+    positions = np.array([m.position[k] for m in states])
+    limit, acceleration = robot.velocity_limits_rad_s[k], robot.acceleration_limits_rad_s2[k]
     assert np.all(np.abs(velocities) <= limit * (1 + 1e-12))
-    assert np.sum(np.isclose(velocities, limit)) >= 99
-    assert collector.messages['/joint_states'][-1].position[k] == pytest.approx(jump[k])
+    assert np.all(np.abs(np.diff(velocities)) <= acceleration * 0.005 * (1 + 1e-9))
+    np.testing.assert_allclose(np.diff(positions), velocities[1:] * 0.005, atol=1e-15)
+    at_limit = int(np.sum(np.isclose(velocities, limit)))
+    assert 0.5 / limit - limit / acceleration - 0.01 <= at_limit * 0.005 <= 0.5 / limit
+    assert np.all(positions <= jump[k] + 1e-12)  # no overshoot
+    assert positions[-1] == pytest.approx(jump[k], abs=1e-12)
     summaries = [s for _, s in collector.statuses('velocity saturation')]
     assert level_value(summaries[0].level) == WARN
-    assert values_of(summaries[0])['joints'] == 'fr_joint_1'
-    assert float(values_of(summaries[0])['max_demanded_over_limit']) == pytest.approx(
-        0.5 / (limit * 0.005))
+    values = values_of(summaries[0])
+    assert values['joints'] == 'fr_joint_1'
+    # The first tick asked for 0.5 rad in one step: 100 rad/s from rest, 1000x a_max dt.
+    assert float(values['max_demanded_over_limit']) == pytest.approx(
+        0.5 / 0.005 / (acceleration * 0.005))
+    assert int(values['acceleration_saturated_ticks']) >= 10
 
 
 class FixedClock:
@@ -823,36 +812,72 @@ def test_on_the_wall_clock_steps_stay_on_the_period_grid_whatever_the_timer_jitt
     assert stamps[-1] == clock.ns
 
 
-def test_a_jittery_command_stream_gives_the_commanded_motion_not_its_arrival_times(
-        inproc, robot, q_nominal):
-    """A ramp of stamped setpoints with velocities, every third one lost.
+def ramp_window(names, start, k, stamp_ns, rate_rad_s, horizon_s=0.1, period_ns=NS // 200):
+    """A stamped trajectory from ``stamp_ns`` to ``stamp_ns + horizon_s``.
 
-    The joint still moves at the commanded velocity at every tick (setpoints are carried
-    forward with their velocity), so the monitor's accelerations, hence its ZMP, stay those of
-    the motion.
+    Knots ``period_ns`` apart (as whole_body_ik sends them); joint ``k`` ramps at
+    ``rate_rad_s`` from 0.25 s on.
+    """
+    times_ns = np.arange(0, int(horizon_s * NS) + 1, period_ns)
+    positions = np.repeat(start[None, :], len(times_ns), axis=0)
+    velocities = np.zeros_like(positions)
+    absolute_s = (stamp_ns + times_ns) * 1e-9
+    positions[:, k] += rate_rad_s * np.maximum(absolute_s - 0.25, 0.0)
+    velocities[:, k] = np.where(absolute_s >= 0.25, rate_rad_s, 0.0)
+    return trajectory_msg(names, positions, velocities, times_s=times_ns * 1e-9,
+                          stamp_ns=stamp_ns)
+
+
+def test_late_and_lost_trajectories_give_the_commanded_motion_not_their_arrival_times(
+        inproc, robot, q_nominal):
+    """Stamped 0.1 s windows published every 20 ms: two in three lost, the rest late.
+
+    The joint follows the stamps (the held horizon rides through the gaps): its velocity is
+    the commanded one at every tick once the motion is under way, and its position the ramp's.
     """
     names = list(robot.joint_names)
     start = robot.joint_positions(q_nominal)
     k = names.index('fl_joint_1')
-    rate = 0.4  # [rad/s], within the limit
+    rate = 0.4  # [rad/s], within the limit; the ramp's corner at 0.25 s asks 80 rad/s^2
+    rng = np.random.default_rng(7)
     schedule = []
-    for tick in range(1, 200):
-        if tick % 3 == 0:
-            continue
-        stamp = tick * NS // 200
-        positions = start.copy()
-        positions[k] += rate * max(stamp - NS // 4, 0) * 1e-9
-        velocities = np.zeros(len(names))
-        velocities[k] = rate if stamp >= NS // 4 else 0.0
-        msg = joint_command(names, positions, velocities)
-        msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(stamp, NS)
-        schedule.append((stamp, msg))
+    for publication in range(0, 50):
+        stamp = publication * NS // 50
+        if publication % 3 and publication > 2:
+            continue  # lost
+        late = int(rng.uniform(0, 0.03) * NS)
+        schedule.append((stamp + late, ramp_window(names, start, k, stamp, rate)))
     simulator, collector = run_simulator(1.0, schedule)
     moving = [m for m in collector.messages['/joint_states']
-              if NS // 4 + NS // 50 <= stamp_ns(m) <= NS - NS // 50]
+              if NS // 4 + NS // 10 <= stamp_ns(m) <= NS - NS // 50]
     assert len(moving) > 100
     for msg in moving:
         assert msg.velocity[k] == pytest.approx(rate, abs=1e-9)
+        assert msg.position[k] == pytest.approx(
+            start[k] + rate * (stamp_ns(msg) * 1e-9 - 0.25), abs=1e-9)
+
+
+def test_a_zero_stamp_starts_at_receipt_and_a_stamp_at_its_time(inproc, robot, q_nominal):
+    """The same two-point trajectory received at 0.2 s, with a zero stamp and stamped for 0.5 s.
+
+    The joint reaches the last point 0.2 s after the trajectory's start, wherever that is.
+    """
+    names = list(robot.joint_names)
+    start = robot.joint_positions(q_nominal)
+    k = names.index('rr_joint_2')
+    positions = np.array([start, start])
+    positions[1, k] += 0.01
+    for stamp, start_ns in ((0, NS // 5), (NS // 2, NS // 2)):
+        msg = trajectory_msg(names, positions, times_s=[0.0, 0.2], stamp_ns=stamp)
+        simulator, collector = run_simulator(1.0, [(NS // 5, msg)])
+        trace = {stamp_ns(m): m.position[k] for m in collector.messages['/joint_states']}
+        still = [t for t, p in trace.items() if p == start[k]]
+        assert max(still) == start_ns, stamp  # moves from the first tick after the start
+        # Linear to the last point (no velocities), followed exactly within the limits.
+        assert trace[start_ns + NS // 10] == pytest.approx(start[k] + 0.005, abs=1e-12)
+        assert trace[start_ns + NS // 5] == pytest.approx(start[k] + 0.01, abs=1e-12)
+        runtime.shutdown()
+        runtime.init(args=[], runtime='inproc', signal_handlers=False)
 
 
 def base_fit_cost(base, in_base, in_world, rotation_weight_m, guess):

@@ -163,7 +163,25 @@ class _Collector:
         self._joints('/joint_states', msg)
 
     def _joint_commands(self, msg) -> None:
-        self._joints('/joint_commands', msg)
+        if not hasattr(msg, 'points'):  # a JointState setpoint (bags before the trajectories)
+            self._joints('/joint_commands', msg)
+            return
+        # A JointTrajectory: its points at their absolute times (a zero stamp counts from 0),
+        # each instant once (the windows of whole_body_ik overlap; a knot is solved once).
+        command = contract.joint_trajectory_from_msg(msg)
+        series = self.series.joints.setdefault('/joint_commands', JointSeries())
+        names = list(command.joint_names)
+        if series.names and names != series.names:
+            return
+        series.names = names
+        last_ns = series.stamps_ns[-1] if series.stamps_ns else None
+        velocities = command.velocities_rad_s
+        for k, stamp_ns in enumerate((command.stamp_ns + command.times_from_start_ns).tolist()):
+            if last_ns is not None and stamp_ns <= last_ns:
+                continue
+            series.stamps_ns.append(stamp_ns)
+            series.positions.append(command.positions_rad[k].tolist())
+            series.velocities.append([] if velocities is None else velocities[k].tolist())
 
     def _gait_command_status(self, msg) -> None:
         try:

@@ -25,6 +25,8 @@ Format (lengths in metres, angles in radians, in the base frame: x forward, y le
     com_height_m: 0.60           # COM above the ground at standstill (preview control's zc)
     joint_velocity_limit_rad_s: 1.0      # every joint unless listed below
     joint_velocity_limits_rad_s: {}      # joint -> limit, overrides
+    joint_acceleration_limit_rad_s2: 20.0   # every joint unless listed below (required)
+    joint_acceleration_limits_rad_s2: {}    # joint -> limit, overrides
     reach:
       max_step_length_m: 0.5     # longest step along x a foot can make
       max_step_width_m: 0.2      # largest sideways displacement of a foot in one step
@@ -51,6 +53,10 @@ from gait_nodes.paths import data_dir
 KINDS = ('quadruped', 'biped')
 GAITS_BY_KIND = {'quadruped': ('crawl', 'trot'), 'biped': ('biped',)}
 EXAMPLE_ROBOT_DATA_PREFIX = 'example-robot-data:'
+#: Largest joint velocity limit a robot YAML may give [rad/s or m/s].
+MAX_VELOCITY_RAD_S = 100.0
+#: Largest joint acceleration limit a robot YAML may give [rad/s^2 or m/s^2].
+MAX_ACCELERATION_RAD_S2 = 10000.0
 
 
 @dataclass(frozen=True)
@@ -101,6 +107,8 @@ class RobotDescription:
     com_height_m: float
     joint_velocity_limit_rad_s: float
     joint_velocity_limits_rad_s: Mapping[str, float]
+    joint_acceleration_limit_rad_s2: float
+    joint_acceleration_limits_rad_s2: Mapping[str, float]
     reach: Reach
     description: str = ''
     extra: Mapping[str, object] = field(default_factory=dict)
@@ -125,6 +133,11 @@ class RobotDescription:
     def velocity_limit_rad_s(self, joint: str) -> float:
         """Velocity limit of ``joint`` [rad/s]."""
         return float(self.joint_velocity_limits_rad_s.get(joint, self.joint_velocity_limit_rad_s))
+
+    def acceleration_limit_rad_s2(self, joint: str) -> float:
+        """Acceleration limit of ``joint`` [rad/s^2] (what its actuator can do, both ways)."""
+        return float(self.joint_acceleration_limits_rad_s2.get(
+            joint, self.joint_acceleration_limit_rad_s2))
 
     def nominal_stance_in_base(self) -> np.ndarray:
         """(F, 3) nominal foot positions in the base frame [m]."""
@@ -245,6 +258,17 @@ class _Reader:
         return array
 
 
+def _per_joint(top: _Reader, key: str, all_joints: list[str], high: float) -> dict[str, float]:
+    """The optional ``joint -> limit`` overrides under ``key``, each in (0, ``high``]."""
+    reader = top.mapping(key, default={})
+    limits = {}
+    for joint in reader.data:
+        if joint not in all_joints:
+            reader.fail(str(joint), f'not a limb joint; limb joints: {all_joints}')
+        limits[str(joint)] = reader.number(joint, 0.0, high)
+    return limits
+
+
 def load_robot_description(name_or_path: str | os.PathLike) -> RobotDescription:
     """Read and validate a robot YAML (a shipped name such as ``robosimian``, or a path).
 
@@ -262,7 +286,8 @@ def load_robot_description(name_or_path: str | os.PathLike) -> RobotDescription:
     top = _Reader(path, data)
     known = {'name', 'description', 'urdf', 'kind', 'gaits', 'base_frame', 'feet',
              'foot_radius_m', 'body_height_m', 'com_height_m', 'joint_velocity_limit_rad_s',
-             'joint_velocity_limits_rad_s', 'reach', 'extra'}
+             'joint_velocity_limits_rad_s', 'joint_acceleration_limit_rad_s2',
+             'joint_acceleration_limits_rad_s2', 'reach', 'extra'}
     unknown = sorted(set(data) - known)
     if unknown:
         raise ConfigError(f'{path}: unknown keys {unknown}; allowed: {sorted(known)}')
@@ -290,12 +315,9 @@ def load_robot_description(name_or_path: str | os.PathLike) -> RobotDescription:
     if len(set(all_joints)) != len(all_joints):
         top.fail('feet', 'a joint belongs to more than one limb')
 
-    limits_reader = top.mapping('joint_velocity_limits_rad_s', default={})
-    limits = {}
-    for joint in limits_reader.data:
-        if joint not in all_joints:
-            limits_reader.fail(str(joint), f'not a limb joint; limb joints: {all_joints}')
-        limits[str(joint)] = limits_reader.number(joint, 0.0, 100.0)
+    limits = _per_joint(top, 'joint_velocity_limits_rad_s', all_joints, MAX_VELOCITY_RAD_S)
+    acceleration_limits = _per_joint(top, 'joint_acceleration_limits_rad_s2', all_joints,
+                                     MAX_ACCELERATION_RAD_S2)
 
     reach_reader = top.mapping('reach')
     reach = Reach(max_step_length_m=reach_reader.number('max_step_length_m', 0.0, 5.0),
@@ -316,8 +338,12 @@ def load_robot_description(name_or_path: str | os.PathLike) -> RobotDescription:
         foot_radius_m=top.number('foot_radius_m', 0.0, 0.5),
         body_height_m=top.number('body_height_m', 0.0, 5.0),
         com_height_m=top.number('com_height_m', 0.0, 5.0),
-        joint_velocity_limit_rad_s=top.number('joint_velocity_limit_rad_s', 0.0, 100.0),
+        joint_velocity_limit_rad_s=top.number('joint_velocity_limit_rad_s', 0.0,
+                                              MAX_VELOCITY_RAD_S),
         joint_velocity_limits_rad_s=limits,
+        joint_acceleration_limit_rad_s2=top.number('joint_acceleration_limit_rad_s2', 0.0,
+                                                   MAX_ACCELERATION_RAD_S2),
+        joint_acceleration_limits_rad_s2=acceleration_limits,
         reach=reach,
         description=str(top.get('description', '', required=False)),
         extra=dict(extra),

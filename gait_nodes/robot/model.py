@@ -143,6 +143,9 @@ class RobotModel:
                                               else description.joint_velocity_limit_rad_s
                                               for n in names])
         model.velocityLimit[self._v_index] = self.velocity_limits_rad_s
+        self.acceleration_limits_rad_s2 = _frozen([
+            description.acceleration_limit_rad_s2(n) if n in description.joint_names
+            else description.joint_acceleration_limit_rad_s2 for n in names])
 
         self._read_extra(where)
         self._data = model.createData()

@@ -1,8 +1,10 @@
 """Kinematic simulation: position-controlled joints and a floating base held by the stance feet.
 
-Every step, :class:`PositionActuators` moves each joint toward its commanded position by at most
-``velocity_limit * dt`` (what a position-controlled servo with a velocity limit does; each joint
-saturates on its own) and keeps it inside its URDF position limits. :class:`KinematicSimulation`
+Every step, :class:`PositionActuators` moves each joint toward its commanded position as a
+position-controlled servo with velocity and acceleration limits does: its velocity changes by at
+most ``acceleration_limit * dt`` per step, never exceeds ``velocity_limit``, and stops on a still
+target without overshoot (each joint saturates on its own); the joint stays inside its URDF
+position limits. :class:`KinematicSimulation`
 then places the floating base so that the feet in contact stay where they touched down: the
 base pose ``B`` minimises, over the stance feet ``k``,
 
@@ -70,38 +72,62 @@ class ActuatorStep:
     """One step of the position-controlled joints (read-only).
 
     The step keeps its inputs; the diagnostics (:attr:`demanded_over_limit`, :attr:`saturated`,
-    :attr:`clamped_to_limits`) are computed from them when asked, and :attr:`any_saturated`,
-    :attr:`any_clamped` answer the usual "none" with one comparison of bytes each (clipping
-    returns an input unchanged, bit for bit, where it does not clip it).
+    :attr:`clamped_to_limits`) are computed from them when asked.
 
     Attributes:
         positions_rad: (J,) joint positions after the step [rad or m].
         velocities_rad_s: (J,) mean joint velocities over the step [rad/s or m/s].
         commanded_rad: (J,) the command [rad or m].
         target_rad: (J,) the command clamped to the position limits [rad or m].
-        demanded_rad: (J,) displacement toward the target (the short way round for continuous
-            joints) [rad or m].
-        moved_rad: (J,) the demanded displacement clipped to the velocity limits [rad or m].
-        allowed_rad: (J,) displacement the velocity limits allow in the step [rad or m].
+        demanded_rad_s: (J,) the mean velocity that would put each joint on its target at the
+            end of the step [rad/s or m/s].
+        previous_velocities_rad_s: (J,) mean joint velocities over the step before [rad/s].
+        velocity_limits_rad_s: (J,) [rad/s or m/s].
+        velocity_change_limits_rad_s: (J,) the acceleration limits times the step [rad/s].
+        exact: Every joint moved at its demanded velocity (then none saturated).
     """
 
     positions_rad: np.ndarray
     velocities_rad_s: np.ndarray
     commanded_rad: np.ndarray
     target_rad: np.ndarray
-    demanded_rad: np.ndarray
-    moved_rad: np.ndarray
-    allowed_rad: np.ndarray
+    demanded_rad_s: np.ndarray
+    previous_velocities_rad_s: np.ndarray
+    velocity_limits_rad_s: np.ndarray
+    velocity_change_limits_rad_s: np.ndarray
+    exact: bool = False
+
+    @property
+    def demanded_velocity_over_limit(self) -> np.ndarray:
+        """(J,) demanded velocity over the velocity limit; above 1 the joint saturated."""
+        return np.abs(self.demanded_rad_s) / self.velocity_limits_rad_s
+
+    @property
+    def demanded_acceleration_over_limit(self) -> np.ndarray:
+        """(J,) demanded velocity change over the acceleration limit's; above 1: saturated."""
+        return (np.abs(self.demanded_rad_s - self.previous_velocities_rad_s)
+                / self.velocity_change_limits_rad_s)
 
     @property
     def demanded_over_limit(self) -> np.ndarray:
-        """(J,) demanded displacement over the allowed one; above 1 the joint saturated."""
-        return np.abs(self.demanded_rad) / self.allowed_rad
+        """(J,) the larger of the two ratios; above 1 the joint lags its command."""
+        return np.maximum(self.demanded_velocity_over_limit,
+                          self.demanded_acceleration_over_limit)
+
+    @property
+    def velocity_saturated(self) -> np.ndarray:
+        """(J,) booleans: reaching the target would have taken more than the velocity limit."""
+        return self.demanded_velocity_over_limit > 1.0 + 1e-9
+
+    @property
+    def acceleration_saturated(self) -> np.ndarray:
+        """(J,) booleans: reaching the target would have taken more than the acceleration."""
+        return self.demanded_acceleration_over_limit > 1.0 + 1e-9
 
     @property
     def saturated(self) -> np.ndarray:
-        """(J,) booleans: the joint moved at its velocity limit and still lags its command."""
-        return self.demanded_over_limit > 1.0 + 1e-9
+        """(J,) booleans: the joint moved at a limit and still lags its command."""
+        return self.velocity_saturated | self.acceleration_saturated
 
     @property
     def clamped_to_limits(self) -> np.ndarray:
@@ -111,10 +137,7 @@ class ActuatorStep:
     @property
     def any_saturated(self) -> bool:
         """Whether any joint saturated (``saturated.any()``)."""
-        # A ratio above 1 + 1e-9 means |demanded| > allowed, which the clipping changed: where
-        # every joint moved as demanded, none saturated.
-        return (self.moved_rad.tobytes() != self.demanded_rad.tobytes()
-                and bool(np.count_nonzero(self.saturated)))
+        return not self.exact and bool(np.count_nonzero(self.saturated))
 
     @property
     def any_clamped(self) -> bool:
@@ -124,11 +147,46 @@ class ActuatorStep:
                 and bool(np.count_nonzero(self.clamped_to_limits)))
 
 
-class PositionActuators:
-    """Position-controlled joints with velocity limits (one per joint of the robot).
+def stopping_velocity(error: np.ndarray, velocity_change: np.ndarray,
+                      dt_s: float) -> np.ndarray:
+    """Fastest velocity [rad/s] toward a target ``|error|`` away that can still stop on it.
+
+    A joint whose velocity changes by at most ``velocity_change`` = ``a_max * dt`` per step of
+    ``dt_s`` moves at ``v`` for one step and then brakes as hard as it may: it covers
+    ``v dt + D(v)`` with ``D(v) = dt (v - c) + D(v - c)`` (``c`` = ``velocity_change``, D = 0
+    below ``c``). This is the largest ``v`` with ``v dt + D(v) <= |error|``, in closed form:
+    with ``E = |error| / (c dt)`` and ``m`` the largest integer with ``m (m + 1) / 2 <= E``,
+    ``v = c (m + f)`` where ``f = (E - m (m + 1) / 2) / (m + 1)``. Moving at most this fast,
+    the joint stops on the target without overshoot (the discrete form of
+    ``sqrt(2 a_max |error|)``); below ``c dt`` of error it is ``|error| / dt``, the step that
+    lands on the target.
 
     Args:
-        robot: The robot (joint order, position limits, velocity limits).
+        error: (J,) distances to the targets [rad]; the sign is ignored.
+        velocity_change: (J,) ``a_max * dt`` [rad/s], > 0.
+        dt_s: Step in [s].
+
+    Returns:
+        (J,) velocities >= 0 [rad/s].
+    """
+    e = np.abs(error) / (velocity_change * dt_s)
+    m = np.floor((np.sqrt(8.0 * e + 1.0) - 1.0) * 0.5)
+    m -= m * (m + 1.0) * 0.5 > e  # the square root rounded up across an integer
+    f = np.minimum((e - m * (m + 1.0) * 0.5) / (m + 1.0), 1.0)
+    return velocity_change * (m + f)
+
+
+class PositionActuators:
+    """Position-controlled joints with velocity and acceleration limits (one per joint).
+
+    Each step the mean velocity of a joint changes by at most ``a_max * dt`` and stays within
+    ``v_max``; toward its target it moves with the target's own velocity (the feed-forward of a
+    trajectory being tracked) plus the correction of the remaining error, that correction never
+    faster than :func:`stopping_velocity` of the error: a joint stops on a still target without
+    overshoot, and a target that moves within the limits is followed exactly (on the tick grid).
+
+    Args:
+        robot: The robot (joint order, position, velocity and acceleration limits).
     """
 
     def __init__(self, robot: RobotModel):
@@ -140,15 +198,24 @@ class PositionActuators:
         self.lower = np.array(robot.lower_limits)
         self.upper = np.array(robot.upper_limits)
         self.velocity_limits_rad_s = np.array(robot.velocity_limits_rad_s)
-        # (dt [s], allowed step, its negative) of the last step: the step is nearly always fixed.
-        self._allowed: tuple[float, np.ndarray, np.ndarray] = (math.nan, self.lower, self.lower)
+        self.acceleration_limits_rad_s2 = np.array(robot.acceleration_limits_rad_s2)
+        # (dt, a_max dt, a_max dt^2): the velocity change and the error a step may close.
+        self._change: tuple[float, np.ndarray, np.ndarray] = (math.nan, self.lower, self.lower)
 
-    def step(self, positions_rad: np.ndarray, commanded_rad: np.ndarray,
-             dt_s: float) -> ActuatorStep:
-        """Move ``positions_rad`` toward ``commanded_rad`` for ``dt_s`` [s].
+    def step(self, positions_rad: np.ndarray, velocities_rad_s: np.ndarray,
+             commanded_rad: np.ndarray, dt_s: float,
+             commanded_velocities_rad_s: np.ndarray | None = None) -> ActuatorStep:
+        """Move joints at ``positions_rad`` (moving at ``velocities_rad_s``) for ``dt_s`` [s].
 
-        Commands beyond a joint's position limits are clamped to them; continuous joints turn
-        the short way round.
+        Args:
+            positions_rad: (J,) positions at the start of the step [rad or m].
+            velocities_rad_s: (J,) mean velocities over the step before [rad/s or m/s].
+            commanded_rad: (J,) where the joints should be at the end of the step; beyond a
+                joint's position limits it is clamped to them; continuous joints turn the
+                short way round.
+            dt_s: Step [s].
+            commanded_velocities_rad_s: (J,) the command's velocity at the end of the step
+                (feed-forward), or None for a still command.
         """
         if not dt_s > 0.0:
             raise ParameterError(f'dt_s must be > 0 s, got {dt_s!r}')
@@ -158,15 +225,40 @@ class PositionActuators:
         if self._any_continuous:
             wrapped = (delta + math.pi) % (2.0 * math.pi) - math.pi
             delta = np.where(self.continuous, wrapped, delta)
-        cached_dt, allowed, minus_allowed = self._allowed
+        cached_dt, change, one_step = self._change
         if dt_s != cached_dt:
-            allowed = self.velocity_limits_rad_s * dt_s
-            minus_allowed = -allowed
-            self._allowed = (dt_s, allowed, minus_allowed)
-        moved = np.clip(delta, minus_allowed, allowed)
-        positions = np.clip(positions_rad + moved, self.lower, self.upper)
+            change = self.acceleration_limits_rad_s2 * dt_s
+            one_step = change * dt_s
+            self._change = (dt_s, change, one_step)
+        demanded = delta / dt_s
+        if commanded_velocities_rad_s is None:
+            feed_forward = 0.0
+            correction = delta
+        else:
+            # A clamped command does not move: no feed-forward beyond the position limits.
+            feed_forward = np.where(target == commanded_rad, commanded_velocities_rad_s, 0.0)
+            correction = delta - feed_forward * dt_s
+        # The error beyond the feed-forward, closed no faster than the joint can stop on it
+        # (exactly, where the error is within one step of the acceleration limit).
+        # (np.minimum/np.maximum: np.clip's dispatch costs more than the arithmetic here.)
+        magnitude = np.abs(correction)
+        if np.less_equal(magnitude, one_step).all():
+            wanted = demanded  # every joint closes its error this step (tracking)
+        else:
+            stopping = stopping_velocity(correction, change, dt_s)
+            closes = (magnitude <= one_step) | (magnitude <= stopping * dt_s)
+            wanted = np.where(closes, demanded, feed_forward + np.copysign(stopping, correction))
+        previous = np.asarray(velocities_rad_s, dtype=float)
+        limit = self.velocity_limits_rad_s
+        velocity = np.minimum(np.maximum(np.minimum(np.maximum(wanted, previous - change),
+                                                    previous + change), -limit), limit)
+        # Where nothing limited the step, every joint moved as demanded (bit for bit).
+        exact = velocity.tobytes() == demanded.tobytes()
+        positions = np.minimum(np.maximum(positions_rad + velocity * dt_s, self.lower),
+                               self.upper)
         velocities = (positions - positions_rad) / dt_s
-        return ActuatorStep(positions, velocities, commanded_rad, target, delta, moved, allowed)
+        return ActuatorStep(positions, velocities, commanded_rad, target, demanded, previous,
+                            limit, change, exact)
 
 
 def kabsch(points_in_base: np.ndarray, points_in_world: np.ndarray) -> pin.SE3 | None:
@@ -525,6 +617,8 @@ class KinematicSimulation:
         # The last read-only contacts given to step() (by identity), their copy and its list.
         self._contacts_given: tuple = (None, None, None)
         self.joints = robot.joint_positions(self.q)
+        #: (J,) mean joint velocities over the last step [rad/s or m/s] (at rest at the start).
+        self.joint_velocities = np.zeros(len(self.joints))
         self.base = pin.XYZQUATToSE3(self.q[:7])
         feet = self._feet_in_base(self.joints)
         self.latched: list[pin.SE3 | None] = [self.base * foot for foot in feet]
@@ -592,16 +686,20 @@ class KinematicSimulation:
         return self._stance
 
     def step(self, commanded_joints: np.ndarray, dt_s: float,
-             contacts: np.ndarray | None = None) -> SimulationStep:
+             contacts: np.ndarray | None = None,
+             commanded_velocities: np.ndarray | None = None) -> SimulationStep:
         """Advance by ``dt_s`` [s] toward ``commanded_joints`` (joint vector).
 
         Args:
-            commanded_joints: (J,) commanded joint positions, in :attr:`RobotModel.joint_names`
-                order [rad or m].
+            commanded_joints: (J,) commanded joint positions at the end of the step, in
+                :attr:`RobotModel.joint_names` order [rad or m].
             dt_s: Step [s].
             contacts: (F,) booleans from a contact schedule, or None to decide by foot height.
+            commanded_velocities: (J,) the command's velocities at the end of the step [rad/s]
+                (a trajectory's feed-forward), or None for a still command.
         """
-        actuators = self.actuators.step(self.joints, commanded_joints, dt_s)
+        actuators = self.actuators.step(self.joints, self.joint_velocities, commanded_joints,
+                                        dt_s, commanded_velocities)
         feet = self._feet_in_base(actuators.positions_rad)
         if contacts is None:
             contacts = self._contacts_by_height(feet)
@@ -648,6 +746,7 @@ class KinematicSimulation:
                 touched.append(self.robot.foot_names[k])
         self.base = base
         self.joints = actuators.positions_rad
+        self.joint_velocities = actuators.velocities_rad_s
         if self._joints_follow_base:
             q = np.concatenate((pin.SE3ToXYZQUAT(base), self.joints))
         else:
