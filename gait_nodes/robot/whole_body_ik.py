@@ -656,7 +656,7 @@ class JointKnots:
         joint_count: Length of a joint vector.
     """
 
-    __slots__ = ('times_ns', 'joints', 'positions', 'velocities', '_steps', '_zero')
+    __slots__ = ('times_ns', 'joints', 'positions', 'velocities', '_steps', '_step_ns', '_zero')
 
     def __init__(self, joint_count: int):
         self._zero = [0.0] * joint_count
@@ -666,6 +666,7 @@ class JointKnots:
         #: Knot velocities, None for the last knot (its backward difference is ``_steps[-1]``).
         self.velocities: list[list[float] | None] = []
         self._steps: list[np.ndarray | None] = []  # velocity of the step into each knot
+        self._step_ns = 0  # duration of the step into the last knot [ns]
 
     def __len__(self) -> int:
         return len(self.times_ns)
@@ -686,13 +687,14 @@ class JointKnots:
         if not self.times_ns:
             raise ValueError('JointKnots.append before restart: no knot to step from')
         last_step = self._steps[-1]
+        after = stamp_ns - self.times_ns[-1]
         if last_step is None:
             self.velocities[-1] = self._zero
         else:
-            before = self.times_ns[-1] - self.times_ns[-2]
-            after = stamp_ns - self.times_ns[-1]
+            before = self._step_ns
             self.velocities[-1] = ((before * last_step + after * step_velocity)
                                    / (before + after)).tolist()
+        self._step_ns = after
         self.times_ns.append(stamp_ns)
         self.joints.append(joints)
         self.positions.append(joints.tolist())
