@@ -26,6 +26,7 @@ from gait_nodes.robot.model import load_robot_model
 from gait_nodes.robot.whole_body_ik import (
     IkSettings,
     IkTargets,
+    JointKnots,
     WholeBodyIkSolver,
     com_state_at,
     fallback_swing_pose,
@@ -431,6 +432,37 @@ def test_swing_sampling_is_linear_between_waypoints(times, yaws, t_s, seed):
     assert abs(math.remainder(yaw - wanted, 2 * math.pi)) < 1e-9
 
 
+def test_joint_knots_velocities_are_central_differences_within_the_steps():
+    """Uneven spacing: the time-weighted mean of the two steps; the last backward or at rest."""
+    knots = JointKnots(2)
+    knots.restart(0, np.array([0.0, 1.0]))
+    rng = np.random.default_rng(3)
+    times, joints = [0], [np.array([0.0, 1.0])]
+    for dt in (5, 5, 20, 5, 15):
+        times.append(times[-1] + dt)
+        joints.append(joints[-1] + rng.uniform(-1, 1, 2))
+        knots.append(times[-1], joints[-1], (joints[-1] - joints[-2]) / dt)
+        if len(knots) == 4:
+            knots.drop_before(knots.first_at_or_before(times[-1]))  # one knot left
+            assert len(knots) == 1
+    window_times, positions, velocities = knots.window(0)
+    assert window_times == times[3:]
+    np.testing.assert_array_equal(positions, joints[3:])
+    for k in range(1, len(window_times) - 1):
+        j = k + 3
+        central = (joints[j + 1] - joints[j - 1]) / (times[j + 1] - times[j - 1])
+        np.testing.assert_allclose(velocities[k], central, rtol=1e-12)
+    np.testing.assert_allclose(velocities[-1], (joints[-1] - joints[-2]) / 15, rtol=1e-12)
+    assert knots.window(len(knots) - 1, ends_at_rest=True)[2] == [[0.0, 0.0]]
+    # Dropped knots keep their velocities in the later ones: the first knot's is central.
+    np.testing.assert_allclose(velocities[0], (joints[4] - joints[2]) / (times[4] - times[2]),
+                               rtol=1e-12)
+    restarted = JointKnots(2)
+    restarted.restart(7, np.array([1.0, 2.0]))
+    restarted.append(12, np.array([1.5, 2.0]), np.array([0.1, 0.0]))
+    assert restarted.window(0)[2] == [[0.0, 0.0], [0.1, 0.0]]  # from rest
+
+
 # -- the node in the inproc runtime ------------------------------------------------------------
 
 
@@ -749,6 +781,33 @@ def test_node_holds_the_nominal_stance_before_the_references(inproc):
     # Nothing has come for longer than stale_timeout_s: reported at once and in the summary.
     assert [level_value(s.level) for s in statuses] == [WARN, WARN]
     assert 'nothing received on /gait/com_reference' in statuses[0].message
+
+
+def test_node_rides_through_a_late_reference(inproc):
+    """COM reference late but not stale: the trajectory ends at rest, then goes on from there.
+
+    A 0.2 s horizon, silent 0.3 s: the reference ends 0.15 s before the next message comes.
+    """
+    silent_from = 2 * NS
+    node, _, collector = run_node(3.5, silent_from_ns=silent_from, silent_for_s=0.3,
+                                  horizon_s=0.2)
+    robot = node.robot
+    for msg in collector.commands:
+        check_controller_rules(msg, robot)
+    assert node.faults.failures == 0 and not collector.status('faults')
+    assert all(level_value(s.level) == 0 for s in collector.status('inputs')[1:])
+    ended = [m for m in collector.commands if len(m.points) == 1
+             and silent_from < stamp_ns(m) < silent_from + 3 * NS // 10]
+    assert ended and all(np.all(np.array(m.points[0].velocities) == 0.0) for m in ended)
+    knots = knots_of(collector.commands[1:])
+    times = np.array(list(knots))
+    assert times.max() <= silent_from - 50_000_000 + NS // 5 or times.max() >= 3.5 * NS
+    gaps = np.diff(times)
+    assert gaps.max() > 5_000_000 and np.all(gaps % 5_000_000 == 0)  # the grid, past skipped
+    positions = np.array([p for p, _ in knots.values()])
+    steps = np.abs(np.diff(positions, axis=0)) / (gaps * 1e-9)[:, None]
+    assert np.all(steps <= robot.velocity_limits_rad_s * (1 + 1e-9))
+    assert times[-1] >= 3.5 * NS
 
 
 def test_node_saturates_a_fast_reference_and_reports_the_joints(inproc):
