@@ -26,7 +26,7 @@ TOPICS: dict[str, str] = {
     '/gait/zmp_reference': 'nav_msgs/msg/Path',
     '/gait/com_reference': 'trajectory_msgs/msg/MultiDOFJointTrajectory',
     '/gait/swing_trajectory': 'trajectory_msgs/msg/MultiDOFJointTrajectory',
-    '/joint_commands': 'sensor_msgs/msg/JointState',
+    '/joint_commands': 'trajectory_msgs/msg/JointTrajectory',
     '/joint_states': 'sensor_msgs/msg/JointState',
     '/tf': 'tf2_msgs/msg/TFMessage',
     '/gait/zmp': 'geometry_msgs/msg/PointStamped',

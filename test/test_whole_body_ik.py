@@ -871,3 +871,85 @@ def test_node_refuses_an_ik_family_for_a_robot_without_limb_ik():
             WholeBodyIk()
     finally:
         runtime.shutdown()
+
+
+@pytest.mark.parametrize('scenario_name', ['robosimian_crawl', 'biped_walk'])
+def test_joint_commands_of_an_inproc_walk_keep_the_controller_rules(scenario_name, tmp_path):
+    """The whole inproc graph walking a scenario: every /joint_commands a JTC would take.
+
+    Each knot solved once (the same positions in every message that carries it), knots on
+    the 5 ms grid, each step within the velocity limits; a message starts at the latest knot
+    at or before its publication and reaches ahead no further than horizon_s. (How far ahead
+    depends on the COM reference's horizon: with one state per message, the knots end where
+    it ends, at or before the present.)
+    """
+    import yaml
+
+    from gait_nodes import graph
+    from gait_nodes.scenarios import CommandDriver, get_scenario
+
+    scenario = get_scenario(scenario_name)
+    params_file = tmp_path / 'params.yaml'
+    params_file.write_text(yaml.safe_dump({'/**': {'ros__parameters': {
+        'robot': scenario.robot, **scenario.settings}}}))
+    runtime.init(args=['test', '--ros-args', '--params-file', str(params_file)],
+                 runtime='inproc', signal_handlers=False)
+    try:
+        nodes = [graph.load_class(graph.NODES[name])() for name in graph.available_nodes()]
+        [ik] = [node for node in nodes if node.get_name() == 'whole_body_ik']
+        driver_node = runtime.Node('driver', use_global_arguments=False)
+        driver = CommandDriver(driver_node, scenario.commands)
+        collector = Collector()
+        published_ns = []
+        collector.create_subscription(
+            get_message('trajectory_msgs/msg/JointTrajectory'), '/joint_commands',
+            lambda _: published_ns.append(collector.get_clock().now().nanoseconds), 100)
+        executor = runtime.SingleThreadedExecutor()
+        for node in [*nodes, driver_node, collector]:
+            executor.add_node(node)
+        driver.start()
+        executor.spin_for(8.0)
+        robot = ik.robot
+    finally:
+        runtime.shutdown()
+    commands = collector.commands
+    assert len(commands) == pytest.approx(8.0 * 20, abs=1)
+    for msg, now in zip(commands, published_ns, strict=True):
+        check_controller_rules(msg, robot)
+        times = knot_times_ns(msg)
+        assert times[0] <= now and times[-1] <= now + 0.3 * NS
+        assert len(times) == 1 or times[1] > now
+    assert ik._moving
+    knots = knots_of(commands)  # (the posture held before motion: at publications, 50 ms)
+    times = np.array(list(knots))
+    assert np.all(np.diff(times) % 5_000_000 == 0)
+    positions = np.array([p for p, _ in knots.values()])
+    steps = np.abs(np.diff(positions, axis=0)) / (np.diff(times) * 1e-9)[:, None]
+    assert np.all(steps <= robot.velocity_limits_rad_s * (1 + 1e-9))
+    assert not [s for s in collector.statuses if s.name.startswith('whole_body_ik')
+                and level_value(s.level) >= 2]
+
+
+def test_bag_analysis_reads_joint_commands_as_the_trajectory_followed():
+    """The bag analysis of /joint_commands: a message replaces the rest from its first point."""
+    from gait_nodes.bag.analysis import _Collector, joint_metrics
+    from gait_nodes.interfaces import serialize_message
+    from gait_nodes.whole_body_ik import joint_trajectory_to_msg
+
+    names = ['a', 'b']
+    first = joint_trajectory_to_msg(names, [NS, NS + 10, NS + 20, NS + 30],
+                                    [[0.0, 0.0], [1.0, 0.0], [2.0, 0.0], [3.0, 0.0]],
+                                    [[0.0, 0.0], [0.5, 0.0], [0.5, 0.0], [4.0, 0.0]])
+    second = joint_trajectory_to_msg(names, [NS + 20, NS + 25], [[2.0, 1.0], [2.5, 1.0]],
+                                     [[0.1, 0.2], [0.1, 0.3]])
+    collector = _Collector()
+    for msg in (first, second):
+        collector.message('/joint_commands', 'trajectory_msgs/msg/JointTrajectory',
+                          serialize_message(msg))
+    series = collector.series.joints['/joint_commands']
+    assert series.names == names
+    assert series.stamps_ns == [NS, NS + 10, NS + 20, NS + 25]
+    assert series.positions == [[0.0, 0.0], [1.0, 0.0], [2.0, 1.0], [2.5, 1.0]]
+    # The replaced point's 4 rad/s was never followed.
+    metrics = joint_metrics(collector.series, lambda joint: 1.0)['/joint_commands']
+    assert metrics['peak_rad_s'] == 0.5 and metrics['samples'] == 4

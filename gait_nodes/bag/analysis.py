@@ -17,7 +17,9 @@ independent reader of the bag can check it:
   signed_distance`); ``time_outside_s`` sums, over samples outside, the time to the next sample.
 - ``joint_velocity``: peak ``|velocity|`` in ``/joint_states`` (and ``/joint_commands``) per
   joint, against the robot YAML's limit when the robot is known (``--robot``, or the
-  ``hardware_id`` of the bag's diagnostics).
+  ``hardware_id`` of the bag's diagnostics). ``/joint_commands`` (JointTrajectory) counts as
+  the trajectory a joint_trajectory_controller follows: every point of each message until the
+  next message's first point replaces the rest (points at header stamp + time_from_start).
 - ``commands``: ``/gait/command_status`` answers, accepted and rejected with their reasons.
 - ``diagnostics``: statuses on ``/diagnostics`` counted by level and by name.
 - ``consistency``: the nodes' outputs checked against each other with the robot's full model
@@ -53,7 +55,7 @@ GAIT_TOPICS = ('/tf', '/gait/zmp', '/gait/com', '/gait/support_polygon', '/gait/
 
 @dataclass
 class JointSeries:
-    """Joint samples of one JointState topic."""
+    """Joint samples of one JointState topic, or the points of a JointTrajectory topic."""
 
     names: list[str] = field(default_factory=list)
     stamps_ns: list[int] = field(default_factory=list)
@@ -163,7 +165,26 @@ class _Collector:
         self._joints('/joint_states', msg)
 
     def _joint_commands(self, msg) -> None:
-        self._joints('/joint_commands', msg)
+        """The commanded trajectory as followed: a message replaces it from its first point on.
+
+        (ros2_control's rule; a zero header stamp, "start when received", is read as time 0.)
+        """
+        series = self.series.joints.setdefault('/joint_commands', JointSeries())
+        names = list(msg.joint_names)
+        if not msg.points or (series.names and names != series.names):
+            return  # nothing, or a different joint set: keep the first one consistent
+        series.names = names
+        start_ns = _stamp(msg.header)
+        times_ns = [start_ns + contract.time_msg_to_ns(p.time_from_start) for p in msg.points]
+        stamps = series.stamps_ns
+        kept = len(stamps)
+        while kept and stamps[kept - 1] >= times_ns[0]:
+            kept -= 1
+        for values in (stamps, series.positions, series.velocities):
+            del values[kept:]
+        stamps.extend(times_ns)
+        series.positions.extend(list(p.positions) for p in msg.points)
+        series.velocities.extend(list(p.velocities) for p in msg.points)
 
     def _gait_command_status(self, msg) -> None:
         try:
