@@ -24,12 +24,14 @@ so a late message is no jump: the previous one still covers ``horizon_s`` ahead.
   so that a restarted IK picks up the robot where it stands instead of pulling it back to the
   nominal stance, and seeds its solver there.
 * A late /gait/com_reference ends the trajectory where the reference ends (at rest, once the
-  present has reached its last knot). Silent for more than
-  ``stale_timeout_s``, the node holds: it sends its last knot as a one-point trajectory at rest
-  (the robot stops where its trajectory ended, it does not keep stepping under a frozen COM) and
-  reports the stale input (WARN, ``whole_body_ik: inputs``); when the reference returns it
-  starts a new trajectory from the held posture and reports OK. A node that ran late (starved)
-  solves no knot in the past but the latest one at or before now, reached within the limits.
+  present has reached its last knot). Silent for more than ``stale_timeout_s``, the node
+  holds: it sends its last knot as a one-point trajectory at rest (the robot stops where its
+  trajectory ended, it does not keep stepping under a frozen COM) and reports the stale input
+  (WARN, ``whole_body_ik: inputs``); when the reference returns it starts a new trajectory from
+  the held posture and reports OK. A trajectory that ended before now (the node starved, or its
+  COM reference late) was held at its last knot by its consumer: the next one starts there, at
+  rest, at the latest knot time at or before now (no knot in the past is solved), and catches
+  up within the velocity limits.
 * A foot in swing per the plan with no swing trajectory covering a knot's instant follows the
   fallback swing (quintic smoothstep from lift-off to landing place, lifted by
   ``fallback_step_height_m``; :func:`gait_nodes.robot.whole_body_ik.fallback_swing_pose`).
@@ -399,6 +401,9 @@ class WholeBodyIk(GuardedNode):
             elif self._held:
                 self._held = False
                 knots.restart(max(now_ns, knots.times_ns[-1]), self._joints_command)
+            elif knots.times_ns[-1] > now_ns + int(round(
+                    (self.params.horizon_s + self.params.sample_period_s) * 1e9)):
+                knots.restart(now_ns, self._joints_command)  # the clock went back
             self._solve_knots(now_ns)
             start = knots.first_at_or_before(now_ns)
             # A trajectory that has ended (a late COM reference) ends at rest.
@@ -415,15 +420,18 @@ class WholeBodyIk(GuardedNode):
     def _solve_knots(self, now_ns: int) -> None:
         """Solve the knots after the last one up to the horizon and the COM reference's end.
 
-        On the grid of the knots; a node that ran late starts at the latest grid point at or
-        before now (no knot in the past is solved but that one), reached within the limits.
+        On the grid of the knots. A trajectory that ended before now (the node or its COM
+        reference late) was held at its last knot by its consumer: it starts again from there,
+        at rest, at the latest grid point at or before now; no knot in the past is solved.
         """
         knots = self._knots
         period_ns = max(int(round(self.params.sample_period_s * 1e9)), 1)
         end_ns = min(now_ns + int(round(self.params.horizon_s * 1e9)), self._com_end_ns)
+        last_ns = knots.times_ns[-1]
+        if last_ns + period_ns < now_ns:
+            knots.restart(last_ns + (now_ns - last_ns) // period_ns * period_ns,
+                          knots.joints[-1])
         stamp_ns = knots.times_ns[-1] + period_ns
-        if stamp_ns < now_ns:
-            stamp_ns += (now_ns - stamp_ns) // period_ns * period_ns
         while stamp_ns <= end_ns:
             self._solve_knot(stamp_ns, (stamp_ns - knots.times_ns[-1]) * 1e-9)
             stamp_ns += period_ns

@@ -805,9 +805,52 @@ def test_node_rides_through_a_late_reference(inproc):
     gaps = np.diff(times)
     assert gaps.max() > 5_000_000 and np.all(gaps % 5_000_000 == 0)  # the grid, past skipped
     positions = np.array([p for p, _ in knots.values()])
+    # The robot held the last knot: the trajectory starts again there, at rest.
+    gap = int(np.argmax(gaps))
+    np.testing.assert_array_equal(positions[gap + 1], positions[gap])
+    np.testing.assert_array_equal(knots[times[gap + 1]][1], 0.0)
     steps = np.abs(np.diff(positions, axis=0)) / (gaps * 1e-9)[:, None]
     assert np.all(steps <= robot.velocity_limits_rad_s * (1 + 1e-9))
     assert times[-1] >= 3.5 * NS
+
+
+def test_a_starved_node_starts_again_at_rest_where_its_trajectory_ended(inproc):
+    """The IK's timer stopped 0.5 s: its trajectory (0.3 s ahead) ran out and was held.
+
+    The next message starts at the last knot, at rest, at the latest grid point at or before
+    the present; no knot in the past is solved; then the knots catch up within the limits.
+    """
+    from gait_nodes.whole_body_ik import WholeBodyIk
+
+    node = WholeBodyIk()
+    source = CrawlSource(node.robot, node.q_nominal)
+    collector = Collector()
+    executor = runtime.SingleThreadedExecutor()
+    for n in (node, source, collector):
+        executor.add_node(n)
+    executor.spin_for(2.0)
+    node.timer.cancel()
+    before = len(collector.commands)
+    last_knot_ns = knot_times_ns(collector.commands[-1])[-1]
+    executor.spin_for(0.5)
+    assert len(collector.commands) == before
+    node.timer = node.create_timer(0.05, node.tick)
+    executor.spin_for(1.0)
+    resumed = collector.commands[before]
+    back = node.get_clock().now().nanoseconds - NS  # the timer is back (its tick 50 ms on)
+    times = knot_times_ns(resumed)
+    assert times[0] > last_knot_ns and times[0] <= back + 50_000_000 < times[1]
+    assert (times[0] - last_knot_ns) % 5_000_000 == 0
+    np.testing.assert_array_equal(resumed.points[0].positions,
+                                  collector.commands[before - 1].points[-1].positions)
+    np.testing.assert_array_equal(resumed.points[0].velocities, 0.0)
+    for msg in collector.commands:
+        check_controller_rules(msg, node.robot)
+    knots = knots_of(collector.commands[1:])
+    knot_times = np.array(list(knots))
+    positions = np.array([p for p, _ in knots.values()])
+    steps = np.abs(np.diff(positions, axis=0)) / (np.diff(knot_times) * 1e-9)[:, None]
+    assert np.all(steps <= node.robot.velocity_limits_rad_s * (1 + 1e-9))
 
 
 def test_node_saturates_a_fast_reference_and_reports_the_joints(inproc):
