@@ -56,7 +56,7 @@ NODES = {
     'com_preview_controller': ((5, 1000), ('/gait/com_reference',),
                                ('/gait/zmp_reference', '/gait/footsteps', '/gait/com')),
     'swing_leg_policy': ((20,), ('/gait/swing_trajectory',), ('/gait/footsteps',)),
-    'whole_body_ik': ((5,), ('/joint_commands',),
+    'whole_body_ik': ((50,), ('/joint_commands',),
                       ('/gait/com_reference', '/gait/footsteps', '/gait/swing_trajectory',
                        '/joint_states', '/tf')),
     'kinematic_simulator': ((5,), ('/diagnostics', '/joint_states', '/tf', '/gait/zmp',

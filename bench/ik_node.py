@@ -1,18 +1,25 @@
 #!/usr/bin/env python3
-"""whole_body_ik node alone: CPU per 5 ms tick, its inputs replayed from a graph run.
+"""whole_body_ik node alone: CPU-seconds per second walked, its inputs replayed from a graph run.
 
     python bench/ik_node.py [--scenario robosimian_crawl] [--duration 20] [--runs 5]
-                            [--profile] [--cache FILE]
+                            [--com-horizon S] [--profile] [--cache FILE]
 
 One inproc graph run of the scenario (every contract node, no recorder) records what the
 whole_body_ik node is handed: each callback (its timer, /joint_states, /tf,
 /gait/com_reference, /gait/footsteps, /gait/swing_trajectory) with the simulated time and the
 message. Then a fresh node, alone, is handed the same callbacks at the same simulated times
 ``--runs`` times (a subscription the node has dropped meanwhile is skipped, as the executor
-would): the CPU time of its callbacks per tick (median of the runs, and per callback kind),
-nothing else of the graph in the figure. Every replay's /joint_commands are checked equal
-to the graph run's (the same floats), so a figure is never that of a node that does otherwise.
-``--profile`` adds a cProfile of one replay.
+would): the CPU time of its callbacks per second walked (median of the runs, and per callback
+kind), nothing else of the graph in the figure. Every replay's /joint_commands (each
+JointTrajectory's times, positions and velocities) are checked equal to the graph run's (the
+same floats), so a figure is never that of a node that does otherwise. ``--profile`` adds a
+cProfile of one replay.
+
+``--com-horizon S`` hands the node, instead of the graph's /gait/com_reference messages, one
+message every ``--com-period`` (0.05 s) carrying the graph run's COM states from then to S
+seconds later, every ``--com-sample`` (0.02 s): the stamped horizon of the agreed design, from
+a graph whose com_preview_controller still publishes one state per tick. The commands are then
+checked equal between the replays (the graph run's IK had other inputs).
 
 ``--cache FILE`` keeps the graph run's callbacks (messages as CDR) and commands in FILE and
 replays from there when FILE holds the same scenario and duration: a replay then runs without
@@ -44,7 +51,6 @@ from gait_nodes import graph, runtime  # noqa: E402
 from gait_nodes.scenarios import CommandDriver, get_scenario  # noqa: E402
 
 NODE = 'whole_body_ik'
-RATE_HZ = 200.0
 
 
 def _init(scenario) -> None:
@@ -64,12 +70,51 @@ def _callbacks(node) -> dict[str, object]:
     return found
 
 
+def trajectory_of(msg) -> tuple[list[int], list[list[float]], list[list[float]]]:
+    """A /joint_commands JointTrajectory's point times [ns], positions and velocities."""
+    from gait_nodes.contract import time_msg_to_ns
+
+    start_ns = time_msg_to_ns(msg.header.stamp)
+    return ([start_ns + time_msg_to_ns(p.time_from_start) for p in msg.points],
+            [list(p.positions) for p in msg.points], [list(p.velocities) for p in msg.points])
+
+
+def with_com_horizon(events: list, horizon_s: float, period_s: float,
+                     sample_s: float) -> list:
+    """``events`` with the /gait/com_reference ones replaced by messages with a horizon.
+
+    One message every ``period_s`` (at the recorded COM events whose time is a multiple of
+    it), holding the recorded COM states from that time to ``horizon_s`` later, ``sample_s``
+    apart (the states of one-state messages; the latest one at or before each sample time).
+    """
+    import bisect
+
+    from gait_nodes.contract import com_reference_from_msg, com_reference_to_msg
+
+    kind = '/gait/com_reference'
+    states = [com_reference_from_msg(msg)[0] for _, k, msg in events if k == kind]
+    stamps = [state.stamp_ns for state in states]
+    period_ns = int(round(period_s * 1e9))
+    offsets = [int(round(k * sample_s * 1e9)) for k in range(int(horizon_s / sample_s) + 1)]
+    replaced = []
+    for now_ns, k, msg in events:
+        if k != kind:
+            replaced.append((now_ns, k, msg))
+        elif now_ns % period_ns == 0:
+            picked = [states[max(bisect.bisect_right(stamps, now_ns + dt) - 1, 0)]
+                      for dt in offsets]
+            horizon = [picked[0]] + [b for a, b in zip(picked[:-1], picked[1:], strict=True)
+                                     if b.stamp_ns > a.stamp_ns]
+            replaced.append((now_ns, k, com_reference_to_msg(horizon)))
+    return replaced
+
+
 def record(scenario_name: str, duration_s: float) -> tuple[list, list]:
     """The whole_body_ik node's callbacks of one graph run, and its /joint_commands.
 
     Returns:
-        ``(events, commands)``: ``(time_ns, kind, msg)`` per callback, ``(positions,
-        velocities)`` per published command.
+        ``(events, commands)``: ``(time_ns, kind, msg)`` per callback, :func:`trajectory_of`
+        each published command.
     """
     scenario = get_scenario(scenario_name)
     _init(scenario)
@@ -89,9 +134,7 @@ def record(scenario_name: str, duration_s: float) -> tuple[list, list]:
 
                 holder.callback = logged
         publish = ik.publisher.publish
-        ik.publisher.publish = lambda msg: (commands.append((list(msg.position),
-                                                             list(msg.velocity))),
-                                            publish(msg))
+        ik.publisher.publish = lambda msg: (commands.append(trajectory_of(msg)), publish(msg))
         executor = runtime.SingleThreadedExecutor()
         for node in nodes:
             executor.add_node(node)
@@ -141,7 +184,7 @@ def replay(scenario_name: str, events: list, profile: bool = False) -> tuple[dic
     try:
         node = WholeBodyIk()
         transport = runtime.default_context().transport
-        node.publisher.publish = lambda msg: commands.append((msg.position, msg.velocity))
+        node.publisher.publish = commands.append  # (read after the timing)
         holders = {kind: found[0] for kind, found in _callbacks(node).items()}
         callbacks = {kind: holder.callback for kind, holder in holders.items()}
         subscriptions = node._subscriptions
@@ -168,6 +211,7 @@ def replay(scenario_name: str, events: list, profile: bool = False) -> tuple[dic
             import pstats
 
             pstats.Stats(profiler).sort_stats('tottime').print_stats(30)
+        commands = [trajectory_of(msg) for msg in commands]
     finally:
         runtime.shutdown()
     return seconds, commands
@@ -179,6 +223,9 @@ def main() -> int:
     parser.add_argument('--scenario', default='robosimian_crawl')
     parser.add_argument('--duration', type=float, default=20.0)
     parser.add_argument('--runs', type=int, default=5)
+    parser.add_argument('--com-horizon', type=float, help='COM horizon [s] (see above)')
+    parser.add_argument('--com-period', type=float, default=0.05)
+    parser.add_argument('--com-sample', type=float, default=0.02)
     parser.add_argument('--profile', action='store_true')
     parser.add_argument('--cache', type=Path, help='file keeping the graph run (see above)')
     args = parser.parse_args()
@@ -189,29 +236,34 @@ def main() -> int:
             save(args.cache, args.scenario, args.duration, events, commands)
     else:
         events, commands = kept
-    ticks = args.duration * RATE_HZ
+    source = 'the graph run\'s'
+    if args.com_horizon is not None:
+        events = with_com_horizon(events, args.com_horizon, args.com_period, args.com_sample)
+        commands, source = None, 'each other'
     runs = []
     for run in range(args.runs):
         seconds, replayed = replay(args.scenario, events, args.profile and run == 0)
-        same = len(replayed) == len(commands) and all(
-            list(p) == c[0] and list(v) == c[1] for (p, v), c in zip(replayed, commands,
-                                                                     strict=True))
-        if not same:
-            print('replayed /joint_commands differ from the graph run\'s', file=sys.stderr)
+        if commands is None:
+            commands = replayed
+        if replayed != commands:
+            print(f'replayed /joint_commands differ from {source}', file=sys.stderr)
             return 1
         runs.append(seconds)
     kinds = sorted({kind for _, kind, _ in events})
     counts = {kind: sum(1 for _, k, _ in events if k == kind) for kind in kinds}
     total = [sum(r.values()) for r in runs]
-    print(f'{NODE} alone, {args.scenario}, {args.duration:g} s at {RATE_HZ:g} Hz, '
-          f'{len(events)} callbacks replayed, {args.runs} runs (commands equal to the graph '
-          f'run\'s)')
-    print(f'  CPU per 5 ms tick, median: {np.median(total) / ticks * 1e6:.1f} us '
-          f'(runs: {", ".join(f"{t / ticks * 1e6:.1f}" for t in total)})')
+    points = sum(len(times) for times, _, _ in commands)
+    horizon = 'the graph\'s COM reference' if args.com_horizon is None else (
+        f'a {args.com_horizon:g} s COM horizon every {args.com_period:g} s')
+    print(f'{NODE} alone, {args.scenario}, {args.duration:g} s walked, {horizon}, '
+          f'{len(events)} callbacks replayed, {args.runs} runs (commands equal to {source}); '
+          f'{len(commands)} /joint_commands, {points / max(len(commands), 1):.1f} points each')
+    print(f'  CPU-seconds per second walked, median: {np.median(total) / args.duration:.4f} '
+          f'(runs: {", ".join(f"{t / args.duration:.4f}" for t in total)})')
     for kind in kinds:
         median = float(np.median([r.get(kind, 0.0) for r in runs]))
-        print(f'    {kind:24s} {median / ticks * 1e6:7.1f} us per tick, '
-              f'{median / counts[kind] * 1e6:7.1f} us per call ({counts[kind]} calls)')
+        print(f'    {kind:24s} {median / args.duration:7.4f} s/s, '
+              f'{median / counts[kind] * 1e6:8.1f} us per call ({counts[kind]} calls)')
     return 0
 
 

@@ -1,29 +1,45 @@
-"""whole_body_ik node: COM reference, footsteps and swing trajectories in, joint commands out.
+"""whole_body_ik node: COM reference, footsteps and swing trajectories in, a joint trajectory out.
 
-``python -m gait_nodes.whole_body_ik [--ros-args -p robot:=go2 ...]``. Every tick (``rate_hz``)
-the node takes the COM reference and body yaw at that instant (/gait/com_reference), holds the
-stance feet where the footstep plan puts them (/gait/footsteps), moves each swing foot along its
-swing trajectory (/gait/swing_trajectory) and solves the whole-body IK
-(:mod:`gait_nodes.robot.whole_body_ik`): the body moves so that the full-model COM is on the
-reference. The step is scaled down to the joint velocity limits and published on
-/joint_commands (positions and velocities of every joint of the URDF).
+``python -m gait_nodes.whole_body_ik [--ros-args -p robot:=go2 ...]``. The node solves the
+whole-body IK (:mod:`gait_nodes.robot.whole_body_ik`) at knots ``sample_period_s`` apart on a
+fixed time grid, each for the instant it is for: the COM reference and body yaw at that instant
+(/gait/com_reference, a stamped horizon), the stance feet where the footstep plan puts them
+(/gait/footsteps), each swing foot on its swing trajectory (/gait/swing_trajectory); the body
+moves so that the full-model COM is on the reference. Every ``1 / rate_hz`` it solves the knots
+from its last solved one up to ``horizon_s`` ahead of the clock, never past the end of the COM
+reference it holds, each knot once (warm-started from the knots before it) and reached from the
+one before within the joint velocity limits (the step scaled down, as the thesis times its
+swings); then it publishes /joint_commands, a trajectory_msgs/JointTrajectory as a ros2_control
+joint_trajectory_controller takes it: every joint of the URDF in the robot's order, the knots
+from the latest one at or before now to the last one solved (header.stamp is the first point's
+time, ``time_from_start`` strictly increasing from 0), positions and velocities (the
+trajectory's derivative at the knots: central differences, the last one backward, never above
+the limits), no accelerations or efforts. A consumer follows it by its stamps on its own clock,
+so a late message is no jump: the previous one still covers ``horizon_s`` ahead.
 
-* Before the first COM reference and footstep plan have arrived, the current posture is held:
-  the robot's /joint_states (and /tf base pose) once heard, the nominal stance until then. A
-  node started into a running graph (dds, rclpy) waits up to ``stale_timeout_s`` for
-  /joint_states before it commands anything, so that a restarted IK picks up the robot where it
-  stands instead of pulling it back to the nominal stance, and seeds its solver there.
-* /gait/com_reference is a stream: silent for more than ``stale_timeout_s``, the node holds its
-  last joint command (zero velocity: the robot stops where it is, it does not keep stepping
-  under a frozen COM) and reports the stale input (WARN, ``whole_body_ik: inputs``); when the
-  reference returns it resumes from the held posture and reports OK.
-* A foot in swing per the plan with no swing trajectory covering the instant follows the
+* Before the first COM reference and footstep plan have arrived, the current posture is held
+  (a one-point trajectory at the present instant, at rest): the robot's /joint_states (and /tf
+  base pose) once heard, the nominal stance until then. A node started into a running graph
+  (dds, rclpy) waits up to ``stale_timeout_s`` for /joint_states before it commands anything,
+  so that a restarted IK picks up the robot where it stands instead of pulling it back to the
+  nominal stance, and seeds its solver there.
+* A late /gait/com_reference ends the trajectory where the reference ends (at rest, once the
+  present has reached its last knot). Silent for more than ``stale_timeout_s``, the node
+  holds: it sends its last knot as a one-point trajectory at rest (the robot stops where its
+  trajectory ended, it does not keep stepping under a frozen COM) and reports the stale input
+  (WARN, ``whole_body_ik: inputs``); when the reference returns it starts a new trajectory from
+  the held posture and reports OK. A trajectory that ended before now (the node starved, or its
+  COM reference late) was held at its last knot by its consumer: the next one starts there, at
+  rest, at the latest knot time at or before now (no knot in the past is solved), and catches
+  up within the velocity limits.
+* A foot in swing per the plan with no swing trajectory covering a knot's instant follows the
   fallback swing (quintic smoothstep from lift-off to landing place, lifted by
   ``fallback_step_height_m``; :func:`gait_nodes.robot.whole_body_ik.fallback_swing_pose`).
 * /diagnostics: inputs dropped (NaN, wrong frame or feet) at once; every
-  ``diagnostics_period_s`` a summary: velocity saturation (fraction of saturated ticks, the
-  largest demanded/limit ratio, which joints), tracking residuals (foot, orientation and COM
-  errors, unconverged ticks, joints on a limit) and input state (waiting, stale, fallbacks).
+  ``diagnostics_period_s`` a summary over the knots solved since the last one (the ``ticks``
+  keys count knots): velocity saturation (fraction of saturated knots, the largest
+  demanded/limit ratio, which joints), tracking residuals (foot, orientation and COM errors,
+  unconverged knots, joints on a limit) and input state (waiting, stale, fallbacks).
 """
 
 from __future__ import annotations
@@ -43,6 +59,7 @@ from gait_nodes.contract import (
     com_reference_from_msg,
     duration_msg_to_seconds,
     footsteps_from_msg,
+    ns_to_time_msg,
     quaternion_to_yaw,
     swing_trajectory_from_msg,
     time_msg_to_ns,
@@ -58,6 +75,7 @@ from gait_nodes.robot.whole_body_ik import (
     FootTargets,
     IkSettings,
     IkTargets,
+    JointKnots,
     SwingPath,
     WholeBodyIkSolver,
     limb_ik_family,
@@ -87,6 +105,8 @@ class WholeBodyIkParams:
 
     robot: str
     rate_hz: float
+    sample_period_s: float
+    horizon_s: float
     ik_family: int
     fallback_step_height_m: float
     max_iterations: int
@@ -113,6 +133,8 @@ class WholeBodyIkParams:
         return cls(
             robot=robot,
             rate_hz=_number(values, 'rate_hz', 0.01, 2000.0),  # 5e-324 Hz: no timer period
+            sample_period_s=_number(values, 'sample_period_s', 1e-4, 1.0),
+            horizon_s=_number(values, 'horizon_s', 0.0, 10.0),
             ik_family=family,
             fallback_step_height_m=_number(values, 'fallback_step_height_m', 0.0, 0.5),
             max_iterations=iterations,
@@ -163,22 +185,26 @@ class WholeBodyIk(GuardedNode):
         self.solver = WholeBodyIkSolver(self.robot, self.params.ik_settings())
         self.q_nominal = nominal_configuration(self.robot, self._family)
         self._q_solution = self.q_nominal.copy()
+        # The last knot's configuration (the posture held before motion): the next step's start.
         self._q_command = self.q_nominal.copy()
         self._joints_command = self.robot.joint_positions(self._q_command)
-        # Solutions of the last consecutive solved ticks (oldest first): the warm start.
+        self._knots = JointKnots(len(self.robot.joint_names))
+        # Solutions of the last consecutive solved knots (oldest first): the warm start.
         self._solutions: list[np.ndarray] = []
-        self._solution_times_s: list[int] = []  # their tick times [ns]
+        self._solution_times_s: list[int] = []  # their knot times [ns]
         self._reseed = False
         self._plan = None
         self._feet: FootTargets | None = None  # the plan's foot targets
         self._com_track: ComTrack | None = None
+        self._com_end_ns = None  # the time of the held COM reference's last point [ns]
         self._com_received_ns = None
         # The latest swing trajectory of each foot (robot order).
         self._swing_paths: list[SwingPath | None] = [None] * len(self.robot.foot_names)
-        self._last_tick_ns = None
         self._window = _Window()
         self._last_summary_ns = None
         self._moving = False
+        self._held = False  # moving, but holding the last knot (stale COM reference)
+        self._zero_velocity = [0.0] * len(self.robot.joint_names)
         self._start_ns = self.get_clock().now().nanoseconds
         self.inputs = InputWatchdog(['/gait/com_reference'], self.params.stale_timeout_s,
                                     self._start_ns, holding='holding the last joint command')
@@ -189,12 +215,10 @@ class WholeBodyIk(GuardedNode):
 
         self.diagnostics = DiagnosticsReporter(self, self.robot.name)
         self.faults = FaultGuard(self, self.diagnostics)
-        self._new = {name.rsplit('/', 1)[1]: get_constructor(name) for name in (
-            'sensor_msgs/msg/JointState', 'std_msgs/msg/Header', 'builtin_interfaces/msg/Time')}
         # Shared by every /joint_commands message (published messages are read-only).
         self._joint_names = list(self.robot.joint_names)
-        self.publisher = self.create_publisher(get_message('sensor_msgs/msg/JointState'),
-                                               '/joint_commands', 10)
+        self.publisher = self.create_publisher(
+            get_message('trajectory_msgs/msg/JointTrajectory'), '/joint_commands', 10)
         trajectory = get_message('trajectory_msgs/msg/MultiDOFJointTrajectory')
         self.create_subscription(trajectory, '/gait/com_reference', self._on_com_reference, 10)
         self.create_subscription(trajectory, '/gait/footsteps', self._on_footsteps,
@@ -208,7 +232,9 @@ class WholeBodyIk(GuardedNode):
                                      100)]
         self.timer = self.create_timer(1.0 / self.params.rate_hz, self.tick)
         self.get_logger().info(f'{self.robot.name}: {len(self.robot.joint_names)} joints, '
-                               f'{len(self.robot.ik_joint_names)} moved by the IK, '
+                               f'{len(self.robot.ik_joint_names)} moved by the IK, knots '
+                               f'{self.params.sample_period_s:g} s apart up to '
+                               f'{self.params.horizon_s:g} s ahead, sent at '
                                f'{self.params.rate_hz:g} Hz')
 
     # -- parameters ----------------------------------------------------------------------------
@@ -256,6 +282,9 @@ class WholeBodyIk(GuardedNode):
             self.diagnostics.drop('/gait/com_reference', str(exc))
             return
         self._com_track = track
+        last = msg.points[-1].time_from_start
+        self._com_end_ns = time_msg_to_ns(msg.header.stamp) + last.sec * 1_000_000_000 \
+            + last.nanosec
         self._com_received_ns = self.get_clock().now().nanoseconds
         self.inputs.heard('/gait/com_reference', self._com_received_ns)
 
@@ -318,91 +347,129 @@ class WholeBodyIk(GuardedNode):
 
     # -- tick ----------------------------------------------------------------------------------
 
-    def _targets_at(self, now_ns: int):
-        """IK targets at ``now_ns``: feet, foot yaws, COM, body yaw, fallback feet count.
+    def _targets_at(self, stamp_ns: int):
+        """IK targets at ``stamp_ns`` (a knot's time): feet, foot yaws, COM, body yaw, fallbacks.
 
         From references checked where they entered (contract-validated messages, finite):
         the tick hands them to :meth:`WholeBodyIkSolver.solve_trusted` unchecked.
         """
-        feet, yaws, fallbacks = self._feet.at(now_ns, self._swing_paths,
+        feet, yaws, fallbacks = self._feet.at(stamp_ns, self._swing_paths,
                                               self.params.fallback_step_height_m)
-        com, yaw = self._com_track.at(now_ns, self.params.com_extrapolation_s)
+        com, yaw = self._com_track.at(stamp_ns, self.params.com_extrapolation_s)
         # Interpolations of finite references are finite, short of an overflow (IkTargets
         # refused that too; FootTargets checks the swing feet): one sum tells.
         if not math.isfinite(sum(com) + yaw):
             raise ValueError(f'the COM target is not finite: {com}, {yaw}')
         return feet, yaws, com, yaw, fallbacks
 
-    def _warm_start(self, now_ns: int) -> np.ndarray:
-        """The solver's start from the last solutions, extrapolated to ``now_ns``.
+    def _warm_start(self, stamp_ns: int) -> np.ndarray:
+        """The solver's start from the last solutions, extrapolated to ``stamp_ns``.
 
-        Ticks one period apart (inproc, an idle machine) use the equal-spacing formula; late or
-        early ticks (a loaded machine) extrapolate with their real times.
+        Knots one sample period apart (the grid) use the equal-spacing formula; after a gap (a
+        node that ran late skips the knots in the past) it extrapolates with the real times.
         """
         times = self._solution_times_s  # (at most three)
-        step = now_ns - times[-1]
+        step = stamp_ns - times[-1]
         if len(times) < 2 or times[-1] - times[-2] == step and (
                 len(times) < 3 or times[-2] - times[-3] == step):
             return self.solver.warm_start(self._solutions)
         return self.solver.warm_start(self._solutions,
-                                      [(t - now_ns) * 1e-9 for t in self._solution_times_s], 0.0)
+                                      [(t - stamp_ns) * 1e-9 for t in self._solution_times_s], 0.0)
 
     def tick(self) -> None:
-        """Solve the IK for now, limit the joint velocities, publish /joint_commands."""
+        """Solve the knots up to the horizon, publish /joint_commands (module docstring)."""
         now_ns = self.get_clock().now().nanoseconds
-        period_s = 1.0 / self.params.rate_hz
-        dt_s = period_s if self._last_tick_ns is None or now_ns <= self._last_tick_ns \
-            else (now_ns - self._last_tick_ns) * 1e-9
-        self._last_tick_ns = now_ns
         if self.inputs.update(now_ns):
             self.diagnostics.publish([self._input_status(now_ns, self._window)])
         if not self._joined:
             if (now_ns - self._start_ns) * 1e-9 <= self.params.stale_timeout_s:
                 return  # wait a moment for the robot's /joint_states before commanding
             self._joined = True
-        window = self._window
-        window.ticks += 1
-        held = self._moving and self.inputs.stale
-        if held:
-            target = self._q_command
-            self._solutions.clear()
-            self._solution_times_s.clear()
+        knots = self._knots
+        if self._moving and self.inputs.stale:
+            if not self._held:
+                self._held = True
+                self._solutions.clear()
+                self._solution_times_s.clear()
+            # The trajectory ends at its last knot: the robot stops there, at rest.
+            self._publish([knots.times_ns[-1]], [knots.positions[-1]], [self._zero_velocity])
         elif self._com_track is not None and self._plan is not None:
             if not self._moving:
                 self._moving = True
                 self._stop_listening_to_the_robot()
-            feet, yaws, com, yaw, fallbacks = self._targets_at(now_ns)
-            window.fallback_ticks += fallbacks > 0
-            if self._reseed:
-                self._q_solution = seed_configuration(
-                    self.robot, IkTargets(feet, np.array(yaws), yaw, com_in_world=np.array(com)),
-                    self._family, self._q_solution[:3])
-                self._reseed = False
-                self._solutions.clear()
-                self._solution_times_s.clear()
-            result = self.solver.solve_trusted(
-                feet, yaws, yaw, self._warm_start(now_ns) if self._solutions
-                else self._q_solution, com)
-            self._q_solution = result.q
-            self._solutions.append(result.q)
-            self._solution_times_s.append(now_ns)
-            if len(self._solutions) > 3:
-                del self._solutions[0]
-                del self._solution_times_s[0]
-            window.max_foot_error_m = max(window.max_foot_error_m,
-                                          *result.foot_position_errors_m.tolist())
-            window.max_orientation_error_rad = max(window.max_orientation_error_rad,
-                                                   *result.foot_orientation_errors_rad.tolist())
-            window.max_com_error_m = max(window.max_com_error_m, result.com_error_m)
-            window.unconverged_ticks += not result.converged
-            if result.joints_at_limit:
-                window.joints_at_limit.update(result.joints_at_limit)
-            target = result.q
+                knots.restart(now_ns, self._joints_command)
+            elif self._held:
+                self._held = False
+                knots.restart(max(now_ns, knots.times_ns[-1]), self._joints_command)
+            elif knots.times_ns[-1] > now_ns + int(round(
+                    (self.params.horizon_s + self.params.sample_period_s) * 1e9)):
+                knots.restart(now_ns, self._joints_command)  # the clock went back
+            self._solve_knots(now_ns)
+            start = knots.first_at_or_before(now_ns)
+            # A trajectory that has ended (a late COM reference) ends at rest.
+            self._publish(*knots.window(start, ends_at_rest=knots.times_ns[-1] <= now_ns))
+            knots.drop_before(start)
         else:
-            target = self._q_command  # the current posture (the nominal stance before any)
+            # The current posture (the nominal stance before any), at rest, now.
+            self._publish([now_ns], [self._joints_command.tolist()], [self._zero_velocity])
+        if self._last_summary_ns is None:
+            self._last_summary_ns = now_ns
+        elif (now_ns - self._last_summary_ns) * 1e-9 >= self.params.diagnostics_period_s - 1e-9:
+            self._publish_summary(now_ns)
+
+    def _solve_knots(self, now_ns: int) -> None:
+        """Solve the knots after the last one up to the horizon and the COM reference's end.
+
+        On the grid of the knots. A trajectory that ended before now (the node or its COM
+        reference late) was held at its last knot by its consumer: it starts again from there,
+        at rest, at the latest grid point at or before now; no knot in the past is solved.
+        """
+        knots = self._knots
+        period_ns = max(int(round(self.params.sample_period_s * 1e9)), 1)
+        end_ns = min(now_ns + int(round(self.params.horizon_s * 1e9)), self._com_end_ns)
+        last_ns = knots.times_ns[-1]
+        if last_ns + period_ns < now_ns:
+            knots.restart(last_ns + (now_ns - last_ns) // period_ns * period_ns,
+                          knots.joints[-1])
+        stamp_ns = knots.times_ns[-1] + period_ns
+        while stamp_ns <= end_ns:
+            self._solve_knot(stamp_ns, (stamp_ns - knots.times_ns[-1]) * 1e-9)
+            stamp_ns += period_ns
+
+    def _solve_knot(self, stamp_ns: int, dt_s: float) -> None:
+        """Solve the IK at ``stamp_ns``, step there from the last knot within the limits."""
+        window = self._window
+        window.ticks += 1
+        feet, yaws, com, yaw, fallbacks = self._targets_at(stamp_ns)
+        window.fallback_ticks += fallbacks > 0
+        if self._reseed:
+            self._q_solution = seed_configuration(
+                self.robot, IkTargets(feet, np.array(yaws), yaw, com_in_world=np.array(com)),
+                self._family, self._q_solution[:3])
+            self._reseed = False
+            self._solutions.clear()
+            self._solution_times_s.clear()
+        result = self.solver.solve_trusted(
+            feet, yaws, yaw, self._warm_start(stamp_ns) if self._solutions
+            else self._q_solution, com)
+        self._q_solution = result.q
+        self._solutions.append(result.q)
+        self._solution_times_s.append(stamp_ns)
+        if len(self._solutions) > 3:
+            del self._solutions[0]
+            del self._solution_times_s[0]
+        window.max_foot_error_m = max(window.max_foot_error_m,
+                                      *result.foot_position_errors_m.tolist())
+        window.max_orientation_error_rad = max(window.max_orientation_error_rad,
+                                               *result.foot_orientation_errors_rad.tolist())
+        window.max_com_error_m = max(window.max_com_error_m, result.com_error_m)
+        window.unconverged_ticks += not result.converged
+        if result.joints_at_limit:
+            window.joints_at_limit.update(result.joints_at_limit)
         q, joints, velocities, saturation = limit_joint_step(
-            self.robot, self._q_command, self._joints_command, target, dt_s)
+            self.robot, self._q_command, self._joints_command, result.q, dt_s)
         self._q_command, self._joints_command = q, joints
+        self._knots.append(stamp_ns, joints, velocities)
         if saturation.saturated:
             window.saturated_ticks += 1
             window.max_ratio = max(window.max_ratio, saturation.ratio)
@@ -410,11 +477,6 @@ class WholeBodyIk(GuardedNode):
                                     strict=True):
                 window.saturated_joints[joint] = max(window.saturated_joints.get(joint, 0.0),
                                                      ratio)
-        self._publish(now_ns, joints, velocities)
-        if self._last_summary_ns is None:
-            self._last_summary_ns = now_ns
-        elif (now_ns - self._last_summary_ns) * 1e-9 >= self.params.diagnostics_period_s - 1e-9:
-            self._publish_summary(now_ns)
 
     def _stop_listening_to_the_robot(self) -> None:
         """Drop the /joint_states and /tf subscriptions: once moving, the node never reads them.
@@ -427,14 +489,10 @@ class WholeBodyIk(GuardedNode):
             self.destroy_subscription(subscription)
         self._robot_subscriptions = []
 
-    def _publish(self, now_ns: int, joints: np.ndarray, velocities: np.ndarray) -> None:
-        new = self._new
-        # Stamped with the instant the targets were taken at, not the end of the solve: the
-        # simulator follows the setpoints by their stamps.
-        stamp = new['Time'](*divmod(now_ns, 1_000_000_000))
-        self.publisher.publish(new['JointState'](
-            new['Header'](stamp, ''), self._joint_names, joints.tolist(), velocities.tolist(),
-            []))
+    def _publish(self, times_ns: list[int], positions: list[list[float]],
+                 velocities: list[list[float]]) -> None:
+        self.publisher.publish(joint_trajectory_to_msg(self._joint_names, times_ns, positions,
+                                                       velocities))
 
     def _publish_summary(self, now_ns: int) -> None:
         window, self._window = self._window, _Window()
@@ -497,6 +555,30 @@ class WholeBodyIk(GuardedNode):
                 else f'every limb in family {self._family}',
                 {'family': self._family, **{f'{name}_family': family
                                             for name, family in families.items()}})
+
+
+def joint_trajectory_to_msg(joint_names: list[str], times_ns: list[int],
+                            positions: list[list[float]], velocities: list[list[float]]):
+    """trajectory_msgs/JointTrajectory of knots, as a joint_trajectory_controller takes it.
+
+    Args:
+        joint_names: The joints, each once (the list is put in the message as it is).
+        times_ns: (N,) knot times [ns], strictly increasing, N >= 1: ``header.stamp`` is the
+            first, each point's ``time_from_start`` its time after the first.
+        positions: (N, J) joint positions [rad], J = ``len(joint_names)``.
+        velocities: (N, J) joint velocities [rad/s].
+
+    The lists are put in the message as they are (published messages are read-only); the
+    caller vouches for the sizes and the order of the times, which this does not check.
+    """
+    new_duration = get_constructor('builtin_interfaces/msg/Duration')
+    new_point = get_constructor('trajectory_msgs/msg/JointTrajectoryPoint')
+    start_ns = times_ns[0]
+    points = [new_point(p, v, [], [], new_duration(*divmod(t - start_ns, 1_000_000_000)))
+              for t, p, v in zip(times_ns, positions, velocities, strict=True)]
+    return get_constructor('trajectory_msgs/msg/JointTrajectory')(
+        get_constructor('std_msgs/msg/Header')(ns_to_time_msg(start_ns), ''), joint_names,
+        points)
 
 
 def com_track_from_msg(msg) -> ComTrack:

@@ -26,6 +26,7 @@ from gait_nodes.robot.model import load_robot_model
 from gait_nodes.robot.whole_body_ik import (
     IkSettings,
     IkTargets,
+    JointKnots,
     WholeBodyIkSolver,
     com_state_at,
     fallback_swing_pose,
@@ -431,6 +432,37 @@ def test_swing_sampling_is_linear_between_waypoints(times, yaws, t_s, seed):
     assert abs(math.remainder(yaw - wanted, 2 * math.pi)) < 1e-9
 
 
+def test_joint_knots_velocities_are_central_differences_within_the_steps():
+    """Uneven spacing: the time-weighted mean of the two steps; the last backward or at rest."""
+    knots = JointKnots(2)
+    knots.restart(0, np.array([0.0, 1.0]))
+    rng = np.random.default_rng(3)
+    times, joints = [0], [np.array([0.0, 1.0])]
+    for dt in (5, 5, 20, 5, 15):
+        times.append(times[-1] + dt)
+        joints.append(joints[-1] + rng.uniform(-1, 1, 2))
+        knots.append(times[-1], joints[-1], (joints[-1] - joints[-2]) / dt)
+        if len(knots) == 4:
+            knots.drop_before(knots.first_at_or_before(times[-1]))  # one knot left
+            assert len(knots) == 1
+    window_times, positions, velocities = knots.window(0)
+    assert window_times == times[3:]
+    np.testing.assert_array_equal(positions, joints[3:])
+    for k in range(1, len(window_times) - 1):
+        j = k + 3
+        central = (joints[j + 1] - joints[j - 1]) / (times[j + 1] - times[j - 1])
+        np.testing.assert_allclose(velocities[k], central, rtol=1e-12)
+    np.testing.assert_allclose(velocities[-1], (joints[-1] - joints[-2]) / 15, rtol=1e-12)
+    assert knots.window(len(knots) - 1, ends_at_rest=True)[2] == [[0.0, 0.0]]
+    # Dropped knots keep their velocities in the later ones: the first knot's is central.
+    np.testing.assert_allclose(velocities[0], (joints[4] - joints[2]) / (times[4] - times[2]),
+                               rtol=1e-12)
+    restarted = JointKnots(2)
+    restarted.restart(7, np.array([1.0, 2.0]))
+    restarted.append(12, np.array([1.5, 2.0]), np.array([0.1, 0.0]))
+    assert restarted.window(0)[2] == [[0.0, 0.0], [0.1, 0.0]]  # from rest
+
+
 # -- the node in the inproc runtime ------------------------------------------------------------
 
 
@@ -447,8 +479,8 @@ class Collector(runtime.Node):
     def __init__(self):
         super().__init__('collector')
         self.commands, self.statuses = [], []
-        self.create_subscription(get_message('sensor_msgs/msg/JointState'), '/joint_commands',
-                                 self.commands.append, 100)
+        self.create_subscription(get_message('trajectory_msgs/msg/JointTrajectory'),
+                                 '/joint_commands', self.commands.append, 100)
         self.create_subscription(get_message('diagnostic_msgs/msg/DiagnosticArray'),
                                  '/diagnostics',
                                  lambda msg: self.statuses.extend(msg.status), 100)
@@ -462,11 +494,65 @@ def stamp_ns(msg) -> int:
     return msg.header.stamp.sec * NS + msg.header.stamp.nanosec
 
 
-class CrawlSource(runtime.Node):
-    """A synthetic gait: footstep plan (latched), COM reference each tick, one swing message."""
+def knot_times_ns(msg) -> list[int]:
+    """Absolute times [ns] of a JointTrajectory's points."""
+    start = stamp_ns(msg)
+    return [start + p.time_from_start.sec * NS + p.time_from_start.nanosec for p in msg.points]
 
-    def __init__(self, robot, q0, com_amplitude_m=0.03, com_period_s=4.0, nan_at_ns=None):
+
+def check_controller_rules(msg, robot) -> None:
+    """What a ros2_control joint_trajectory_controller checks, and our own rules on top.
+
+    Joint names: the robot's, each once; ``time_from_start`` >= 0 and strictly increasing
+    (the first 0: the header stamp is the first point's time); positions and velocities one
+    finite value per joint, velocities within the robot's limits; no accelerations, no efforts.
+    """
+    names = list(msg.joint_names)
+    assert names and len(set(names)) == len(names) and names == list(robot.joint_names)
+    assert msg.header.frame_id == '' and msg.points
+    offsets = [p.time_from_start.sec * NS + p.time_from_start.nanosec for p in msg.points]
+    assert offsets[0] == 0 and all(b > a for a, b in zip(offsets[:-1], offsets[1:], strict=True))
+    assert all(0 <= p.time_from_start.nanosec < NS for p in msg.points)
+    limits = robot.velocity_limits_rad_s
+    for point in msg.points:
+        positions, velocities = np.array(point.positions), np.array(point.velocities)
+        assert positions.shape == velocities.shape == (len(names),)
+        assert np.all(np.isfinite(positions)) and np.all(np.isfinite(velocities))
+        assert np.all(np.abs(velocities) <= limits)
+        assert len(point.accelerations) == 0 and len(point.effort) == 0
+
+
+def knots_of(commands) -> dict[int, tuple[np.ndarray, np.ndarray]]:
+    """Knot time [ns] -> (positions, velocities) over every message, the latest message's.
+
+    A knot sent in several messages has the same positions in each (it is solved once).
+    """
+    knots = {}
+    for msg in commands:
+        for t, point in zip(knot_times_ns(msg), msg.points, strict=True):
+            positions = np.array(point.positions)
+            if t in knots:
+                assert np.array_equal(knots[t][0], positions)
+            knots[t] = positions, np.array(point.velocities)
+    return dict(sorted(knots.items()))
+
+
+class CrawlSource(runtime.Node):
+    """A synthetic gait: footstep plan (latched), COM reference, one swing message.
+
+    The COM reference comes every ``publish_period_s`` with a horizon of ``horizon_s``, points
+    ``sample_period_s`` apart from now on (the com_preview_controller's defaults); it stops at
+    ``silent_from_ns`` for ``silent_for_s``.
+    """
+
+    def __init__(self, robot, q0, com_amplitude_m=0.03, com_period_s=4.0, nan_at_ns=None,
+                 publish_period_s=0.05, horizon_s=0.5, sample_period_s=0.02,
+                 silent_from_ns=None, silent_for_s=0.0):
         super().__init__('crawl_source')
+        self.horizon_times_ns = [int(round(k * sample_period_s * NS))
+                                 for k in range(int(round(horizon_s / sample_period_s)) + 1)]
+        self.silent = (silent_from_ns, None if silent_from_ns is None
+                       else silent_from_ns + int(silent_for_s * NS))
         self.period = com_period_s
         self.feet0, _ = robot.foot_poses(q0)
         self.com0 = robot.com(q0)
@@ -494,7 +580,7 @@ class CrawlSource(runtime.Node):
         self.swing = SwingTrajectory(
             'rear_right', self.plan.start_ns + 4 * NS, np.array([0.0, 0.5, 1.5, 2.0]),
             np.array([start, start + [0, 0, 0.05], end + [0, 0, 0.05], end]), np.zeros(4))
-        self.create_timer(0.005, self.tick)
+        self.create_timer(publish_period_s, self.tick)
         self.sent_swing = False
 
     def com_at(self, t_ns: int) -> np.ndarray:
@@ -503,18 +589,23 @@ class CrawlSource(runtime.Node):
         sway = self.amplitude * math.sin(2 * math.pi * t / self.period)
         return self.com0 + [0.01 * t, sway, 0.0]
 
+    def com_velocity_at(self, t_ns: int) -> np.ndarray:
+        """Derivative of :meth:`com_at` [m/s]."""
+        omega = 2 * math.pi / self.period
+        return np.array([0.01, self.amplitude * omega * math.cos(omega * t_ns * 1e-9), 0.0])
+
     def tick(self):
-        """Publish the COM reference now, and the swing trajectory one second early."""
+        """Publish the COM reference from now on, and the swing trajectory one second early."""
         now = self.get_clock().now().nanoseconds
-        position = self.com_at(now)
+        start, end = self.silent
+        if start is not None and start <= now < end:
+            return
+        msg = com_reference_to_msg([ComState(now + dt, self.com_at(now + dt),
+                                             self.com_velocity_at(now + dt), np.zeros(3))
+                                    for dt in self.horizon_times_ns])
         if self.nan_at_ns is not None and now == self.nan_at_ns:
-            msg = com_reference_to_msg([ComState(now, self.com_at(now), np.zeros(3),
-                                                 np.zeros(3))])
             msg.points[0].transforms[0].translation.x = float('nan')
-            self.com_publisher.publish(msg)
-        else:
-            self.com_publisher.publish(com_reference_to_msg([ComState(
-                now, position, np.zeros(3), np.zeros(3))]))
+        self.com_publisher.publish(msg)
         if not self.sent_swing and now >= self.swing.start_ns - NS:
             self.swing_publisher.publish(swing_trajectory_to_msg(self.swing))
             self.sent_swing = True
@@ -541,32 +632,40 @@ def run_node(seconds, **source_kwargs):
 
 
 def test_node_tracks_the_contract_references_checked_by_fk(inproc):
+    """Every knot of the trajectories puts the feet and the COM on the references at its time.
+
+    The messages keep ros2_control's rules; each knot is solved once (the same positions in
+    every message that carries it), on a 5 ms grid, and reached from the one before within the
+    joint velocity limits.
+    """
     node, source, collector = run_node(7.0)
     robot = node.robot
-    assert len(collector.commands) == pytest.approx(7.0 * 200, abs=2)
+    assert len(collector.commands) == pytest.approx(7.0 * 20, abs=1)
     plan = source.plan
     limits = robot.velocity_limits_rad_s
-    previous = None
-    checked_swings = {'front_left': 0, 'rear_right': 0}
     for msg in collector.commands:
-        assert list(msg.name) == list(robot.joint_names)
-        positions = np.array(msg.position)
-        velocities = np.array(msg.velocity)
-        assert np.all(np.isfinite(positions))
-        assert np.all(np.abs(velocities) <= limits)
-        if previous is not None:
-            dt = (stamp_ns(msg) - stamp_ns(previous)) * 1e-9
-            assert np.all(np.abs(positions - np.array(previous.position)) / dt
-                          <= limits * (1 + 1e-9))
-        previous = msg
-        now = stamp_ns(msg)
+        check_controller_rules(msg, robot)
+        # From the latest knot at or before the present (the message's publication time)
+        # to about horizon_s ahead.
+        times = knot_times_ns(msg)
+        assert times[-1] - times[0] >= 0.3 * NS - 5_000_000 or times[0] < plan.start_ns
+    # (The first message holds the nominal stance: it comes before the references.)
+    assert len(collector.commands[0].points) == 1
+    knots = knots_of(collector.commands[1:])
+    times = np.array(list(knots))
+    assert np.all(np.diff(times) == 5_000_000)
+    positions = np.array([p for p, _ in knots.values()])
+    steps = np.abs(np.diff(positions, axis=0)) / 0.005
+    assert np.all(steps <= limits * (1 + 1e-9))
+    checked_swings = {'front_left': 0, 'rear_right': 0}
+    for now, (joints, _) in knots.items():
         t_plan = (now - plan.start_ns) * 1e-9
         if t_plan < 0.05:
             continue
         stance = plan.contacts_at(t_plan)
         targets = np.array(plan.stance_positions_at(t_plan))
-        base = base_from_stance(robot, positions, targets, stance)
-        q = robot.configuration(base, 0.0, positions)
+        base = base_from_stance(robot, joints, targets, stance)
+        q = robot.configuration(base, 0.0, joints)
         feet, _ = robot.foot_poses(q)
         # Stance feet where the plan holds them, COM on the reference (0.1 mm, 1 mm).
         assert np.abs(feet[stance] - targets[stance]).max() <= 1e-4
@@ -590,6 +689,53 @@ def test_node_tracks_the_contract_references_checked_by_fk(inproc):
                for s in inputs)
 
 
+def test_knot_velocities_are_the_derivative_of_the_knots(inproc):
+    """Central differences of the knots (the last one of a message backward), as sent.
+
+    (The first message holds the posture before the references; the first knot of the motion
+    starts from rest.)
+    """
+    node, _, collector = run_node(3.0)
+    knots = knots_of(collector.commands[1:-1])
+    times = np.array(list(knots)) * 1e-9
+    positions = np.array([p for p, _ in knots.values()])
+    velocities = np.array([v for _, v in knots.values()])
+    central = (positions[2:] - positions[:-2]) / (times[2:] - times[:-2])[:, None]
+    np.testing.assert_allclose(velocities[1:-1], central, rtol=1e-9, atol=1e-12)
+    last = collector.commands[-1].points
+    backward = (np.array(last[-1].positions) - np.array(last[-2].positions)) / 0.005
+    np.testing.assert_allclose(last[-1].velocities, backward, rtol=1e-9, atol=1e-12)
+
+
+def test_node_holds_the_last_knot_on_a_stale_reference_and_walks_on(inproc):
+    """COM reference silent for 1 s: the trajectory ends, the last knot is held, then resumes."""
+    silent_from = 2 * NS
+    node, source, collector = run_node(4.5, silent_from_ns=silent_from, silent_for_s=1.0)
+    robot = node.robot
+    for msg in collector.commands:
+        check_controller_rules(msg, robot)
+    last_heard = silent_from - 50_000_000
+    sent = [(stamp_ns(m), m) for m in collector.commands]
+    # The reference covers 0.5 s past its last message: knots go no further.
+    assert max(t for m in collector.commands for t in knot_times_ns(m)
+               if stamp_ns(m) < silent_from + NS) <= last_heard + NS // 2
+    held = [m for t, m in sent if len(m.points) == 1 and silent_from <= t < silent_from + NS]
+    assert held, 'no one-point trajectory while the reference was stale'
+    for msg in held:
+        np.testing.assert_array_equal(msg.points[0].velocities, 0.0)
+        np.testing.assert_array_equal(msg.points[0].positions, held[0].points[0].positions)
+    statuses = [level_value(s.level) for s in collector.status('inputs')]
+    assert WARN in statuses and statuses[-1] == 0
+    # Walking on: from the held posture, within the limits, on the references again.
+    after = [m for m in collector.commands if knot_times_ns(m)[0] >= silent_from + NS + NS // 5]
+    assert after and all(len(m.points) > 10 for m in after)
+    knots = knots_of(collector.commands)
+    times = np.array(list(knots))
+    positions = np.array([p for p, _ in knots.values()])
+    steps = np.abs(np.diff(positions, axis=0)) / (np.diff(times) * 1e-9)[:, None]
+    assert np.all(steps <= robot.velocity_limits_rad_s * (1 + 1e-9))
+
+
 def test_node_stops_hearing_the_robot_once_it_moves(inproc):
     """/joint_states and /tf, which only seed the posture held before motion, are dropped.
 
@@ -609,7 +755,7 @@ def test_node_stops_hearing_the_robot_once_it_moves(inproc):
     topics = {s.topic_name for s in node.subscriptions}
     assert not robot_topics & topics
     assert {'/gait/com_reference', '/gait/footsteps', '/gait/swing_trajectory'} <= topics
-    assert len(collector.commands) == 120
+    assert len(collector.commands) == 12
 
 
 def test_node_holds_the_nominal_stance_before_the_references(inproc):
@@ -622,10 +768,13 @@ def test_node_holds_the_nominal_stance_before_the_references(inproc):
     executor.add_node(collector)
     executor.spin_for(1.5)
     nominal = node.robot.joint_positions(node.q_nominal)
-    assert len(collector.commands) == 300
+    assert len(collector.commands) == 30
     for msg in collector.commands:
-        np.testing.assert_allclose(msg.position, nominal)
-        np.testing.assert_allclose(msg.velocity, 0.0)
+        check_controller_rules(msg, node.robot)
+        # One point, now, at rest.
+        [point] = msg.points
+        np.testing.assert_allclose(point.positions, nominal)
+        np.testing.assert_allclose(point.velocities, 0.0)
     statuses = collector.status('inputs')
     assert all('waiting for /gait/com_reference, /gait/footsteps' in status.message
                for status in statuses)
@@ -634,11 +783,80 @@ def test_node_holds_the_nominal_stance_before_the_references(inproc):
     assert 'nothing received on /gait/com_reference' in statuses[0].message
 
 
+def test_node_rides_through_a_late_reference(inproc):
+    """COM reference late but not stale: the trajectory ends at rest, then goes on from there.
+
+    A 0.2 s horizon, silent 0.3 s: the reference ends 0.15 s before the next message comes.
+    """
+    silent_from = 2 * NS
+    node, _, collector = run_node(3.5, silent_from_ns=silent_from, silent_for_s=0.3,
+                                  horizon_s=0.2)
+    robot = node.robot
+    for msg in collector.commands:
+        check_controller_rules(msg, robot)
+    assert node.faults.failures == 0 and not collector.status('faults')
+    assert all(level_value(s.level) == 0 for s in collector.status('inputs')[1:])
+    ended = [m for m in collector.commands if len(m.points) == 1
+             and silent_from < stamp_ns(m) < silent_from + 3 * NS // 10]
+    assert ended and all(np.all(np.array(m.points[0].velocities) == 0.0) for m in ended)
+    knots = knots_of(collector.commands[1:])
+    times = np.array(list(knots))
+    assert times.max() <= silent_from - 50_000_000 + NS // 5 or times.max() >= 3.5 * NS
+    gaps = np.diff(times)
+    assert gaps.max() > 5_000_000 and np.all(gaps % 5_000_000 == 0)  # the grid, past skipped
+    positions = np.array([p for p, _ in knots.values()])
+    # The robot held the last knot: the trajectory starts again there, at rest.
+    gap = int(np.argmax(gaps))
+    np.testing.assert_array_equal(positions[gap + 1], positions[gap])
+    np.testing.assert_array_equal(knots[times[gap + 1]][1], 0.0)
+    steps = np.abs(np.diff(positions, axis=0)) / (gaps * 1e-9)[:, None]
+    assert np.all(steps <= robot.velocity_limits_rad_s * (1 + 1e-9))
+    assert times[-1] >= 3.5 * NS
+
+
+def test_a_starved_node_starts_again_at_rest_where_its_trajectory_ended(inproc):
+    """The IK's timer stopped 0.5 s: its trajectory (0.3 s ahead) ran out and was held.
+
+    The next message starts at the last knot, at rest, at the latest grid point at or before
+    the present; no knot in the past is solved; then the knots catch up within the limits.
+    """
+    from gait_nodes.whole_body_ik import WholeBodyIk
+
+    node = WholeBodyIk()
+    source = CrawlSource(node.robot, node.q_nominal)
+    collector = Collector()
+    executor = runtime.SingleThreadedExecutor()
+    for n in (node, source, collector):
+        executor.add_node(n)
+    executor.spin_for(2.0)
+    node.timer.cancel()
+    before = len(collector.commands)
+    last_knot_ns = knot_times_ns(collector.commands[-1])[-1]
+    executor.spin_for(0.5)
+    assert len(collector.commands) == before
+    node.timer = node.create_timer(0.05, node.tick)
+    executor.spin_for(1.0)
+    resumed = collector.commands[before]
+    back = node.get_clock().now().nanoseconds - NS  # the timer is back (its tick 50 ms on)
+    times = knot_times_ns(resumed)
+    assert times[0] > last_knot_ns and times[0] <= back + 50_000_000 < times[1]
+    assert (times[0] - last_knot_ns) % 5_000_000 == 0
+    np.testing.assert_array_equal(resumed.points[0].positions,
+                                  collector.commands[before - 1].points[-1].positions)
+    np.testing.assert_array_equal(resumed.points[0].velocities, 0.0)
+    for msg in collector.commands:
+        check_controller_rules(msg, node.robot)
+    knots = knots_of(collector.commands[1:])
+    knot_times = np.array(list(knots))
+    positions = np.array([p for p, _ in knots.values()])
+    steps = np.abs(np.diff(positions, axis=0)) / (np.diff(knot_times) * 1e-9)[:, None]
+    assert np.all(steps <= node.robot.velocity_limits_rad_s * (1 + 1e-9))
+
+
 def test_node_saturates_a_fast_reference_and_reports_the_joints(inproc):
     node, source, collector = run_node(2.0, com_amplitude_m=0.1, com_period_s=0.5)
-    limits = node.robot.velocity_limits_rad_s
     for msg in collector.commands:
-        assert np.all(np.abs(np.array(msg.velocity)) <= limits)
+        check_controller_rules(msg, node.robot)
     saturation = collector.status('velocity saturation')
     assert any(level_value(s.level) == WARN for s in saturation)
     warned = [s for s in saturation if level_value(s.level) == WARN][0]
@@ -655,10 +873,12 @@ def test_node_drops_nan_input_and_keeps_going(inproc):
     drops = collector.status('input /gait/com_reference')
     assert len(drops) == 1 and 'NaN' in drops[0].message
     assert node.diagnostics.dropped == {'/gait/com_reference': 1}
-    around = [m for m in collector.commands if abs(stamp_ns(m) - nan_at) <= 10_000_000]
-    assert len(around) >= 3
+    # The trajectory goes on through the dropped message: knots every 5 ms around it.
     for msg in collector.commands:
-        assert np.all(np.isfinite(msg.position)) and np.all(np.isfinite(msg.velocity))
+        check_controller_rules(msg, node.robot)
+    times = np.array(list(knots_of(collector.commands)))
+    assert np.all(np.diff(times[(times > nan_at - NS // 2) & (times < nan_at + NS // 2)])
+                  == 5_000_000)
 
 
 def test_node_parameters_are_validated_and_a_rejected_change_changes_nothing(inproc):
@@ -667,7 +887,8 @@ def test_node_parameters_are_validated_and_a_rejected_change_changes_nothing(inp
     node = WholeBodyIk()
     before = node.params
     for name, value in (('rate_hz', -5.0), ('ik_family', 9), ('robot', 'biped'),
-                        ('fallback_step_height_m', 2.0)):
+                        ('fallback_step_height_m', 2.0), ('sample_period_s', 0.0),
+                        ('horizon_s', -0.1), ('horizon_s', float('nan'))):
         [result] = node.set_parameters([Parameter(name, value=value)])
         assert not result.successful
         assert name in result.reason or 'robot' in result.reason
@@ -677,6 +898,10 @@ def test_node_parameters_are_validated_and_a_rejected_change_changes_nothing(inp
     [result] = node.set_parameters([Parameter('rate_hz', value=100.0)])
     assert result.successful
     assert node.timer.timer_period_ns == 10_000_000
+    results = node.set_parameters([Parameter('sample_period_s', value=0.01),
+                                   Parameter('horizon_s', value=0.5)])
+    assert all(result.successful for result in results)
+    assert (node.params.sample_period_s, node.params.horizon_s) == (0.01, 0.5)
 
 
 def test_node_refuses_an_ik_family_for_a_robot_without_limb_ik():
@@ -689,3 +914,85 @@ def test_node_refuses_an_ik_family_for_a_robot_without_limb_ik():
             WholeBodyIk()
     finally:
         runtime.shutdown()
+
+
+@pytest.mark.parametrize('scenario_name', ['robosimian_crawl', 'biped_walk'])
+def test_joint_commands_of_an_inproc_walk_keep_the_controller_rules(scenario_name, tmp_path):
+    """The whole inproc graph walking a scenario: every /joint_commands a JTC would take.
+
+    Each knot solved once (the same positions in every message that carries it), knots on
+    the 5 ms grid, each step within the velocity limits; a message starts at the latest knot
+    at or before its publication and reaches ahead no further than horizon_s. (How far ahead
+    depends on the COM reference's horizon: with one state per message, the knots end where
+    it ends, at or before the present.)
+    """
+    import yaml
+
+    from gait_nodes import graph
+    from gait_nodes.scenarios import CommandDriver, get_scenario
+
+    scenario = get_scenario(scenario_name)
+    params_file = tmp_path / 'params.yaml'
+    params_file.write_text(yaml.safe_dump({'/**': {'ros__parameters': {
+        'robot': scenario.robot, **scenario.settings}}}))
+    runtime.init(args=['test', '--ros-args', '--params-file', str(params_file)],
+                 runtime='inproc', signal_handlers=False)
+    try:
+        nodes = [graph.load_class(graph.NODES[name])() for name in graph.available_nodes()]
+        [ik] = [node for node in nodes if node.get_name() == 'whole_body_ik']
+        driver_node = runtime.Node('driver', use_global_arguments=False)
+        driver = CommandDriver(driver_node, scenario.commands)
+        collector = Collector()
+        published_ns = []
+        collector.create_subscription(
+            get_message('trajectory_msgs/msg/JointTrajectory'), '/joint_commands',
+            lambda _: published_ns.append(collector.get_clock().now().nanoseconds), 100)
+        executor = runtime.SingleThreadedExecutor()
+        for node in [*nodes, driver_node, collector]:
+            executor.add_node(node)
+        driver.start()
+        executor.spin_for(8.0)
+        robot = ik.robot
+    finally:
+        runtime.shutdown()
+    commands = collector.commands
+    assert len(commands) == pytest.approx(8.0 * 20, abs=1)
+    for msg, now in zip(commands, published_ns, strict=True):
+        check_controller_rules(msg, robot)
+        times = knot_times_ns(msg)
+        assert times[0] <= now and times[-1] <= now + 0.3 * NS
+        assert len(times) == 1 or times[1] > now
+    assert ik._moving
+    knots = knots_of(commands)  # (the posture held before motion: at publications, 50 ms)
+    times = np.array(list(knots))
+    assert np.all(np.diff(times) % 5_000_000 == 0)
+    positions = np.array([p for p, _ in knots.values()])
+    steps = np.abs(np.diff(positions, axis=0)) / (np.diff(times) * 1e-9)[:, None]
+    assert np.all(steps <= robot.velocity_limits_rad_s * (1 + 1e-9))
+    assert not [s for s in collector.statuses if s.name.startswith('whole_body_ik')
+                and level_value(s.level) >= 2]
+
+
+def test_bag_analysis_reads_joint_commands_as_the_trajectory_followed():
+    """The bag analysis of /joint_commands: a message replaces the rest from its first point."""
+    from gait_nodes.bag.analysis import _Collector, joint_metrics
+    from gait_nodes.interfaces import serialize_message
+    from gait_nodes.whole_body_ik import joint_trajectory_to_msg
+
+    names = ['a', 'b']
+    first = joint_trajectory_to_msg(names, [NS, NS + 10, NS + 20, NS + 30],
+                                    [[0.0, 0.0], [1.0, 0.0], [2.0, 0.0], [3.0, 0.0]],
+                                    [[0.0, 0.0], [0.5, 0.0], [0.5, 0.0], [4.0, 0.0]])
+    second = joint_trajectory_to_msg(names, [NS + 20, NS + 25], [[2.0, 1.0], [2.5, 1.0]],
+                                     [[0.1, 0.2], [0.1, 0.3]])
+    collector = _Collector()
+    for msg in (first, second):
+        collector.message('/joint_commands', 'trajectory_msgs/msg/JointTrajectory',
+                          serialize_message(msg))
+    series = collector.series.joints['/joint_commands']
+    assert series.names == names
+    assert series.stamps_ns == [NS, NS + 10, NS + 20, NS + 25]
+    assert series.positions == [[0.0, 0.0], [1.0, 0.0], [2.0, 1.0], [2.5, 1.0]]
+    # The replaced point's 4 rad/s was never followed.
+    metrics = joint_metrics(collector.series, lambda joint: 1.0)['/joint_commands']
+    assert metrics['peak_rad_s'] == 0.5 and metrics['samples'] == 4

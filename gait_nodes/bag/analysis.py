@@ -17,7 +17,9 @@ independent reader of the bag can check it:
   signed_distance`); ``time_outside_s`` sums, over samples outside, the time to the next sample.
 - ``joint_velocity``: peak ``|velocity|`` in ``/joint_states`` (and ``/joint_commands``) per
   joint, against the robot YAML's limit when the robot is known (``--robot``, or the
-  ``hardware_id`` of the bag's diagnostics).
+  ``hardware_id`` of the bag's diagnostics). ``/joint_commands`` (JointTrajectory) counts as
+  the trajectory a joint_trajectory_controller follows: every point of each message until the
+  next message's first point replaces the rest (points at header stamp + time_from_start).
 - ``commands``: ``/gait/command_status`` answers, accepted and rejected with their reasons.
 - ``diagnostics``: statuses on ``/diagnostics`` counted by level and by name.
 - ``consistency``: the nodes' outputs checked against each other with the robot's full model
@@ -53,7 +55,7 @@ GAIT_TOPICS = ('/tf', '/gait/zmp', '/gait/com', '/gait/support_polygon', '/gait/
 
 @dataclass
 class JointSeries:
-    """Joint samples of one JointState topic."""
+    """Joint samples of one JointState topic, or the points of a JointTrajectory topic."""
 
     names: list[str] = field(default_factory=list)
     stamps_ns: list[int] = field(default_factory=list)
@@ -163,25 +165,30 @@ class _Collector:
         self._joints('/joint_states', msg)
 
     def _joint_commands(self, msg) -> None:
-        if not hasattr(msg, 'points'):  # a JointState setpoint (bags before the trajectories)
+        """The commanded trajectory as followed: a message replaces it from its first point on.
+
+        (ros2_control's rule; a zero header stamp, "start when received", is read as time 0.)
+        Bags from before /joint_commands was a trajectory hold JointState setpoints.
+        """
+        if not hasattr(msg, 'points'):
             self._joints('/joint_commands', msg)
             return
-        # A JointTrajectory: its points at their absolute times (a zero stamp counts from 0),
-        # each instant once (the windows of whole_body_ik overlap; a knot is solved once).
-        command = contract.joint_trajectory_from_msg(msg)
         series = self.series.joints.setdefault('/joint_commands', JointSeries())
-        names = list(command.joint_names)
-        if series.names and names != series.names:
-            return
+        names = list(msg.joint_names)
+        if not msg.points or (series.names and names != series.names):
+            return  # nothing, or a different joint set: keep the first one consistent
         series.names = names
-        last_ns = series.stamps_ns[-1] if series.stamps_ns else None
-        velocities = command.velocities_rad_s
-        for k, stamp_ns in enumerate((command.stamp_ns + command.times_from_start_ns).tolist()):
-            if last_ns is not None and stamp_ns <= last_ns:
-                continue
-            series.stamps_ns.append(stamp_ns)
-            series.positions.append(command.positions_rad[k].tolist())
-            series.velocities.append([] if velocities is None else velocities[k].tolist())
+        start_ns = _stamp(msg.header)
+        times_ns = [start_ns + contract.time_msg_to_ns(p.time_from_start) for p in msg.points]
+        stamps = series.stamps_ns
+        kept = len(stamps)
+        while kept and stamps[kept - 1] >= times_ns[0]:
+            kept -= 1
+        for values in (stamps, series.positions, series.velocities):
+            del values[kept:]
+        stamps.extend(times_ns)
+        series.positions.extend(list(p.positions) for p in msg.points)
+        series.velocities.extend(list(p.velocities) for p in msg.points)
 
     def _gait_command_status(self, msg) -> None:
         try:

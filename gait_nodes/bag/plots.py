@@ -120,7 +120,7 @@ def com_zmp_time(series: GaitSeries, path: Path) -> bool:
 
 def joint_velocities(series: GaitSeries, path: Path,
                      limit_of: Callable[[str], float | None]) -> bool:
-    """Joint velocities of /joint_states (else /joint_commands) with their limits."""
+    """Joint velocities of /joint_states (else the trajectory of /joint_commands), limits."""
     joints = series.joints.get('/joint_states') or series.joints.get('/joint_commands')
     if joints is None or not joints.names:
         return False

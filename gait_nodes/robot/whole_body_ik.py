@@ -637,6 +637,95 @@ def limit_joint_step(robot: RobotModel, q_previous: np.ndarray, previous_joints:
     return q, robot.joint_positions(q), scale * step / dt_s, report
 
 
+# -- the commanded joint trajectory ------------------------------------------------------------
+
+
+class JointKnots:
+    """The IK's solved knots: a short joint trajectory, sent as windows of it.
+
+    Knot ``k`` is a joint vector [rad] at ``times_ns[k]``, each reached from the one before
+    within the joint velocity limits (:func:`limit_joint_step`). Its velocity [rad/s] is the
+    trajectory's derivative there: the central difference of its two neighbours (for uneven
+    spacing the time-weighted mean of the two step velocities, so never above the limits the
+    steps keep), computed once when the next knot comes; the last knot has its backward
+    difference until then; the first knot of a :meth:`restart` starts from rest (zero).
+    Positions and velocities are kept as Python lists too: each knot goes into several
+    messages, converted once.
+
+    Args:
+        joint_count: Length of a joint vector.
+    """
+
+    __slots__ = ('times_ns', 'joints', 'positions', 'velocities', '_steps', '_step_ns', '_zero')
+
+    def __init__(self, joint_count: int):
+        self._zero = [0.0] * joint_count
+        self.times_ns: list[int] = []
+        self.joints: list[np.ndarray] = []
+        self.positions: list[list[float]] = []
+        #: Knot velocities, None for the last knot (its backward difference is ``_steps[-1]``).
+        self.velocities: list[list[float] | None] = []
+        self._steps: list[np.ndarray | None] = []  # velocity of the step into each knot
+        self._step_ns = 0  # duration of the step into the last knot [ns]
+
+    def __len__(self) -> int:
+        return len(self.times_ns)
+
+    def restart(self, stamp_ns: int, joints: np.ndarray) -> None:
+        """Forget every knot; the trajectory starts at rest at ``joints`` at ``stamp_ns``."""
+        self.times_ns[:] = [stamp_ns]
+        self.joints[:] = [np.array(joints, dtype=float)]
+        self.positions[:] = [self.joints[0].tolist()]
+        self.velocities[:] = [None]
+        self._steps[:] = [None]
+
+    def append(self, stamp_ns: int, joints: np.ndarray, step_velocity: np.ndarray) -> None:
+        """Add the knot ``joints`` at ``stamp_ns``, reached with ``step_velocity`` [rad/s].
+
+        ``stamp_ns`` is after the last knot's; ``step_velocity`` is ``(joints - last) / dt``.
+        """
+        if not self.times_ns:
+            raise ValueError('JointKnots.append before restart: no knot to step from')
+        last_step = self._steps[-1]
+        after = stamp_ns - self.times_ns[-1]
+        if last_step is None:
+            self.velocities[-1] = self._zero
+        else:
+            before = self._step_ns
+            self.velocities[-1] = ((before * last_step + after * step_velocity)
+                                   / (before + after)).tolist()
+        self._step_ns = after
+        self.times_ns.append(stamp_ns)
+        self.joints.append(joints)
+        self.positions.append(joints.tolist())
+        self.velocities.append(None)
+        self._steps.append(step_velocity)
+
+    def first_at_or_before(self, stamp_ns: int) -> int:
+        """Index of the latest knot at or before ``stamp_ns`` (0 if every knot is later)."""
+        return max(bisect.bisect_right(self.times_ns, stamp_ns) - 1, 0)
+
+    def drop_before(self, index: int) -> None:
+        """Forget the knots before ``index`` (their velocities are already in the later ones)."""
+        if index > 0:
+            for values in (self.times_ns, self.joints, self.positions, self.velocities,
+                           self._steps):
+                del values[:index]
+
+    def window(self, start: int, ends_at_rest: bool = False
+               ) -> tuple[list[int], list[list[float]], list[list[float]]]:
+        """Times [ns], positions [rad] and velocities [rad/s] of the knots from ``start`` on.
+
+        The last knot's velocity is its backward difference, or zero if ``ends_at_rest`` (no
+        knot will follow it soon: the trajectory stops there).
+        """
+        velocities = self.velocities[start:]
+        last_step = self._steps[-1]
+        velocities[-1] = self._zero if last_step is None or ends_at_rest \
+            else last_step.tolist()
+        return self.times_ns[start:], self.positions[start:], velocities
+
+
 # -- references at one instant ----------------------------------------------------------------
 
 
