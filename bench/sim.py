@@ -104,7 +104,7 @@ def node_costs(robot_name: str, joints: list[np.ndarray]) -> list[float]:
     from sim_node import HORIZON_S, PUBLISH_PERIOD_S
 
     from gait_nodes import runtime
-    from gait_nodes.contract import JointTrajectoryCommand, joint_trajectory_to_msg
+    from gait_nodes.contract import JointTrajectoryCommand, joint_trajectory_command_to_msg
 
     runtime.init(args=['bench', '--ros-args', '-p', f'robot:={robot_name}'], runtime='inproc',
                  signal_handlers=False)
@@ -117,7 +117,7 @@ def node_costs(robot_name: str, joints: list[np.ndarray]) -> list[float]:
         velocities = np.gradient(positions, DT_S, axis=0)
         every, ahead = round(PUBLISH_PERIOD_S / DT_S), round(HORIZON_S / DT_S) + 1
         # Tick k (at (k + 1) dt) publishes the trajectory from its own instant on.
-        messages = {k: joint_trajectory_to_msg(JointTrajectoryCommand(
+        messages = {k: joint_trajectory_command_to_msg(JointTrajectoryCommand(
             (k + 1) * NS // int(RATE_HZ), names,
             np.arange(min(ahead, len(joints) - k)) * NS // int(RATE_HZ),
             positions[k:k + ahead], velocities[k:k + ahead]))

@@ -70,7 +70,7 @@ def trajectories_from_setpoints(setpoints: list, publish_period_s: float = PUBLI
     Returns:
         The trajectories, each at the log time of its first setpoint.
     """
-    from gait_nodes.contract import JointTrajectoryCommand, joint_trajectory_to_msg
+    from gait_nodes.contract import JointTrajectoryCommand, joint_trajectory_command_to_msg
 
     stamps = np.array([msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec
                        for _, msg in setpoints])
@@ -85,8 +85,9 @@ def trajectories_from_setpoints(setpoints: list, publish_period_s: float = PUBLI
             continue
         next_ns = stamp + int(publish_period_s * 1e9)
         end = int(np.searchsorted(stamps, stamp + int(horizon_s * 1e9), side='right'))
-        trajectories.append((setpoints[k][0], joint_trajectory_to_msg(JointTrajectoryCommand(
-            int(stamp), names, stamps[k:end] - stamp, positions[k:end], velocities[k:end]))))
+        command = JointTrajectoryCommand(int(stamp), names, stamps[k:end] - stamp,
+                                         positions[k:end], velocities[k:end])
+        trajectories.append((setpoints[k][0], joint_trajectory_command_to_msg(command)))
     return trajectories
 
 

@@ -1068,18 +1068,42 @@ def joint_trajectory_from_msg(msg, known_joints: Sequence[str] | None = None
         _point_rows(accelerations, 'accelerations', count, required=False))
 
 
-def joint_trajectory_to_msg(command: JointTrajectoryCommand):
-    """trajectory_msgs/JointTrajectory of ``command`` (the inverse of the reader)."""
-    point = get_constructor('trajectory_msgs/msg/JointTrajectoryPoint')
-    duration = get_constructor('builtin_interfaces/msg/Duration')
-    count = len(command.times_from_start_ns)
-    velocities = (command.velocities_rad_s.tolist() if command.velocities_rad_s is not None
-                  else [[]] * count)
-    accelerations = (command.accelerations_rad_s2.tolist()
-                     if command.accelerations_rad_s2 is not None else [[]] * count)
-    points = [point(positions, v, a, [], duration(*divmod(int(t), _NS_PER_S)))
-              for positions, v, a, t in zip(command.positions_rad.tolist(), velocities,
-                                            accelerations, command.times_from_start_ns.tolist(),
-                                            strict=True)]
+def joint_trajectory_to_msg(joint_names: list[str], times_ns: list[int],
+                            positions: list[list[float]],
+                            velocities: list[list[float]] | None = None,
+                            accelerations: list[list[float]] | None = None):
+    """trajectory_msgs/JointTrajectory of knots, as a joint_trajectory_controller takes it.
+
+    Args:
+        joint_names: The joints, each once (the list is put in the message as it is).
+        times_ns: (N,) knot times [ns], strictly increasing, N >= 1: ``header.stamp`` is the
+            first, each point's ``time_from_start`` its time after the first.
+        positions: (N, J) joint positions [rad], J = ``len(joint_names)``.
+        velocities: (N, J) joint velocities [rad/s], or None (none sent).
+        accelerations: (N, J) joint accelerations [rad/s^2], or None (none sent).
+
+    The lists are put in the message as they are (published messages are read-only); the
+    caller vouches for the sizes and the order of the times, which this does not check
+    (:func:`joint_trajectory_from_msg` does, as a controller would).
+    """
+    new_duration = get_constructor('builtin_interfaces/msg/Duration')
+    new_point = get_constructor('trajectory_msgs/msg/JointTrajectoryPoint')
+    start_ns = times_ns[0]
+    empty = [[]] * len(times_ns)
+    points = [new_point(p, v, a, [], new_duration(*divmod(t - start_ns, _NS_PER_S)))
+              for t, p, v, a in zip(times_ns, positions, velocities or empty,
+                                    accelerations or empty, strict=True)]
     return get_constructor('trajectory_msgs/msg/JointTrajectory')(
-        _header(command.stamp_ns, ''), list(command.joint_names), points)
+        _header(start_ns, ''), joint_names, points)
+
+
+def joint_trajectory_command_to_msg(command: JointTrajectoryCommand):
+    """trajectory_msgs/JointTrajectory of ``command`` (the inverse of the reader)."""
+    def rows(array):
+        return None if array is None else array.tolist()
+
+    start_ns = command.stamp_ns
+    return joint_trajectory_to_msg(
+        list(command.joint_names), (command.times_from_start_ns + start_ns).tolist(),
+        command.positions_rad.tolist(), rows(command.velocities_rad_s),
+        rows(command.accelerations_rad_s2))

@@ -59,7 +59,7 @@ from gait_nodes.contract import (
     com_reference_from_msg,
     duration_msg_to_seconds,
     footsteps_from_msg,
-    ns_to_time_msg,
+    joint_trajectory_to_msg,
     quaternion_to_yaw,
     swing_trajectory_from_msg,
     time_msg_to_ns,
@@ -67,7 +67,7 @@ from gait_nodes.contract import (
 from gait_nodes.diagnostics import OK, WARN, DiagnosticsReporter
 from gait_nodes.errors import GaitNodesError, ParameterError
 from gait_nodes.faults import FaultGuard, GuardedNode
-from gait_nodes.interfaces import get_constructor, get_message
+from gait_nodes.interfaces import get_message
 from gait_nodes.paths import node_defaults as shipped_node_defaults
 from gait_nodes.robot.model import load_robot_model
 from gait_nodes.robot.whole_body_ik import (
@@ -555,30 +555,6 @@ class WholeBodyIk(GuardedNode):
                 else f'every limb in family {self._family}',
                 {'family': self._family, **{f'{name}_family': family
                                             for name, family in families.items()}})
-
-
-def joint_trajectory_to_msg(joint_names: list[str], times_ns: list[int],
-                            positions: list[list[float]], velocities: list[list[float]]):
-    """trajectory_msgs/JointTrajectory of knots, as a joint_trajectory_controller takes it.
-
-    Args:
-        joint_names: The joints, each once (the list is put in the message as it is).
-        times_ns: (N,) knot times [ns], strictly increasing, N >= 1: ``header.stamp`` is the
-            first, each point's ``time_from_start`` its time after the first.
-        positions: (N, J) joint positions [rad], J = ``len(joint_names)``.
-        velocities: (N, J) joint velocities [rad/s].
-
-    The lists are put in the message as they are (published messages are read-only); the
-    caller vouches for the sizes and the order of the times, which this does not check.
-    """
-    new_duration = get_constructor('builtin_interfaces/msg/Duration')
-    new_point = get_constructor('trajectory_msgs/msg/JointTrajectoryPoint')
-    start_ns = times_ns[0]
-    points = [new_point(p, v, [], [], new_duration(*divmod(t - start_ns, 1_000_000_000)))
-              for t, p, v in zip(times_ns, positions, velocities, strict=True)]
-    return get_constructor('trajectory_msgs/msg/JointTrajectory')(
-        get_constructor('std_msgs/msg/Header')(ns_to_time_msg(start_ns), ''), joint_names,
-        points)
 
 
 def com_track_from_msg(msg) -> ComTrack:

@@ -16,8 +16,8 @@ from scipy.interpolate import CubicHermiteSpline
 from gait_nodes.contract import (
     ContractError,
     JointTrajectoryCommand,
+    joint_trajectory_command_to_msg,
     joint_trajectory_from_msg,
-    joint_trajectory_to_msg,
 )
 from gait_nodes.errors import ConfigError
 from gait_nodes.interfaces import get_message
@@ -335,7 +335,7 @@ def test_a_valid_trajectory_round_trips_through_the_message(robot, start):
     np.testing.assert_array_equal(command.velocities_rad_s, velocities)
     assert command.accelerations_rad_s2 is None
     np.testing.assert_array_equal(command.times_ns(99), [3 * NS + 7, 3 * NS + 7 + NS // 10])
-    again = joint_trajectory_from_msg(joint_trajectory_to_msg(command))
+    again = joint_trajectory_from_msg(joint_trajectory_command_to_msg(command))
     for field in ('times_from_start_ns', 'positions_rad', 'velocities_rad_s'):
         np.testing.assert_array_equal(getattr(again, field), getattr(command, field))
     zero_stamp = JointTrajectoryCommand(0, names, command.times_from_start_ns, positions)

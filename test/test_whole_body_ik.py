@@ -976,8 +976,8 @@ def test_joint_commands_of_an_inproc_walk_keep_the_controller_rules(scenario_nam
 def test_bag_analysis_reads_joint_commands_as_the_trajectory_followed():
     """The bag analysis of /joint_commands: a message replaces the rest from its first point."""
     from gait_nodes.bag.analysis import _Collector, joint_metrics
+    from gait_nodes.contract import joint_trajectory_to_msg
     from gait_nodes.interfaces import serialize_message
-    from gait_nodes.whole_body_ik import joint_trajectory_to_msg
 
     names = ['a', 'b']
     first = joint_trajectory_to_msg(names, [NS, NS + 10, NS + 20, NS + 30],
