@@ -92,6 +92,10 @@ NODE_NAME = 'whole_body_ik'
 #: Foot error and COM error above which a tick is reported as off target [m] (issue accuracy).
 FOOT_ERROR_WARN_M = 1e-4
 COM_ERROR_WARN_M = 1e-3
+#: A COM window that moves the COM (or the yaw) of a solved knot by more than this (a
+#: micrometre: below any mechanical meaning, above the interpolation of equal windows) changed it
+#: [m or rad].
+COM_CHANGE_M = 1e-6
 
 
 def node_defaults() -> dict:
@@ -204,6 +208,8 @@ class WholeBodyIk(GuardedNode):
         self._last_summary_ns = None
         self._moving = False
         self._held = False  # moving, but holding the last knot (stale COM reference)
+        # The earliest instant [ns] whose references changed after its knot was solved.
+        self._changed_from_ns: int | None = None
         self._zero_velocity = [0.0] * len(self.robot.joint_names)
         self._start_ns = self.get_clock().now().nanoseconds
         self.inputs = InputWatchdog(['/gait/com_reference'], self.params.stale_timeout_s,
@@ -281,12 +287,29 @@ class WholeBodyIk(GuardedNode):
         except ContractError as exc:
             self.diagnostics.drop('/gait/com_reference', str(exc))
             return
+        if self._com_track is not None and self._moving:
+            self._compare_com(self._com_track, track)
         self._com_track = track
         last = msg.points[-1].time_from_start
         self._com_end_ns = time_msg_to_ns(msg.header.stamp) + last.sec * 1_000_000_000 \
             + last.nanosec
         self._com_received_ns = self.get_clock().now().nanoseconds
         self.inputs.heard('/gait/com_reference', self._com_received_ns)
+
+    def _compare_com(self, held: ComTrack, new: ComTrack) -> None:
+        """Solve again the knots at and after the first at which ``new`` differs from ``held``.
+
+        A COM window normally repeats what the last one said for the instants both cover (the
+        controller commits its states); it differs from the instant a new ZMP reference
+        changed the plan on.
+        """
+        extrapolation = self.params.com_extrapolation_s
+        for stamp_ns in self._knots.times_ns[1:]:
+            (x0, y0, z0), yaw0 = held.at(stamp_ns, extrapolation)
+            (x1, y1, z1), yaw1 = new.at(stamp_ns, extrapolation)
+            if abs(x1 - x0) + abs(y1 - y0) + abs(z1 - z0) + abs(yaw1 - yaw0) > COM_CHANGE_M:
+                self._references_changed(stamp_ns)
+                return
 
     def _on_footsteps(self, msg) -> None:
         try:
@@ -297,6 +320,8 @@ class WholeBodyIk(GuardedNode):
         except ContractError as exc:
             self.diagnostics.drop('/gait/footsteps', str(exc))
             return
+        if self._plan is not None and self._moving:
+            self._references_changed(plan.start_ns)  # every knot of the new plan
         self._plan = plan
         self._feet = FootTargets(plan, self.robot.foot_names)
 
@@ -309,6 +334,8 @@ class WholeBodyIk(GuardedNode):
         except ContractError as exc:
             self.diagnostics.drop('/gait/swing_trajectory', str(exc))
             return
+        if self._moving:
+            self._references_changed(swing.start_ns)
         self._swing_paths[self.robot.foot_names.index(swing.foot)] = SwingPath(swing)
 
     def _on_tf(self, msg) -> None:
@@ -397,13 +424,15 @@ class WholeBodyIk(GuardedNode):
             if not self._moving:
                 self._moving = True
                 self._stop_listening_to_the_robot()
-                knots.restart(now_ns, self._joints_command)
+                knots.restart(now_ns, self._joints_command, self._knot_state())
             elif self._held:
                 self._held = False
-                knots.restart(max(now_ns, knots.times_ns[-1]), self._joints_command)
+                knots.restart(max(now_ns, knots.times_ns[-1]), self._joints_command,
+                              self._knot_state())
             elif knots.times_ns[-1] > now_ns + int(round(
                     (self.params.horizon_s + self.params.sample_period_s) * 1e9)):
                 knots.restart(now_ns, self._joints_command)  # the clock went back
+            self._forget_changed_knots(now_ns)
             self._solve_knots(now_ns)
             start = knots.first_at_or_before(now_ns)
             # A trajectory that has ended (a late COM reference) ends at rest.
@@ -416,6 +445,32 @@ class WholeBodyIk(GuardedNode):
             self._last_summary_ns = now_ns
         elif (now_ns - self._last_summary_ns) * 1e-9 >= self.params.diagnostics_period_s - 1e-9:
             self._publish_summary(now_ns)
+
+    def _knot_state(self) -> tuple:
+        """What solving goes on from: commanded configuration and joints, last solution."""
+        return self._q_command, self._joints_command, self._q_solution
+
+    def _references_changed(self, from_ns: int) -> None:
+        """The references changed from ``from_ns`` on: knots solved for then are solved again."""
+        if self._changed_from_ns is None or from_ns < self._changed_from_ns:
+            self._changed_from_ns = from_ns
+
+    def _forget_changed_knots(self, now_ns: int) -> None:
+        """Drop the knots whose references changed since they were solved (module docstring).
+
+        Knots up to the latest one at or before now were sent for instants that have come:
+        they stay; the trajectory goes on from there with the new references.
+        """
+        changed_ns, self._changed_from_ns = self._changed_from_ns, None
+        knots = self._knots
+        if changed_ns is None or changed_ns > knots.times_ns[-1]:
+            return
+        keep_ns = max(changed_ns - 1, knots.times_ns[knots.first_at_or_before(now_ns)])
+        state = knots.truncate_after(keep_ns)
+        if state is not None:
+            self._q_command, self._joints_command, self._q_solution = state
+            self._solutions.clear()
+            self._solution_times_s.clear()
 
     def _solve_knots(self, now_ns: int) -> None:
         """Solve the knots after the last one up to the horizon and the COM reference's end.
@@ -430,7 +485,7 @@ class WholeBodyIk(GuardedNode):
         last_ns = knots.times_ns[-1]
         if last_ns + period_ns < now_ns:
             knots.restart(last_ns + (now_ns - last_ns) // period_ns * period_ns,
-                          knots.joints[-1])
+                          knots.joints[-1], knots.states[-1])
         stamp_ns = knots.times_ns[-1] + period_ns
         while stamp_ns <= end_ns:
             self._solve_knot(stamp_ns, (stamp_ns - knots.times_ns[-1]) * 1e-9)
@@ -469,7 +524,8 @@ class WholeBodyIk(GuardedNode):
         q, joints, velocities, saturation = limit_joint_step(
             self.robot, self._q_command, self._joints_command, result.q, dt_s)
         self._q_command, self._joints_command = q, joints
-        self._knots.append(stamp_ns, joints, velocities)
+        self._knots.append(stamp_ns, joints, velocities,
+                           (self._q_command, joints, self._q_solution))
         if saturation.saturated:
             window.saturated_ticks += 1
             window.max_ratio = max(window.max_ratio, saturation.ratio)

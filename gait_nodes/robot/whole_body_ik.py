@@ -650,13 +650,15 @@ class JointKnots:
     steps keep), computed once when the next knot comes; the last knot has its backward
     difference until then; the first knot of a :meth:`restart` starts from rest (zero).
     Positions and velocities are kept as Python lists too: each knot goes into several
-    messages, converted once.
+    messages, converted once. Each knot may carry a ``state`` of the caller's (what it needs to
+    solve on from that knot), given back by :meth:`truncate_after`.
 
     Args:
         joint_count: Length of a joint vector.
     """
 
-    __slots__ = ('times_ns', 'joints', 'positions', 'velocities', '_steps', '_step_ns', '_zero')
+    __slots__ = ('times_ns', 'joints', 'positions', 'velocities', 'states', '_steps', '_step_ns',
+                 '_zero')
 
     def __init__(self, joint_count: int):
         self._zero = [0.0] * joint_count
@@ -665,21 +667,24 @@ class JointKnots:
         self.positions: list[list[float]] = []
         #: Knot velocities, None for the last knot (its backward difference is ``_steps[-1]``).
         self.velocities: list[list[float] | None] = []
+        self.states: list[object] = []
         self._steps: list[np.ndarray | None] = []  # velocity of the step into each knot
         self._step_ns = 0  # duration of the step into the last knot [ns]
 
     def __len__(self) -> int:
         return len(self.times_ns)
 
-    def restart(self, stamp_ns: int, joints: np.ndarray) -> None:
+    def restart(self, stamp_ns: int, joints: np.ndarray, state: object = None) -> None:
         """Forget every knot; the trajectory starts at rest at ``joints`` at ``stamp_ns``."""
         self.times_ns[:] = [stamp_ns]
         self.joints[:] = [np.array(joints, dtype=float)]
         self.positions[:] = [self.joints[0].tolist()]
         self.velocities[:] = [None]
+        self.states[:] = [state]
         self._steps[:] = [None]
 
-    def append(self, stamp_ns: int, joints: np.ndarray, step_velocity: np.ndarray) -> None:
+    def append(self, stamp_ns: int, joints: np.ndarray, step_velocity: np.ndarray,
+               state: object = None) -> None:
         """Add the knot ``joints`` at ``stamp_ns``, reached with ``step_velocity`` [rad/s].
 
         ``stamp_ns`` is after the last knot's; ``step_velocity`` is ``(joints - last) / dt``.
@@ -699,7 +704,23 @@ class JointKnots:
         self.joints.append(joints)
         self.positions.append(joints.tolist())
         self.velocities.append(None)
+        self.states.append(state)
         self._steps.append(step_velocity)
+
+    def truncate_after(self, stamp_ns: int) -> object:
+        """Forget the knots after ``stamp_ns`` (never the first); the new last knot's state.
+
+        The last knot kept gets its backward difference again until a knot follows it.
+        """
+        keep = max(bisect.bisect_right(self.times_ns, stamp_ns), 1)
+        if keep < len(self.times_ns):
+            for values in (self.times_ns, self.joints, self.positions, self.velocities,
+                           self.states, self._steps):
+                del values[keep:]
+            self.velocities[-1] = None
+            if keep > 1:
+                self._step_ns = self.times_ns[-1] - self.times_ns[-2]
+        return self.states[-1]
 
     def first_at_or_before(self, stamp_ns: int) -> int:
         """Index of the latest knot at or before ``stamp_ns`` (0 if every knot is later)."""
@@ -709,7 +730,7 @@ class JointKnots:
         """Forget the knots before ``index`` (their velocities are already in the later ones)."""
         if index > 0:
             for values in (self.times_ns, self.joints, self.positions, self.velocities,
-                           self._steps):
+                           self.states, self._steps):
                 del values[:index]
 
     def window(self, start: int, ends_at_rest: bool = False
