@@ -2,8 +2,10 @@
 
 Subscribes ``/cmd_vel`` (geometry_msgs/Twist) and ``/gait/command`` (std_msgs/String, JSON, schema
 ``msgs_schema/gait_command.schema.json``). Publishes ``/gait/footsteps`` (latched, whenever the
-plan changes), ``/gait/zmp_reference`` (the next ``zmp_horizon_s`` every tick),
-``/gait/command_status`` (one JSON answer per command) and ``/diagnostics``.
+plan changes), ``/gait/zmp_reference`` (the next ``zmp_horizon_s``, 2.5 s, every tick:
+``rate_hz``, 10 Hz; the horizon covers the COM controller's ``preview_s + horizon_s`` and one
+publication period, so that a late reference is ridden through), ``/gait/command_status`` (one
+JSON answer per command) and ``/diagnostics``.
 
 The gait settings are ROS parameters (defaults in ``config/footstep_planner.yaml``); a
 ``ros2 param set`` and a /gait/command go through the same checks, and an accepted change takes
@@ -135,6 +137,8 @@ DEPENDENCIES = {'whole_body_ik: inputs': '/gait/com_reference',
 RESUME_AFTER_S = 0.5
 #: A planned swing with no /gait/swing_trajectory this long after its lift-off is missed [s].
 SWING_GRACE_S = 0.05
+#: A swing trajectory lifting off this close to a planned swing's lift-off is its own [ns].
+SAME_LIFT_OFF_NS = 1000
 SWING_TOPIC = '/gait/swing_trajectory'
 #: After a planning failure the plan stands still this long before it is tried again [s].
 RETRY_AFTER_S = 1.0
@@ -672,7 +676,11 @@ class FootstepPlanner(GuardedNode):
             if key in self._swings_checked or not lift_ns + grace_ns <= now_ns:
                 continue
             self._swings_checked.add(key)
-            if key not in self._swings_heard and now_ns - lift_ns < 2 * grace_ns + NS_PER_S:
+            # (the policy works the lift-off out from the plan message it got, whose start
+            # may differ from this plan's: the same instant can come out a nanosecond apart)
+            heard = key in self._swings_heard or any(
+                f == foot and abs(t - lift_ns) <= SAME_LIFT_OFF_NS for f, t in self._swings_heard)
+            if not heard and now_ns - lift_ns < 2 * grace_ns + NS_PER_S:
                 self.swing_inputs.missed(SWING_TOPIC, f'the swing of {foot} lifting off '
                                                       f'at {lift_ns * 1e-9:.3f} s')
         if not 0 <= now_ns - self._swings_pruned_ns < NS_PER_S:
