@@ -14,14 +14,18 @@ COM climbs with the feet, with continuous velocity and acceleration; on flat gro
 
 Time is in the data: the generator steps by ``dt_s`` (5 ms) on its own time grid and runs
 ``horizon_s`` (0.5 s) ahead of the clock. Every ``publish_period_s`` (50 ms) the node computes
-up to ``now + horizon_s`` and publishes the window of its committed states, ``sample_period_s``
+up to ``now + horizon_s`` and publishes the window of its computed states, ``sample_period_s``
 (20 ms) apart, from the latest one at or before now to the last one computed (header stamp: the
-first point's time). A state once published is never changed, so a consumer that misses a
-message, or gets it late, still holds the states it needs (the whole-body IK interpolates them,
-:class:`gait_nodes.robot.whole_body_ik.ComTrack`). The generator never computes further than
-the held ZMP reference's end minus ``preview_s``: a reference that covers ``preview_s`` but not
-``preview_s + horizon_s`` is used, and the window reaches only as far as it allows (at least
-one ``publish_period_s`` past now, the reference held at its end as below); the planner's
+first point's time). A consumer that misses a message, or gets it late, still holds the states
+it needs (the whole-body IK interpolates them, :class:`gait_nodes.robot.whole_body_ik.ComTrack`,
+and lets each message replace its track from the message's first point on). A state at or
+before now is never changed; the states ahead are computed again, at once, from the latest one
+at or before now when a new ZMP reference changes the plan they previewed (by more than
+``REVISED_REFERENCE_M``: a new velocity, a pause, a stop), so that the planner's changes take
+effect when it makes them. The generator never computes further than the held ZMP reference's
+end minus ``preview_s``: a reference that covers ``preview_s`` but not ``preview_s +
+horizon_s`` is used, and the window reaches only as far as it allows (at least one
+``publish_period_s`` past now, the reference held at its end as below); the planner's
 ``zmp_horizon_s`` (2.5 s) covers ``preview_s + horizon_s`` and one of its periods.
 
 /gait/zmp_reference is a stream: silent for more than ``stale_after_s`` it is reported stale
@@ -47,6 +51,7 @@ that is not a whole number of steps) is refused with the reason.
 from __future__ import annotations
 
 import bisect
+import copy
 import math
 import sys
 from collections import deque
@@ -91,6 +96,10 @@ DEFAULTS = {
 #: Most generator steps the controller catches up when its computed end fell behind the clock;
 #: further behind, the state is carried over to now.
 MAX_CATCH_UP_TICKS = 50
+#: A new ZMP reference that differs from the held one by more than this over the span the
+#: states ahead of the clock previewed makes them be computed again [m] (references sampled on
+#: other grids differ by a few tenths of a millimetre at the corners of the same plan).
+REVISED_REFERENCE_M = 1e-3
 #: Longest ``horizon_s`` [s].
 MAX_HORIZON_S = 5.0
 #: Range of ``publish_period_s`` and ``sample_period_s`` [s].
@@ -186,8 +195,9 @@ class ComPreviewController(GuardedNode):
         self._generator = None
         self._last_published = None
         self._messages = contract.ComReferenceMessages()
-        # The committed states on the sample grid, oldest first: (stamp [ns], (px, py, pz,
-        # vx, vy, vz, ax, ay, az, yaw, yaw rate)); from the latest at or before now on.
+        # The computed states on the sample grid, oldest first: (stamp [ns], (px, py, pz,
+        # vx, vy, vz, ax, ay, az, yaw, yaw rate), the generator about to step to it); from the
+        # latest at or before now on.
         self._points: deque = deque()
         self._grid_origin_ns = 0  # the sample grid: this stamp + k sample_period_s
         # A horizon made shorter at run time leaves committed states further ahead than the
@@ -267,6 +277,8 @@ class ComPreviewController(GuardedNode):
                                                    self._report_status)
         if self._generator is not None and settings != old:
             self._switch_generator()
+            # The generators kept to compute states again have the old settings.
+            self._points = deque(point[:2] + (None,) for point in self._points)
         if self._generator is not None and (
                 settings.preview.dt_s != old.preview.dt_s
                 or values['sample_period_s'] != old_values['sample_period_s']):
@@ -308,10 +320,50 @@ class ComPreviewController(GuardedNode):
             self.diagnostics.drop(ZMP_TOPIC, 'stamped before the previous reference '
                                              '(out of order)')
             return
-        self._reference = reference
-        self.inputs.heard(ZMP_TOPIC, self.get_clock().now().nanoseconds)
-        if self._generator is not None:
+        previous, self._reference = self._reference, reference
+        now_ns = self.get_clock().now().nanoseconds
+        self.inputs.heard(ZMP_TOPIC, now_ns)
+        if self._generator is None:
+            return
+        if self._points and self._latest_point(now_ns)[2] is not None \
+                and self._revised(previous, reference, now_ns):
+            self._recompute_ahead(now_ns)
+        else:
             self._generator.set_reference(reference)
+
+    def _revised(self, previous, reference, now_ns: int) -> bool:
+        """Whether ``reference`` changes ``previous`` where the states ahead of now looked."""
+        preview = self._settings.preview
+        start_ns = max(self._latest_point(now_ns)[0], int(reference.stamps_ns[0]))
+        end_ns = self._generator.stamp_ns + preview.dt_ns * preview.preview_steps
+        stamps = reference.stamps_ns
+        stamps = stamps[(stamps >= start_ns) & (stamps <= end_ns)]
+        if not len(stamps):
+            return False
+        return float(np.max(np.abs(reference.sample(stamps) - previous.sample(stamps)))) \
+            > REVISED_REFERENCE_M
+
+    def _recompute_ahead(self, now_ns: int) -> None:
+        """Compute the states after the latest at or before now again, on the new reference."""
+        points = self._points
+        stamp_ns, _, generator = self._latest_point(now_ns)
+        while points and points[-1][0] >= stamp_ns:
+            points.pop()
+        self._generator = copy.copy(generator)  # (the one about to step to that state)
+        self._generator.set_reference(self._reference)
+        try:
+            self._compute(self._end_ns(now_ns))
+        except ComPlanningError as exc:
+            self.diagnostics.report('generator', ERROR, f'{self._settings.method}: {exc}')
+            return
+        self._publish(now_ns)
+
+    def _latest_point(self, now_ns: int) -> tuple:
+        """The computed state on the sample grid latest at or before ``now_ns`` (or the first)."""
+        points = self._points
+        while len(points) > 1 and points[1][0] <= now_ns:
+            points.popleft()
+        return points[0]
 
     def _on_footsteps(self, msg) -> None:
         try:
@@ -441,6 +493,7 @@ class ComPreviewController(GuardedNode):
             if (generator.stamp_ns - origin_ns) % sample_ns:
                 generator.step_values()
                 continue
+            before = copy.copy(generator)  # (to compute the states after this one again)
             stamp_ns, px, py, vx, vy, ax, ay = generator.step_values()
             yaw, yaw_rate = 0.0, 0.0
             if self._plan is not None:
@@ -451,18 +504,17 @@ class ComPreviewController(GuardedNode):
             while points and points[-1][0] >= stamp_ns:
                 points.pop()  # (a state carried over to now replaces what it overlaps)
             points.append((stamp_ns, (px, py, height_m + height, vx, vy, climb, ax, ay,
-                                      climb_rate, yaw, yaw_rate)))
+                                      climb_rate, yaw, yaw_rate), before))
 
     def _publish(self, now_ns: int) -> None:
         """Publish the committed states from the latest at or before ``now_ns`` on."""
         points = self._points
-        while len(points) > 1 and points[1][0] <= now_ns:
-            points.popleft()
         if not points:
             return
-        stamps, states = zip(*points, strict=True)
+        self._latest_point(now_ns)
+        stamps, states, _ = zip(*points, strict=True)
         self._publisher.publish(self._messages.window_to_msg(stamps, states))
-        self._last_published = points[0]
+        self._last_published = points[0][:2]
 
     def _report_status(self) -> None:
         self.diagnostics.publish([self.inputs.status(self.get_clock().now().nanoseconds)])
