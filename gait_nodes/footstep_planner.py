@@ -302,6 +302,9 @@ class FootstepPlanner(GuardedNode):
         self._measured_subscriptions: list = []
         self._dependencies: dict[str, bool] = {}
         self._dependencies_fresh: set[str] = set()  # reported their inputs fresh at least once
+        # Reported stale since the last tick: a stale spell shorter than the planner's period
+        # (stale, then fresh again between two 10 Hz ticks) still pauses the walk.
+        self._stale_since_tick: set[str] = set()
         self._pause: dict | None = None
         self._join_start_ns: int | None = None
         self._swings_heard: set[tuple[str, int]] = set()
@@ -574,6 +577,8 @@ class FootstepPlanner(GuardedNode):
             # reference before this planner's first plan) holds nothing that a pause would save.
             self._dependencies[status.name] = is_stale and \
                 status.name in self._dependencies_fresh
+            if self._dependencies[status.name]:
+                self._stale_since_tick.add(status.name)
 
     def _in_motion(self, now_s: float) -> bool:
         return not self.planner.twist.is_zero() or any(
@@ -581,7 +586,9 @@ class FootstepPlanner(GuardedNode):
 
     def _paused(self, now_ns: int, now_s: float) -> bool:
         """Pause, hold and resume (see the module docstring); True while paused."""
-        stale = sorted(name for name, is_stale in self._dependencies.items() if is_stale)
+        stale = sorted({name for name, is_stale in self._dependencies.items() if is_stale}
+                       | self._stale_since_tick)
+        self._stale_since_tick = set()
         pause = self._pause
         if pause is None:
             if not stale or not self._in_motion(now_s):
