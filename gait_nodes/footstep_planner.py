@@ -454,6 +454,7 @@ class FootstepPlanner(GuardedNode):
                 self._base_pose = (float(t.x), float(t.y), yaw)
                 if self._measured is not None:
                     self._measured.on_base(pose, self.get_clock().now().nanoseconds)
+                    self._hold_once_measured()
 
     def on_joint_states(self, msg) -> None:
         """Keep the robot's joint positions (joining or paused: the measured state)."""
@@ -466,6 +467,18 @@ class FootstepPlanner(GuardedNode):
             self._measured.on_joints(msg.name, positions, self.get_clock().now().nanoseconds)
         except (GaitNodesError, ValueError):
             return
+        self._hold_once_measured()
+
+    def _hold_once_measured(self) -> None:
+        """Paused: publish the hold as soon as the robot's state is measured, not at the tick.
+
+        (At 10 Hz the node that was starved may be back before the next tick, and follow the
+        walking plan a tick long before the hold comes.)
+        """
+        pause = self._pause
+        if pause is not None and pause['hold'] is None \
+                and self._measured.since(pause['since_ns']):
+            self.tick()
 
     def _listen(self, on: bool) -> None:
         """Subscribe to the robot's measured state (/tf, /joint_states) or stop."""
@@ -564,7 +577,12 @@ class FootstepPlanner(GuardedNode):
     # --- pause while the robot is held ---------------------------------------------------------
 
     def on_diagnostics(self, msg) -> None:
-        """Follow the stale-input reports of the nodes that move the robot."""
+        """Follow the stale-input reports of the nodes that move the robot.
+
+        A report that holds the robot while it walks pauses the walk at once, not at the next
+        tick (up to 0.1 s later at 10 Hz: the held robot's plan would run on that long).
+        """
+        newly_stale = False
         for status in msg.status:
             topic = DEPENDENCIES.get(status.name)
             if topic is None:
@@ -578,7 +596,10 @@ class FootstepPlanner(GuardedNode):
             self._dependencies[status.name] = is_stale and \
                 status.name in self._dependencies_fresh
             if self._dependencies[status.name]:
+                newly_stale |= status.name not in self._stale_since_tick
                 self._stale_since_tick.add(status.name)
+        if newly_stale and self._pause is None and self._joined:
+            self.tick()
 
     def _in_motion(self, now_s: float) -> bool:
         return not self.planner.twist.is_zero() or any(
