@@ -480,3 +480,34 @@ def test_horizon_and_periods_change_at_run_time_without_a_jump(start):
     assert not behind_reports(recorder)
     assert_no_jump(recorder, spacing_s=None)
     np.testing.assert_allclose(recorder.arrays()[1][-1, :2], plan[1][-1], atol=2e-3)
+
+
+def test_a_changed_plan_is_followed_at_once_from_the_latest_state_at_or_before_now(start):
+    # The states ahead of the clock were computed on the old plan; a reference that changes
+    # that plan makes them be computed again from the latest state at or before now (which
+    # is kept: nothing at or before now changes), and the new window is published at once.
+    start('-p', f'robot:={BIPED}')
+    plan = biped_walk_vertices(steps=6)
+    shorter = biped_walk_vertices(steps=5, step_m=[0.3] * 3 + [0.2] * 2)
+    changed = {}
+
+    def change(context):
+        context['planner'].plan = shorter
+        changed['ns'] = context['controller'].get_clock().now().nanoseconds
+        changed['messages'] = len(context['recorder'].messages)
+
+    recorder = run(plan, 6.0, [(3.52, change)], length_s=2.5)['recorder']
+    held, revisions = {}, []
+    for k, (clock_ns, states) in enumerate(recorder.messages):
+        first = states[0]
+        if first.stamp_ns in held:  # nothing at or before now changes
+            np.testing.assert_array_equal(first.position_in_world, held[first.stamp_ns])
+        change_m = max([np.abs(s.position_in_world - held[s.stamp_ns]).max()
+                        for s in states[1:] if s.stamp_ns in held] or [0.0])
+        if change_m > 1e-4:
+            revisions.append((clock_ns, k))
+        held.update((s.stamp_ns, s.position_in_world) for s in states)
+    # Revised only after the plan changed, and at once (the planner's next message).
+    assert revisions and revisions[0][1] >= changed['messages']
+    assert revisions[0][0] - changed['ns'] <= 0.05 * NS_PER_S
+    assert_no_jump(recorder)
