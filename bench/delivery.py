@@ -50,10 +50,10 @@ NS = 1_000_000_000
 #: The graph's nodes in creation order: timer periods [ms] (in creation order), topics
 #: published, topics subscribed. /diagnostics, published by all, is replayed by the simulator.
 NODES = {
-    'footstep_planner': ((20, 1000), ('/gait/footsteps', '/gait/zmp_reference',
+    'footstep_planner': ((100, 1000), ('/gait/footsteps', '/gait/zmp_reference',
                                       '/gait/command_status'),
                          ('/cmd_vel', '/gait/command', '/gait/swing_trajectory')),
-    'com_preview_controller': ((5, 1000), ('/gait/com_reference',),
+    'com_preview_controller': ((50, 1000), ('/gait/com_reference',),
                                ('/gait/zmp_reference', '/gait/footsteps', '/gait/com')),
     'swing_leg_policy': ((20,), ('/gait/swing_trajectory',), ('/gait/footsteps',)),
     'whole_body_ik': ((50,), ('/joint_commands',),

@@ -1,4 +1,4 @@
-"""com_preview_controller node: /gait/zmp_reference in, /gait/com_reference out every tick.
+"""com_preview_controller node: /gait/zmp_reference in, a stamped /gait/com_reference window out.
 
 ``python -m gait_nodes.com_preview_controller --ros-args -p robot:=biped -p com_method:=preview``
 
@@ -12,27 +12,46 @@ support height of the plan's 3D footholds (:mod:`gait_nodes.com.support_height`:
 COM climbs with the feet, with continuous velocity and acceleration; on flat ground it is
 ``com_height_m``); without a plan it is ``com_height_m``.
 
+Time is in the data: the generator steps by ``dt_s`` (5 ms) on its own time grid and runs
+``horizon_s`` (0.5 s) ahead of the clock. Every ``publish_period_s`` (50 ms) the node computes
+up to ``now + horizon_s`` and publishes the window of its computed states, ``sample_period_s``
+(20 ms) apart, from the latest one at or before now to the last one computed (header stamp: the
+first point's time). A consumer that misses a message, or gets it late, still holds the states
+it needs (the whole-body IK interpolates them, :class:`gait_nodes.robot.whole_body_ik.ComTrack`,
+and lets each message replace its track from the message's first point on). A state at or
+before now is never changed; the states ahead are computed again, at once, from the latest one
+at or before now when a new ZMP reference changes the plan they previewed (by more than
+``REVISED_REFERENCE_M``: a new velocity, a pause, a stop), so that the planner's changes take
+effect when it makes them. The generator never computes further than the held ZMP reference's
+end minus ``preview_s``: a reference that covers ``preview_s`` but not ``preview_s +
+horizon_s`` is used, and the window reaches only as far as it allows (at least one
+``publish_period_s`` past now, the reference held at its end as below); the planner's
+``zmp_horizon_s`` (2.5 s) covers ``preview_s + horizon_s`` and one of its periods.
+
 /gait/zmp_reference is a stream: silent for more than ``stale_after_s`` it is reported stale
 (WARN, ``com_preview_controller: inputs``) and the controller keeps running on the last good
 reference, held at its end (the walk the other nodes still follow, then a standstill over the
 last ZMP). The generator starts from the robot's measured COM (/gait/com, the simulator's
 full-model COM, with its velocity from the recent samples) when one is fresh, so that a
 controller restarted mid-walk picks up the robot where it is; without one, from the reference.
-The COM is stepped by time: ticks the timer missed are caught up (up to ``MAX_CATCH_UP_TICKS``);
-further behind the clock (a process starved on an overloaded machine, a jump in time) the state
-is carried over to now, never stepped ahead of it, and the gap is reported (WARN,
-``com_preview_controller: controller``).
+A controller starved of its timer for less than ``horizon_s`` loses nothing (its published
+window still covers the gap) and computes on from where it stopped. When its computed end
+falls behind the clock by more than ``MAX_CATCH_UP_TICKS`` ticks (a process starved on an
+overloaded machine, a jump in time) the state is carried over to now, never stepped ahead of it
+from a stale time, and the gap is reported (WARN, ``com_preview_controller: controller``); so
+is a clock that jumped back behind the committed states.
 
 A ZMP reference with a NaN, out-of-order stamps, too short a horizon (< ``preview_s``) or in a
 frame other than odom is dropped and reported on /diagnostics; the controller keeps its last good
 reference and its state. A parameter change that the controller cannot use (Riccati equation
-without a stabilizing solution, horizon shorter than one step, unknown method) is refused with
-the reason.
+without a stabilizing solution, horizon shorter than one step, unknown method, a sample period
+that is not a whole number of steps) is refused with the reason.
 """
 
 from __future__ import annotations
 
 import bisect
+import copy
 import math
 import sys
 from collections import deque
@@ -70,9 +89,21 @@ DEFAULTS = {
     'R': 1e-6,
     'status_period_s': 1.0,
     'stale_after_s': 0.5,
+    'horizon_s': 0.5,
+    'publish_period_s': 0.05,
+    'sample_period_s': 0.02,
 }
-#: Most ticks the controller catches up in one timer call when it fell behind the clock.
+#: Most generator steps the controller catches up when its computed end fell behind the clock;
+#: further behind, the state is carried over to now.
 MAX_CATCH_UP_TICKS = 50
+#: A new ZMP reference that differs from the held one by more than this over the span the
+#: states ahead of the clock previewed makes them be computed again [m] (references sampled on
+#: other grids differ by a few tenths of a millimetre at the corners of the same plan).
+REVISED_REFERENCE_M = 1e-3
+#: Longest ``horizon_s`` [s].
+MAX_HORIZON_S = 5.0
+#: Range of ``publish_period_s`` and ``sample_period_s`` [s].
+PERIOD_RANGE_S = (0.001, 1.0)
 
 
 def plan_yaw_means(plan: contract.FootstepPlan) -> np.ndarray:
@@ -164,12 +195,22 @@ class ComPreviewController(GuardedNode):
         self._generator = None
         self._last_published = None
         self._messages = contract.ComReferenceMessages()
-        self._timer = self.create_timer(self._settings.preview.dt_s, self._tick)
+        # The computed states on the sample grid, oldest first: (stamp [ns], (px, py, pz,
+        # vx, vy, vz, ax, ay, az, yaw, yaw rate), the generator about to step to it); from the
+        # latest at or before now on.
+        self._points: deque = deque()
+        self._grid_origin_ns = 0  # the sample grid: this stamp + k sample_period_s
+        # A horizon made shorter at run time leaves committed states further ahead than the
+        # new one: they are waited for, not taken for a clock that jumped back.
+        self._committed_ahead_ns = 0
+        self._timer = self.create_timer(values['publish_period_s'], self._tick)
         self._status_timer = self.create_timer(values['status_period_s'], self._report_status)
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self.get_logger().info(
             f'{self._settings.method} COM at {self._settings.preview.com_height_m:.3f} m for '
-            f'{self._robot.name}, {1.0 / self._settings.preview.dt_s:.0f} Hz')
+            f'{self._robot.name}, {1.0 / self._settings.preview.dt_s:.0f} Hz, '
+            f'{values["horizon_s"]:g} s ahead, published at {1.0 / values["publish_period_s"]:g} '
+            f'Hz')
 
     # --- settings -----------------------------------------------------------------------------
 
@@ -193,6 +234,22 @@ class ComPreviewController(GuardedNode):
         preview = PreviewSettings(com_height_m=height, dt_s=values['dt_s'],
                                   preview_s=values['preview_s'], q_weight=values['Q'],
                                   r_weight=values['R'])
+        horizon = values['horizon_s']
+        if isinstance(horizon, bool) or not isinstance(horizon, (int, float)) \
+                or not 0 <= horizon <= MAX_HORIZON_S:
+            raise ComPlanningError(f'horizon_s must be in [0, {MAX_HORIZON_S:g}] s, got '
+                                   f'{horizon!r}')
+        low, high = PERIOD_RANGE_S
+        for name in ('publish_period_s', 'sample_period_s'):
+            value = values[name]
+            if isinstance(value, bool) or not isinstance(value, (int, float)) \
+                    or not low <= value <= high:
+                raise ComPlanningError(f'{name} must be in [{low:g}, {high:g}] s, got {value!r}')
+        sample_ns = round(values['sample_period_s'] * 1e9)
+        if sample_ns % preview.dt_ns:
+            raise ComPlanningError(f'sample_period_s must be a whole number of generator steps '
+                                   f'(dt_s = {preview.dt_s:g} s), got '
+                                   f'{values["sample_period_s"]!r}')
         return GeneratorSettings(preview, values['com_method'])
 
     def _on_set_parameters(self, parameters) -> SetParametersResult:
@@ -208,21 +265,33 @@ class ComPreviewController(GuardedNode):
         old, old_values = self._settings, self._values
         self._robot, self._values, self._settings = robot, values, settings
         self.inputs.timeout_s = values['stale_after_s']
-        if settings.preview.dt_s != old.preview.dt_s:
+        if values['publish_period_s'] != old_values['publish_period_s']:
             self.destroy_timer(self._timer)
-            self._timer = self.create_timer(settings.preview.dt_s, self._tick)
+            self._timer = self.create_timer(values['publish_period_s'], self._tick)
+        lookahead = max(old_values['horizon_s'], old_values['publish_period_s'])
+        if max(values['horizon_s'], values['publish_period_s']) < lookahead:
+            self._committed_ahead_ns = round(lookahead * 1e9)
         if values['status_period_s'] != old_values['status_period_s']:
             self.destroy_timer(self._status_timer)
             self._status_timer = self.create_timer(values['status_period_s'],
                                                    self._report_status)
         if self._generator is not None and settings != old:
             self._switch_generator()
+            # The generators kept to compute states again have the old settings.
+            self._points = deque(point[:2] + (None,) for point in self._points)
+        if self._generator is not None and (
+                settings.preview.dt_s != old.preview.dt_s
+                or values['sample_period_s'] != old_values['sample_period_s']):
+            self._grid_origin_ns = self._generator.stamp_ns  # (the sample grid from here)
         self.diagnostics.report('settings', OK, f'{settings.method} COM, zc '
                                 f'{settings.preview.com_height_m:.3f} m',
                                 {'com_method': settings.method, 'dt_s': settings.preview.dt_s,
                                  'preview_s': settings.preview.preview_s,
                                  'Q': settings.preview.q_weight,
-                                 'R': settings.preview.r_weight})
+                                 'R': settings.preview.r_weight,
+                                 'horizon_s': values['horizon_s'],
+                                 'publish_period_s': values['publish_period_s'],
+                                 'sample_period_s': values['sample_period_s']})
         return SetParametersResult(successful=True)
 
     def _switch_generator(self) -> None:
@@ -251,10 +320,50 @@ class ComPreviewController(GuardedNode):
             self.diagnostics.drop(ZMP_TOPIC, 'stamped before the previous reference '
                                              '(out of order)')
             return
-        self._reference = reference
-        self.inputs.heard(ZMP_TOPIC, self.get_clock().now().nanoseconds)
-        if self._generator is not None:
+        previous, self._reference = self._reference, reference
+        now_ns = self.get_clock().now().nanoseconds
+        self.inputs.heard(ZMP_TOPIC, now_ns)
+        if self._generator is None:
+            return
+        if self._points and self._latest_point(now_ns)[2] is not None \
+                and self._revised(previous, reference, now_ns):
+            self._recompute_ahead(now_ns)
+        else:
             self._generator.set_reference(reference)
+
+    def _revised(self, previous, reference, now_ns: int) -> bool:
+        """Whether ``reference`` changes ``previous`` where the states ahead of now looked."""
+        preview = self._settings.preview
+        start_ns = max(self._latest_point(now_ns)[0], int(reference.stamps_ns[0]))
+        end_ns = self._generator.stamp_ns + preview.dt_ns * preview.preview_steps
+        stamps = reference.stamps_ns
+        stamps = stamps[(stamps >= start_ns) & (stamps <= end_ns)]
+        if not len(stamps):
+            return False
+        return float(np.max(np.abs(reference.sample(stamps) - previous.sample(stamps)))) \
+            > REVISED_REFERENCE_M
+
+    def _recompute_ahead(self, now_ns: int) -> None:
+        """Compute the states after the latest at or before now again, on the new reference."""
+        points = self._points
+        stamp_ns, _, generator = self._latest_point(now_ns)
+        while points and points[-1][0] >= stamp_ns:
+            points.pop()
+        self._generator = copy.copy(generator)  # (the one about to step to that state)
+        self._generator.set_reference(self._reference)
+        try:
+            self._compute(self._end_ns(now_ns))
+        except ComPlanningError as exc:
+            self.diagnostics.report('generator', ERROR, f'{self._settings.method}: {exc}')
+            return
+        self._publish(now_ns)
+
+    def _latest_point(self, now_ns: int) -> tuple:
+        """The computed state on the sample grid latest at or before ``now_ns`` (or the first)."""
+        points = self._points
+        while len(points) > 1 and points[1][0] <= now_ns:
+            points.popleft()
+        return points[0]
 
     def _on_footsteps(self, msg) -> None:
         try:
@@ -310,70 +419,109 @@ class ComPreviewController(GuardedNode):
     # --- output -------------------------------------------------------------------------------
 
     def _tick(self) -> None:
+        """Compute up to ``horizon_s`` ahead, then publish the committed window."""
         now_ns = self.get_clock().now().nanoseconds
         if self.inputs.update(now_ns):
             self.diagnostics.publish([self.inputs.status(now_ns)])
         if self._reference is None:
             return
-        preview = self._settings.preview
         if self._generator is None:
             if self._waiting_for_the_robot(now_ns):
                 return
             self._generator = make_generator(self._settings, self._start_state(now_ns), now_ns,
                                              self._reference)
+            self._grid_origin_ns = now_ns
             # The measured COM only sets where the generator starts, and it never stops: a
             # 200 Hz subscription would cost a callback per sample for nothing.
             self.destroy_subscription(self._measured_com_subscription)
             self._measured_com.clear()
-        behind = (now_ns - self._generator.stamp_ns) // preview.dt_ns
-        if behind > MAX_CATCH_UP_TICKS or behind < -1:
-            # Far off the clock (a jump in time, or a process starved of its ticks on an
-            # overloaded machine): carry the state over to now, and step from there only the
-            # tick of now (stepping the missed ticks too would publish a COM that ran ahead of
-            # the clock by as much, and the next tick would carry that state back to now).
-            current = self._generator.state()
-            self._generator.reset(current.position_in_world, current.velocity_in_world,
-                                  current.acceleration_in_world, stamp_ns=now_ns)
-            self._generator.set_reference(self._reference)
-            self.diagnostics.report(
-                'controller', WARN, f'{abs(behind) * preview.dt_s:.3f} s '
-                f'{"behind" if behind > 0 else "ahead of"} the clock (more than '
-                f'{MAX_CATCH_UP_TICKS} ticks): the COM state carried over to now',
-                {'behind_s': behind * preview.dt_s, 'max_catch_up_ticks': MAX_CATCH_UP_TICKS})
-            behind = 0
-        elif behind < 0:
-            return
+        self._keep_to_the_clock(now_ns)
         try:
-            for _ in range(max(int(behind), 0)):
-                self._generator.step_values()
-            values = self._generator.step_values()
+            self._compute(self._end_ns(now_ns))
         except ComPlanningError as exc:
             self.diagnostics.report('generator', ERROR, f'{self._settings.method}: {exc}')
             return
-        self._publish(values)
+        self._publish(now_ns)
 
-    def _publish(self, values) -> None:
-        """Publish ``(stamp_ns, cx, cy, vx, vy, ax, ay)`` (a generator's ``step_values``)."""
-        # Plain floats into the message builder: the message of com_reference_to_msg of a
-        # ComState of the same values (test_com_preview_node), without a dozen small arrays.
-        stamp_ns, px, py, vx, vy, ax, ay = values
-        yaw, yaw_rate = 0.0, 0.0
-        if self._plan is not None:
-            yaw, yaw_rate = self._plan_yaw.at((stamp_ns - self._plan.start_ns) * 1e-9)
-            yaw = math.remainder(yaw, 2 * math.pi)
-        height, climb, climb_rate = (0.0, 0.0, 0.0) if self._support is None \
-            else self._support.at_ns(stamp_ns)
-        self._publisher.publish(self._messages.to_msg(
-            stamp_ns, (px, py, self._settings.preview.com_height_m + height), (vx, vy, climb),
-            (ax, ay, climb_rate), yaw, yaw_rate))
-        self._last_published = values
+    def _end_ns(self, now_ns: int) -> int:
+        """The last instant to compute: ``horizon_s`` ahead, within the held reference."""
+        preview = self._settings.preview
+        ahead_ns = round(self._values['horizon_s'] * 1e9)
+        covered_ns = int(self._reference.stamps_ns[-1]) - preview.dt_ns * preview.preview_steps
+        # At least through the next publication: on a stale reference, held at its end.
+        return max(min(now_ns + ahead_ns, covered_ns),
+                   now_ns + round(self._values['publish_period_s'] * 1e9))
+
+    def _keep_to_the_clock(self, now_ns: int) -> None:
+        """Carry the state over to now when the computed end is far off the clock."""
+        preview = self._settings.preview
+        computed_ns = self._generator.stamp_ns - preview.dt_ns  # the last state computed
+        lookahead_ns = round(max(self._values['horizon_s'],
+                                 self._values['publish_period_s']) * 1e9)
+        if computed_ns <= now_ns + lookahead_ns:
+            self._committed_ahead_ns = 0  # (a shorter horizon has caught up)
+        allowed_ns = max(lookahead_ns, self._committed_ahead_ns)
+        behind_s = (now_ns - computed_ns) * 1e-9
+        if behind_s <= MAX_CATCH_UP_TICKS * preview.dt_s \
+                and computed_ns <= now_ns + allowed_ns + preview.dt_ns:
+            return
+        # Far behind (a process starved of its ticks on an overloaded machine) or ahead (a
+        # jump back in time): carry the state over to now; stepping the missed ticks from
+        # the stale state would publish a COM that lags the clock by as much.
+        current = self._generator.state()
+        self._generator.reset(current.position_in_world, current.velocity_in_world,
+                              current.acceleration_in_world, stamp_ns=now_ns)
+        self._generator.set_reference(self._reference)
+        self._grid_origin_ns = now_ns
+        if behind_s < 0:
+            self._points.clear()  # committed for a time the clock has not reached (again)
+        self._committed_ahead_ns = 0
+        self.diagnostics.report(
+            'controller', WARN, f'{abs(behind_s):.3f} s '
+            f'{"behind" if behind_s > 0 else "ahead of"} the clock (more than '
+            f'{MAX_CATCH_UP_TICKS} ticks behind, or beyond horizon_s ahead): the COM state '
+            f'carried over to now',
+            {'behind_s': behind_s, 'max_catch_up_ticks': MAX_CATCH_UP_TICKS})
+
+    def _compute(self, end_ns: int) -> None:
+        """Step the generator up to ``end_ns``; keep the states on the sample grid."""
+        generator, points = self._generator, self._points
+        sample_ns = round(self._values['sample_period_s'] * 1e9)
+        height_m = self._settings.preview.com_height_m
+        origin_ns = self._grid_origin_ns
+        while generator.stamp_ns <= end_ns:
+            if (generator.stamp_ns - origin_ns) % sample_ns:
+                generator.step_values()
+                continue
+            before = copy.copy(generator)  # (to compute the states after this one again)
+            stamp_ns, px, py, vx, vy, ax, ay = generator.step_values()
+            yaw, yaw_rate = 0.0, 0.0
+            if self._plan is not None:
+                yaw, yaw_rate = self._plan_yaw.at((stamp_ns - self._plan.start_ns) * 1e-9)
+                yaw = math.remainder(yaw, 2 * math.pi)
+            height, climb, climb_rate = (0.0, 0.0, 0.0) if self._support is None \
+                else self._support.at_ns(stamp_ns)
+            while points and points[-1][0] >= stamp_ns:
+                points.pop()  # (a state carried over to now replaces what it overlaps)
+            points.append((stamp_ns, (px, py, height_m + height, vx, vy, climb, ax, ay,
+                                      climb_rate, yaw, yaw_rate), before))
+
+    def _publish(self, now_ns: int) -> None:
+        """Publish the committed states from the latest at or before ``now_ns`` on."""
+        points = self._points
+        if not points:
+            return
+        self._latest_point(now_ns)
+        stamps, states, _ = zip(*points, strict=True)
+        self._publisher.publish(self._messages.window_to_msg(stamps, states))
+        self._last_published = points[0][:2]
 
     def _report_status(self) -> None:
         self.diagnostics.publish([self.inputs.status(self.get_clock().now().nanoseconds)])
         if self._last_published is None:
             self.diagnostics.report('controller', WARN, f'waiting for {ZMP_TOPIC}')
             return
-        stamp_ns, px, py, _, _, ax, ay = self._last_published
+        stamp_ns, (px, py, _, _, _, _, ax, ay, _, _, _) = self._last_published
         preview = self._settings.preview
         zmp = np.array((px, py)) - preview.com_height_m / preview.gravity_m_s2 \
             * np.array((ax, ay))

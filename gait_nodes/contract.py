@@ -20,7 +20,12 @@ layout is spelled once (DESIGN.md, "Nodes and the public topic contract"):
     ``joint_names`` = ``['com']``; point 0 is the state at ``header.stamp``: COM position in
     ``transforms[0].translation`` with the body yaw in its rotation, velocity in
     ``velocities[0].linear`` (yaw rate in ``angular.z``), acceleration in
-    ``accelerations[0].linear``. Further points, if any, are the planned horizon.
+    ``accelerations[0].linear``. Further points, if any, are the committed horizon: the COM
+    controller publishes, every ``publish_period_s``, its states ``sample_period_s`` apart from
+    the latest at or before now to the end of what it has computed (``horizon_s`` ahead of the
+    clock). A consumer interpolates between points (quintic Hermite in position, velocity and
+    acceleration; cubic Hermite in yaw and yaw rate) and lets a new message replace what it
+    holds from the message's first point on.
 ``/gait/swing_trajectory`` (trajectory_msgs/MultiDOFJointTrajectory)
     ``joint_names`` = ``[foot]``; ``header.stamp`` = lift-off time; one point per waypoint with
     the foot position and yaw (rotation about z) and ``time_from_start`` from lift-off. The first
@@ -778,18 +783,23 @@ def com_reference_to_msg(states: Sequence[ComState]):
 
 
 class ComReferenceMessages:
-    """Builds the one-state /gait/com_reference messages of a publisher, from plain floats.
+    """Builds the /gait/com_reference messages of a publisher, from plain floats.
 
-    The controller publishes one state per tick: ``to_msg`` gives the message of
-    ``com_reference_to_msg([ComState(...)])`` field by field, but without the ComState's arrays
-    and with the message constructors looked up once (a node lives in one runtime). A
-    non-finite value goes through :class:`ComState`, which raises its :class:`ContractError`.
+    The controller publishes, every period, the window of its committed states from the
+    latest one at or before now to the end of what it has computed: :meth:`window_to_msg`
+    gives the message of ``com_reference_to_msg([ComState(...), ...])`` field by field, but
+    without the ComStates' arrays and with the message constructors looked up once (a node
+    lives in one runtime); :meth:`to_msg` is the one-state case. A non-finite value goes
+    through :class:`ComState`, which raises its :class:`ContractError`.
 
     Parts that do not change are built once and shared by the messages: the joint names, the
     zero ``time_from_start``, the zero angular acceleration (and angular velocity at a zero yaw
-    rate), the rotation while the yaw stays the same (bit for bit: -0.0 is another yaw). For
-    a publisher that never edits a message it built (the inproc and rclpy intra-process rule;
-    a DDS subscriber gets its own copy), as :class:`ZmpReferenceMessages`.
+    rate), the rotation while the yaw stays the same (bit for bit: -0.0 is another yaw), and
+    the transform and twists of a state that the previous message carried at the same stamp
+    with the same values (a committed state is in several successive windows; only its
+    ``time_from_start`` changes). For a publisher that never edits a message it built (the
+    inproc and rclpy intra-process rule; a DDS subscriber gets its own copy), as
+    :class:`ZmpReferenceMessages`.
     """
 
     def __init__(self):
@@ -805,6 +815,7 @@ class ComReferenceMessages:
         self._zero = vector(0.0, 0.0, 0.0)
         self._yaw = (math.nan, 0.0)  # (yaw [rad], its sign) of self._rotation
         self._rotation = None
+        self._parts: dict[int, tuple] = {}  # stamp [ns] -> (values, point parts) last sent
 
     def to_msg(self, stamp_ns: int, position_in_world: Sequence[float],
                velocity_in_world: Sequence[float], acceleration_in_world: Sequence[float],
@@ -819,27 +830,71 @@ class ComReferenceMessages:
             yaw_rad: Body yaw [rad].
             yaw_rate_rad_s: Body yaw rate [rad/s].
         """
-        values = [*position_in_world, *velocity_in_world, *acceleration_in_world]
-        if len(values) != 9 or not all(map(math.isfinite, (*values, yaw_rad, yaw_rate_rad_s))):
+        values = (*position_in_world, *velocity_in_world, *acceleration_in_world, yaw_rad,
+                  yaw_rate_rad_s)
+        if len(values) != 11:
             return com_reference_to_msg([ComState(
                 stamp_ns, position_in_world, velocity_in_world, acceleration_in_world, yaw_rad,
                 yaw_rate_rad_s)])
-        trajectory, point, header, time, _, transform, twist, vector, quaternion = \
-            self._constructors
-        px, py, pz, vx, vy, vz, ax, ay, az = map(float, values)
-        yaw = (float(yaw_rad), math.copysign(1.0, yaw_rad))
+        return self.window_to_msg([stamp_ns], [values])
+
+    def window_to_msg(self, stamps_ns: Sequence[int], states: Sequence[Sequence[float]]):
+        """MultiDOFJointTrajectory of several states, the first at the header stamp.
+
+        Args:
+            stamps_ns: (N,) times of the states [ns], strictly increasing, N >= 1.
+            states: N rows ``(px, py, pz, vx, vy, vz, ax, ay, az, yaw, yaw_rate)``: COM
+                position [m], velocity [m/s], acceleration [m/s^2], body yaw [rad] and yaw
+                rate [rad/s].
+
+        Raises:
+            ContractError: No state, stamps not strictly increasing, a row of another length
+                or a non-finite value (ComState's message).
+        """
+        if not len(stamps_ns) or len(stamps_ns) != len(states):
+            raise ContractError(f'a COM reference needs one state per stamp and at least one, '
+                                f'got {len(states)} states for {len(stamps_ns)} stamps')
+        trajectory, point, header, time, duration, _, _, _, _ = self._constructors
+        start_ns = int(stamps_ns[0])
+        previous_ns = start_ns - 1
+        known, parts = self._parts, {}
+        points = []
+        for stamp_ns, values in zip(stamps_ns, states, strict=True):
+            stamp_ns = int(stamp_ns)
+            if stamp_ns <= previous_ns:
+                raise ContractError('COM reference stamps are not strictly increasing')
+            previous_ns = stamp_ns
+            entry = known.get(stamp_ns)
+            if entry is None or entry[0] != values:
+                entry = (values, self._point_parts(stamp_ns, values))
+            parts[stamp_ns] = entry
+            offset_ns = stamp_ns - start_ns
+            points.append(point(*entry[1], duration(*divmod(offset_ns, _NS_PER_S))
+                                if offset_ns else self._zero_duration))
+        self._parts = parts
+        return trajectory(header(time(*divmod(start_ns, _NS_PER_S)), WORLD_FRAME),
+                          self._joint_names, points)
+
+    def _point_parts(self, stamp_ns: int, values: Sequence[float]) -> tuple[list, list, list]:
+        """([transform], [velocity twist], [acceleration twist]) of one checked state."""
+        values = tuple(values)
+        if len(values) != 11:
+            raise ContractError(f'a COM state is 11 values (position, velocity, acceleration, '
+                                f'yaw, yaw rate), got {len(values)}')
+        if not all(map(math.isfinite, values)):  # ComState names the first bad one
+            ComState(stamp_ns, values[0:3], values[3:6], values[6:9], values[9], values[10])
+        _, _, _, _, _, transform, twist, vector, quaternion = self._constructors
+        px, py, pz, vx, vy, vz, ax, ay, az, yaw_rad, rate = map(float, values)
+        yaw = (yaw_rad, math.copysign(1.0, yaw_rad))
         if yaw != self._yaw:
             self._yaw = yaw
-            self._rotation = quaternion(0.0, 0.0, math.sin(0.5 * yaw[0]), math.cos(0.5 * yaw[0]))
-        rate = float(yaw_rate_rad_s)
+            self._rotation = quaternion(0.0, 0.0, math.sin(0.5 * yaw_rad),
+                                        math.cos(0.5 * yaw_rad))
         zero = self._zero
-        return trajectory(
-            header(time(*divmod(int(stamp_ns), _NS_PER_S)), WORLD_FRAME), self._joint_names,
-            [point([transform(vector(px, py, pz), self._rotation)],
-                   [twist(vector(vx, vy, vz), zero if rate == 0.0 and math.copysign(1.0, rate) > 0
-                          else vector(0.0, 0.0, rate))],
-                   [twist(vector(ax, ay, az), zero)],
-                   self._zero_duration)])
+        return ([transform(vector(px, py, pz), self._rotation)],
+                [twist(vector(vx, vy, vz), zero if rate == 0.0 and math.copysign(1.0, rate) > 0
+                       else vector(0.0, 0.0, rate))],
+                [twist(vector(ax, ay, az), zero)])
 
 
 def com_reference_from_msg(msg) -> list[ComState]:
@@ -858,14 +913,18 @@ def com_reference_from_msg(msg) -> list[ComState]:
                                 f'velocity and acceleration')
         position, yaw = _transform_values(point.transforms[0])
         v, a = point.velocities[0], point.accelerations[0]
+        offset = point.time_from_start
         states.append(ComState(
-            stamp_ns=start_ns + int(round(duration_msg_to_seconds(point.time_from_start) * 1e9)),
+            stamp_ns=start_ns + int(offset.sec) * _NS_PER_S + int(offset.nanosec),
             position_in_world=position,
             velocity_in_world=[v.linear.x, v.linear.y, v.linear.z],
             acceleration_in_world=[a.linear.x, a.linear.y, a.linear.z],
             yaw_rad=yaw,
             yaw_rate_rad_s=v.angular.z,
         ))
+        if k and states[-1].stamp_ns <= states[-2].stamp_ns:
+            raise ContractError(f'/gait/com_reference point {k} is not later than point {k - 1}: '
+                                f'time_from_start must increase strictly')
     return states
 
 

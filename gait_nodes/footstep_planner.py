@@ -2,8 +2,10 @@
 
 Subscribes ``/cmd_vel`` (geometry_msgs/Twist) and ``/gait/command`` (std_msgs/String, JSON, schema
 ``msgs_schema/gait_command.schema.json``). Publishes ``/gait/footsteps`` (latched, whenever the
-plan changes), ``/gait/zmp_reference`` (the next ``zmp_horizon_s`` every tick),
-``/gait/command_status`` (one JSON answer per command) and ``/diagnostics``.
+plan changes), ``/gait/zmp_reference`` (the next ``zmp_horizon_s``, 2.5 s, every tick:
+``rate_hz``, 10 Hz; the horizon covers the COM controller's ``preview_s + horizon_s`` and one
+publication period, so that a late reference is ridden through), ``/gait/command_status`` (one
+JSON answer per command) and ``/diagnostics``.
 
 The gait settings are ROS parameters (defaults in ``config/footstep_planner.yaml``); a
 ``ros2 param set`` and a /gait/command go through the same checks, and an accepted change takes
@@ -135,6 +137,8 @@ DEPENDENCIES = {'whole_body_ik: inputs': '/gait/com_reference',
 RESUME_AFTER_S = 0.5
 #: A planned swing with no /gait/swing_trajectory this long after its lift-off is missed [s].
 SWING_GRACE_S = 0.05
+#: A swing trajectory lifting off this close to a planned swing's lift-off is its own [ns].
+SAME_LIFT_OFF_NS = 1000
 SWING_TOPIC = '/gait/swing_trajectory'
 #: After a planning failure the plan stands still this long before it is tried again [s].
 RETRY_AFTER_S = 1.0
@@ -298,6 +302,9 @@ class FootstepPlanner(GuardedNode):
         self._measured_subscriptions: list = []
         self._dependencies: dict[str, bool] = {}
         self._dependencies_fresh: set[str] = set()  # reported their inputs fresh at least once
+        # Reported stale since the last tick: a stale spell shorter than the planner's period
+        # (stale, then fresh again between two 10 Hz ticks) still pauses the walk.
+        self._stale_since_tick: set[str] = set()
         self._pause: dict | None = None
         self._join_start_ns: int | None = None
         self._swings_heard: set[tuple[str, int]] = set()
@@ -447,6 +454,7 @@ class FootstepPlanner(GuardedNode):
                 self._base_pose = (float(t.x), float(t.y), yaw)
                 if self._measured is not None:
                     self._measured.on_base(pose, self.get_clock().now().nanoseconds)
+                    self._hold_once_measured()
 
     def on_joint_states(self, msg) -> None:
         """Keep the robot's joint positions (joining or paused: the measured state)."""
@@ -459,6 +467,18 @@ class FootstepPlanner(GuardedNode):
             self._measured.on_joints(msg.name, positions, self.get_clock().now().nanoseconds)
         except (GaitNodesError, ValueError):
             return
+        self._hold_once_measured()
+
+    def _hold_once_measured(self) -> None:
+        """Paused: publish the hold as soon as the robot's state is measured, not at the tick.
+
+        (At 10 Hz the node that was starved may be back before the next tick, and follow the
+        walking plan a tick long before the hold comes.)
+        """
+        pause = self._pause
+        if pause is not None and pause['hold'] is None \
+                and self._measured.since(pause['since_ns']):
+            self.tick()
 
     def _listen(self, on: bool) -> None:
         """Subscribe to the robot's measured state (/tf, /joint_states) or stop."""
@@ -557,7 +577,12 @@ class FootstepPlanner(GuardedNode):
     # --- pause while the robot is held ---------------------------------------------------------
 
     def on_diagnostics(self, msg) -> None:
-        """Follow the stale-input reports of the nodes that move the robot."""
+        """Follow the stale-input reports of the nodes that move the robot.
+
+        A report that holds the robot while it walks pauses the walk at once, not at the next
+        tick (up to 0.1 s later at 10 Hz: the held robot's plan would run on that long).
+        """
+        newly_stale = False
         for status in msg.status:
             topic = DEPENDENCIES.get(status.name)
             if topic is None:
@@ -570,6 +595,11 @@ class FootstepPlanner(GuardedNode):
             # reference before this planner's first plan) holds nothing that a pause would save.
             self._dependencies[status.name] = is_stale and \
                 status.name in self._dependencies_fresh
+            if self._dependencies[status.name]:
+                newly_stale |= status.name not in self._stale_since_tick
+                self._stale_since_tick.add(status.name)
+        if newly_stale and self._pause is None and self._joined:
+            self.tick()
 
     def _in_motion(self, now_s: float) -> bool:
         return not self.planner.twist.is_zero() or any(
@@ -577,7 +607,9 @@ class FootstepPlanner(GuardedNode):
 
     def _paused(self, now_ns: int, now_s: float) -> bool:
         """Pause, hold and resume (see the module docstring); True while paused."""
-        stale = sorted(name for name, is_stale in self._dependencies.items() if is_stale)
+        stale = sorted({name for name, is_stale in self._dependencies.items() if is_stale}
+                       | self._stale_since_tick)
+        self._stale_since_tick = set()
         pause = self._pause
         if pause is None:
             if not stale or not self._in_motion(now_s):
@@ -672,7 +704,11 @@ class FootstepPlanner(GuardedNode):
             if key in self._swings_checked or not lift_ns + grace_ns <= now_ns:
                 continue
             self._swings_checked.add(key)
-            if key not in self._swings_heard and now_ns - lift_ns < 2 * grace_ns + NS_PER_S:
+            # (the policy works the lift-off out from the plan message it got, whose start
+            # may differ from this plan's: the same instant can come out a nanosecond apart)
+            heard = key in self._swings_heard or any(
+                f == foot and abs(t - lift_ns) <= SAME_LIFT_OFF_NS for f, t in self._swings_heard)
+            if not heard and now_ns - lift_ns < 2 * grace_ns + NS_PER_S:
                 self.swing_inputs.missed(SWING_TOPIC, f'the swing of {foot} lifting off '
                                                       f'at {lift_ns * 1e-9:.3f} s')
         if not 0 <= now_ns - self._swings_pruned_ns < NS_PER_S:

@@ -57,7 +57,6 @@ from gait_nodes.contract import (
     WORLD_FRAME,
     ContractError,
     com_reference_from_msg,
-    duration_msg_to_seconds,
     footsteps_from_msg,
     joint_trajectory_to_msg,
     quaternion_to_yaw,
@@ -287,12 +286,11 @@ class WholeBodyIk(GuardedNode):
         except ContractError as exc:
             self.diagnostics.drop('/gait/com_reference', str(exc))
             return
-        if self._com_track is not None and self._moving:
-            self._compare_com(self._com_track, track)
-        self._com_track = track
-        last = msg.points[-1].time_from_start
-        self._com_end_ns = time_msg_to_ns(msg.header.stamp) + last.sec * 1_000_000_000 \
-            + last.nanosec
+        held = self._com_track
+        self._com_track = track if held is None else held.spliced(track)
+        if held is not None and self._moving:
+            self._compare_com(held, self._com_track)
+        self._com_end_ns = self._com_track.stamps_ns[-1]
         self._com_received_ns = self.get_clock().now().nanoseconds
         self.inputs.heard('/gait/com_reference', self._com_received_ns)
 
@@ -636,33 +634,35 @@ def _com_track_as_expected(msg) -> ComTrack | None:
             or not msg.points:
         return None
     start_ns = time_msg_to_ns(msg.header.stamp)
-    stamps, positions, velocities, yaws, yaw_rates = [], [], [], [], []
+    stamps, positions, velocities, accelerations, yaws, yaw_rates = [], [], [], [], [], []
     total = 0.0  # every value: finite if and only if each is (short of an overflow)
     for point in msg.points:
-        transforms, twists, accelerations = point.transforms, point.velocities, \
-            point.accelerations
-        if len(transforms) != 1 or len(twists) != 1 or len(accelerations) != 1:
+        transforms, twists, accels = point.transforms, point.velocities, point.accelerations
+        if len(transforms) != 1 or len(twists) != 1 or len(accels) != 1:
             return None
         t, r = transforms[0].translation, transforms[0].rotation
-        v, a = twists[0].linear, accelerations[0].linear
+        v, a = twists[0].linear, accels[0].linear
         position = [float(t.x), float(t.y), float(t.z)]
         velocity = [float(v.x), float(v.y), float(v.z)]
+        acceleration = [float(a.x), float(a.y), float(a.z)]
         x, y, z, w = r.x, r.y, r.z, r.w
         if not abs(x * x + y * y + z * z + w * w - 1.0) <= UNIT_QUATERNION_TOLERANCE:
             return None  # no yaw: the contract's reader names the rotation
         yaw = quaternion_to_yaw(x, y, z, w)
         yaw_rate = float(twists[0].angular.z)
-        total += (sum(position) + sum(velocity) + float(a.x) + float(a.y) + float(a.z) + yaw
-                  + yaw_rate)
-        stamps.append(start_ns + int(round(duration_msg_to_seconds(point.time_from_start)
-                                           * 1e9)))
+        total += sum(position) + sum(velocity) + sum(acceleration) + yaw + yaw_rate
+        offset = point.time_from_start
+        stamps.append(start_ns + int(offset.sec) * 1_000_000_000 + int(offset.nanosec))
         positions.append(position)
         velocities.append(velocity)
+        accelerations.append(acceleration)
         yaws.append(yaw)
         yaw_rates.append(yaw_rate)
     if not math.isfinite(total):
         return None
-    return ComTrack(stamps, positions, velocities, yaws, yaw_rates)
+    if any(later <= earlier for earlier, later in zip(stamps, stamps[1:], strict=False)):
+        return None  # the contract's reader names it
+    return ComTrack(stamps, positions, velocities, yaws, yaw_rates, accelerations)
 
 
 def main(args: list[str] | None = None) -> int:

@@ -47,8 +47,11 @@ def decode_gait_topics(bag: Path) -> dict:
             p = msg.point
             data[channel.topic.split('/')[-1]].append(
                 (contract.time_msg_to_ns(msg.header.stamp), p.x, p.y, p.z))
-        else:
-            data['com_reference'].extend(
-                (s.stamp_ns, *s.position_in_world, *s.velocity_in_world,
-                 *s.acceleration_in_world) for s in contract.com_reference_from_msg(msg))
+        else:  # a window: it replaces the held states from its first one on, as the IK's
+            states = contract.com_reference_from_msg(msg)
+            held = data['com_reference']
+            while held and held[-1][0] >= states[0].stamp_ns:
+                held.pop()
+            held.extend((s.stamp_ns, *s.position_in_world, *s.velocity_in_world,
+                         *s.acceleration_in_world) for s in states)
     return data

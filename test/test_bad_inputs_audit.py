@@ -86,7 +86,7 @@ def test_gait_commands_that_crashed_or_hung_the_planner_are_refused(planner):
     assert all(len(s.message) < 1200 for s in drops)
     count = len(planner.zmp)
     planner.spin(1.0)
-    assert len(planner.zmp) - count >= 45  # still ticking at 50 Hz
+    assert len(planner.zmp) - count >= 9  # still ticking at 10 Hz
 
 
 def test_a_step_period_or_apex_below_the_range_is_refused_as_a_parameter(planner):

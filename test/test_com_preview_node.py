@@ -25,6 +25,8 @@ QUADRUPED = str(HERE / 'data' / 'robots' / 'quadruped.yaml')
 G = 9.81
 ZC = 0.814
 DT = 0.005
+#: Spacing of the published states [s].
+SAMPLE = DEFAULTS['sample_period_s']
 
 
 @pytest.fixture
@@ -40,11 +42,16 @@ def start():
 
 
 class Planner(runtime.Node):
-    """Publishes a 1.8 s window of a piecewise-linear ZMP plan every 50 ms (20 ms samples)."""
+    """Publishes a ``length_s`` window of a piecewise-linear ZMP plan every 50 ms (20 ms samples).
 
-    def __init__(self, plan):
+    1.8 s (the default) covers preview_s but not preview_s + horizon_s: the controller then
+    computes only as far as the reference allows.
+    """
+
+    def __init__(self, plan, length_s=1.8):
         super().__init__('test_planner', use_global_arguments=False)
         self.plan = plan
+        self.length_s = length_s
         self.publisher = self.create_publisher(get_message('nav_msgs/msg/Path'),
                                                '/gait/zmp_reference', 10)
         self.extra = []  # messages to publish before the next good one
@@ -56,23 +63,33 @@ class Planner(runtime.Node):
             self.publisher.publish(msg)
         self.extra = []
         now = self.get_clock().now().nanoseconds
-        self.publisher.publish(contract.zmp_reference_to_msg(window(*self.plan, now, 1.8, 0.02)))
+        self.publisher.publish(contract.zmp_reference_to_msg(
+            window(*self.plan, now, self.length_s, 0.02)))
 
 
 class Recorder(runtime.Node):
-    """Keeps /gait/com_reference states and /diagnostics statuses."""
+    """Keeps /gait/com_reference states, as a consumer holds them, and /diagnostics statuses.
+
+    Each message replaces the states held from its first point on (a trajectory
+    controller's rule); ``messages`` keeps (clock at delivery [ns], states) of every one.
+    """
 
     def __init__(self):
         super().__init__('test_recorder', use_global_arguments=False)
-        self.states, self.statuses = [], []
+        self.states, self.statuses, self.messages = [], [], []
         self.create_subscription(get_message('trajectory_msgs/msg/MultiDOFJointTrajectory'),
                                  '/gait/com_reference', self.on_com, QoSProfile(depth=100))
         self.create_subscription(get_message('diagnostic_msgs/msg/DiagnosticArray'),
                                  '/diagnostics', self.on_diagnostics, QoSProfile(depth=100))
 
     def on_com(self, msg):
-        """Keep the state at the header stamp."""
-        self.states.append(contract.com_reference_from_msg(msg)[0])
+        """Splice the message's states into the held ones."""
+        states = contract.com_reference_from_msg(msg)
+        self.messages.append((self.get_clock().now().nanoseconds, states))
+        first_ns = states[0].stamp_ns
+        while self.states and self.states[-1].stamp_ns >= first_ns:
+            self.states.pop()
+        self.states.extend(states)
 
     def on_diagnostics(self, msg):
         """Keep every status."""
@@ -85,10 +102,13 @@ class Recorder(runtime.Node):
             'position_in_world', 'velocity_in_world', 'acceleration_in_world')))
 
 
-def run(plan, seconds, actions=(), node_args=()):
-    """Run controller + planner + recorder for ``seconds``; ``actions``: (time_s, fn(ctx))."""
+def run(plan, seconds, actions=(), length_s=1.8):
+    """Run controller + planner + recorder for ``seconds``; ``actions``: (time_s, fn(ctx)).
+
+    ``length_s``: the planner's window [s].
+    """
     controller = ComPreviewController()
-    planner, recorder = Planner(plan), Recorder()
+    planner, recorder = Planner(plan, length_s), Recorder()
     executor = runtime.SingleThreadedExecutor()
     for node in (controller, planner, recorder):
         executor.add_node(node)
@@ -108,14 +128,21 @@ def tracking_error(recorder, plan):
     return zmp - sample_vertices(*plan, stamps)
 
 
-def assert_no_jump(recorder, position_m=2e-4, velocity_m_s=0.01, acceleration_m_s2=0.5):
-    """Consecutive horizontal states agree with one tick of integration: nothing jumps."""
+def assert_no_jump(recorder, position_m=2e-4, velocity_m_s=0.01, acceleration_m_s2=0.5,
+                   spacing_s=SAMPLE):
+    """Consecutive horizontal states agree with one sample of integration: nothing jumps.
+
+    The bounds are for one 20 ms sample (the jerk of a walk over a sample is small); the
+    states are ``spacing_s`` apart (None: as they come).
+    """
     stamps, position, velocity, acceleration = (a[:, :2] if a.ndim == 2 else a
                                                 for a in recorder.arrays())
-    np.testing.assert_allclose(np.diff(stamps), DT, atol=1e-9)
-    predicted = position[:-1] + velocity[:-1] * DT + acceleration[:-1] * DT * DT / 2
+    step = np.diff(stamps)[:, None]
+    if spacing_s is not None:
+        np.testing.assert_allclose(step, spacing_s, atol=1e-9)
+    predicted = position[:-1] + velocity[:-1] * step + acceleration[:-1] * step * step / 2
     assert np.max(np.abs(position[1:] - predicted)) < position_m
-    assert np.max(np.abs(np.diff(velocity, axis=0) - acceleration[:-1] * DT)) < velocity_m_s
+    assert np.max(np.abs(np.diff(velocity, axis=0) - acceleration[:-1] * step)) < velocity_m_s
     assert np.max(np.abs(np.diff(acceleration, axis=0))) < acceleration_m_s2
 
 
@@ -125,9 +152,9 @@ def test_preview_com_tracks_the_reference_every_tick(start):
     context = run(plan, 10.0)
     recorder = context['recorder']
     stamps, position, velocity, _ = recorder.arrays()
-    # One state per 5 ms tick from the first reference on, at the robot's COM height.
-    assert len(stamps) >= int(9.9 / DT)
-    np.testing.assert_allclose(np.diff(stamps), DT, atol=1e-9)
+    # One state per 20 ms sample from the first reference on, at the robot's COM height.
+    assert len(stamps) >= int(9.9 / SAMPLE)
+    np.testing.assert_allclose(np.diff(stamps), SAMPLE, atol=1e-9)
     np.testing.assert_allclose(position[:, 2], ZC)
     assert all(s.yaw_rad == 0.0 for s in recorder.states)
     error = tracking_error(recorder, plan)
@@ -259,6 +286,10 @@ REFUSED = [
     ('R', 0.0, 'R'), ('R', -1e-6, 'R'), ('Q', -1.0, 'Q'), ('dt_s', 0.0, 'dt_s'),
     ('preview_s', 0.001, 'shorter than one step'), ('com_method', 'spline', 'com_method'),
     ('com_height_m', -0.5, 'com_height_m'), ('robot', 'no_such_robot', 'no_such_robot'),
+    ('horizon_s', -0.1, 'horizon_s must be in [0, 5] s'), ('horizon_s', 5.5, 'horizon_s'),
+    ('publish_period_s', 0.0, 'publish_period_s must be in [0.001, 1] s'),
+    ('sample_period_s', 0.0123, 'whole number of generator steps'),
+    ('sample_period_s', 2.0, 'sample_period_s must be in'),
 ]
 
 
@@ -321,44 +352,162 @@ def test_shipped_defaults_match_the_declared_parameters():
     assert shipped == DEFAULTS
 
 
-@pytest.mark.parametrize('method', ['preview', 'polynomial'])
-def test_a_controller_starved_of_ticks_publishes_no_state_from_the_future(start, method):
-    # On two overloaded cores a node process can miss its timer for more than
-    # MAX_CATCH_UP_TICKS periods (0.6 s seen over DDS). The controller then starts again at
-    # the clock; it once also stepped the ticks it had missed from there, and published a COM
-    # state 0.3 s ahead of the clock (stamped in the future, the next one 0.3 s earlier): the
-    # whole-body IK followed a COM that ran ahead, then dropped back.
-    start('-p', f'robot:={BIPED}', '-p', f'com_method:={method}')
-    plan = biped_walk_vertices(steps=6)
-    starved_s = (MAX_CATCH_UP_TICKS + 10) * DT
-    received = []  # (clock at delivery [ns], stamp [ns])
+def starvation(starved_s):
+    """Actions that stop the controller's timer at 3 s for ``starved_s`` and start it again."""
 
     def starve(context):
         controller = context['controller']
         controller.destroy_timer(controller._timer)
-        recorder = context['recorder']
-        recorder.create_subscription(
-            get_message('trajectory_msgs/msg/MultiDOFJointTrajectory'), '/gait/com_reference',
-            lambda msg: received.append((recorder.get_clock().now().nanoseconds,
-                                         contract.time_msg_to_ns(msg.header.stamp))),
-            QoSProfile(depth=100))
 
     def resume(context):
         controller = context['controller']
-        controller._timer = controller.create_timer(DT, controller._tick)
+        controller._timer = controller.create_timer(DEFAULTS['publish_period_s'],
+                                                    controller._tick)
 
-    context = run(plan, 6.0, [(3.0, starve), (3.0 + starved_s, resume)])
-    clock_ns, stamps_ns = np.array(received).T
-    assert len(stamps_ns) > 300
-    # Every state describes an instant the clock has reached, and time never runs back.
-    assert np.all(stamps_ns <= clock_ns)
-    assert np.all(np.diff(stamps_ns) > 0)
-    # After the gap the states go on from the clock, one tick apart.
-    np.testing.assert_allclose(np.diff(stamps_ns[1:]), DT * NS_PER_S)
-    assert stamps_ns[0] - int(3.0 * NS_PER_S) >= starved_s * NS_PER_S - DT * NS_PER_S
-    # The gap is reported, with how far behind the controller was.
-    late = [s for s in context['recorder'].statuses if s.name.endswith('controller')
-            and 'behind the clock' in s.message]
+    return [(3.0, starve), (3.0 + starved_s, resume)]
+
+
+def behind_reports(recorder):
+    return [s for s in recorder.statuses if s.name.endswith('controller')
+            and 'the clock' in s.message]
+
+
+@pytest.mark.parametrize('method', ['preview', 'polynomial'])
+def test_a_controller_starved_for_less_than_its_horizon_loses_nothing(start, method):
+    # The window published before the gap covers it: the consumer's held states go on
+    # without a seam, and the controller computes on from where it stopped.
+    start('-p', f'robot:={BIPED}', '-p', f'com_method:={method}')
+    plan = biped_walk_vertices(steps=6)
+    starved_s = 0.8 * DEFAULTS['horizon_s']
+    context = run(plan, 6.0, starvation(starved_s), length_s=2.5)
+    recorder = context['recorder']
+    assert not behind_reports(recorder)
+    assert_no_jump(recorder)
+    # Every message starts at the latest state the clock has reached.
+    for clock_ns, states in recorder.messages:
+        assert states[0].stamp_ns <= clock_ns
+        assert len(states) == 1 or states[1].stamp_ns > clock_ns
+    error = tracking_error(recorder, plan)
+    assert np.all(np.sqrt(np.mean(error ** 2, axis=0)) <= 0.010)
+
+
+@pytest.mark.parametrize('method', ['preview', 'polynomial'])
+def test_a_controller_starved_beyond_its_horizon_starts_again_at_the_clock(start, method):
+    # On two overloaded cores a node process can miss its timer for longer than its horizon
+    # (0.6 s seen over DDS). Its computed end is then behind the clock; beyond
+    # MAX_CATCH_UP_TICKS steps the state is carried over to now, never stepped from the
+    # stale time (which would publish a COM that lags the clock by as much).
+    start('-p', f'robot:={BIPED}', '-p', f'com_method:={method}')
+    plan = biped_walk_vertices(steps=6)
+    horizon_s = DEFAULTS['horizon_s']
+    starved_s = horizon_s + (MAX_CATCH_UP_TICKS + 20) * DT
+    context = run(plan, 6.0, starvation(starved_s), length_s=2.5)
+    recorder = context['recorder']
+    firsts = np.array([states[0].stamp_ns for _, states in recorder.messages])
+    clocks = np.array([clock for clock, _ in recorder.messages])
+    # Every message starts at an instant the clock has reached, and time never runs back.
+    assert np.all(firsts <= clocks)
+    assert np.all(np.diff(firsts) > 0)
+    # The first message after the gap starts at the clock.
+    resumed_ns = int((3.0 + starved_s) * NS_PER_S)
+    after = np.flatnonzero(clocks >= resumed_ns)[0]
+    assert firsts[after] >= resumed_ns - DEFAULTS['publish_period_s'] * NS_PER_S
+    # The gap is reported, with how far behind the computed end was.
+    late = behind_reports(recorder)
     assert late and level_value(late[0].level) == 1
     values = {kv.key: kv.value for kv in late[0].values}
-    assert float(values['behind_s']) >= starved_s - DT
+    assert float(values['behind_s']) >= starved_s - horizon_s - DEFAULTS['publish_period_s']
+
+
+def test_the_window_reaches_horizon_s_ahead_and_its_states_never_change(start):
+    start('-p', f'robot:={BIPED}')
+    plan = biped_walk_vertices(steps=4)
+    controller = ComPreviewController()
+    planner, recorder = Planner(plan, length_s=2.5), Recorder()
+    executor = runtime.SingleThreadedExecutor()
+    for node in (controller, planner, recorder):
+        executor.add_node(node)
+    executor.spin_for(4.0)
+    horizon_ns = DEFAULTS['horizon_s'] * NS_PER_S
+    seen = {}
+    for clock_ns, states in recorder.messages[5:]:
+        stamps = np.array([state.stamp_ns for state in states])
+        np.testing.assert_allclose(np.diff(stamps), SAMPLE * NS_PER_S)
+        assert stamps[0] <= clock_ns < stamps[1]
+        assert clock_ns + horizon_ns - SAMPLE * NS_PER_S <= stamps[-1] <= clock_ns + horizon_ns
+        for state in states:  # a committed state is the same in every window
+            values = np.concatenate([state.position_in_world, state.velocity_in_world,
+                                     state.acceleration_in_world])
+            if state.stamp_ns in seen:
+                np.testing.assert_array_equal(seen[state.stamp_ns], values)
+            seen[state.stamp_ns] = values
+
+
+def test_a_reference_short_of_preview_plus_horizon_is_used_as_far_as_it_reaches(start):
+    # The test planner's 1.8 s windows cover preview_s (1.6 s) but not preview_s + horizon_s:
+    # the controller computes up to the reference's end minus preview_s (and always through
+    # the next publication), and the COM still tracks the reference.
+    start('-p', f'robot:={BIPED}')
+    plan = biped_walk_vertices(steps=4)
+    recorder = run(plan, 5.0)['recorder']
+    reach_ns = (1.8 - DEFAULTS['preview_s'] + 0.05) * NS_PER_S  # (+ the planner's period)
+    least_ns = DEFAULTS['publish_period_s'] * NS_PER_S
+    for clock_ns, states in recorder.messages[5:]:
+        assert clock_ns + least_ns - SAMPLE * NS_PER_S <= states[-1].stamp_ns \
+            <= clock_ns + reach_ns
+    assert not [s for s in recorder.statuses if 'dropped' in s.message]
+    error = tracking_error(recorder, plan)
+    assert np.all(np.sqrt(np.mean(error ** 2, axis=0)) <= 0.010)
+
+
+def test_horizon_and_periods_change_at_run_time_without_a_jump(start):
+    start('-p', f'robot:={BIPED}')
+    plan = biped_walk_vertices(steps=6)
+    results = []
+
+    def setter(**values):
+        def apply(context):
+            parameters = [Parameter(name, value=value) for name, value in values.items()]
+            results.append(context['controller'].set_parameters(parameters))
+        return apply
+
+    actions = [(2.03, setter(horizon_s=0.1)), (3.11, setter(publish_period_s=0.02)),
+               (4.07, setter(horizon_s=0.15, sample_period_s=0.01)),
+               (5.2, setter(publish_period_s=0.05, sample_period_s=0.02))]
+    context = run(plan, 8.0, actions, length_s=2.5)
+    recorder = context['recorder']
+    assert all(r.successful for batch in results for r in batch)
+    assert not behind_reports(recorder)
+    assert_no_jump(recorder, spacing_s=None)
+    np.testing.assert_allclose(recorder.arrays()[1][-1, :2], plan[1][-1], atol=2e-3)
+
+
+def test_a_changed_plan_is_followed_at_once_from_the_latest_state_at_or_before_now(start):
+    # The states ahead of the clock were computed on the old plan; a reference that changes
+    # that plan makes them be computed again from the latest state at or before now (which
+    # is kept: nothing at or before now changes), and the new window is published at once.
+    start('-p', f'robot:={BIPED}')
+    plan = biped_walk_vertices(steps=6)
+    shorter = biped_walk_vertices(steps=5, step_m=[0.3] * 3 + [0.2] * 2)
+    changed = {}
+
+    def change(context):
+        context['planner'].plan = shorter
+        changed['ns'] = context['controller'].get_clock().now().nanoseconds
+        changed['messages'] = len(context['recorder'].messages)
+
+    recorder = run(plan, 6.0, [(3.52, change)], length_s=2.5)['recorder']
+    held, revisions = {}, []
+    for k, (clock_ns, states) in enumerate(recorder.messages):
+        first = states[0]
+        if first.stamp_ns in held:  # nothing at or before now changes
+            np.testing.assert_array_equal(first.position_in_world, held[first.stamp_ns])
+        change_m = max([np.abs(s.position_in_world - held[s.stamp_ns]).max()
+                        for s in states[1:] if s.stamp_ns in held] or [0.0])
+        if change_m > 1e-4:
+            revisions.append((clock_ns, k))
+        held.update((s.stamp_ns, s.position_in_world) for s in states)
+    # Revised only after the plan changed, and at once (the planner's next message).
+    assert revisions and revisions[0][1] >= changed['messages']
+    assert revisions[0][0] - changed['ns'] <= 0.05 * NS_PER_S
+    assert_no_jump(recorder)

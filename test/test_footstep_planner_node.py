@@ -131,9 +131,9 @@ def test_walk_publishes_the_contract(quadruped):
     quadruped.cmd_vel.publish(twist_msg(0.1, 0.0, 0.05))
     quadruped.spin(9.0)
     references = quadruped.references()
-    assert 450 <= len(references) <= 510  # every tick at 50 Hz
-    for reference in references[::50]:
-        assert reference.horizon_s >= 1.6
+    assert 90 <= len(references) <= 102  # every tick at 10 Hz
+    for reference in references[::10]:
+        assert reference.horizon_s >= 2.5 - 1e-9
         assert np.all(np.diff(reference.stamps_ns) == 10_000_000)
     plans = quadruped.plans()
     assert 5 < len(plans) < len(references)  # latched plan, republished when it changes

@@ -209,13 +209,15 @@ def test_a_planner_that_cannot_plan_stands_says_why_and_walks_on(monkeypatch, er
     for item in graph.heard:
         if hasattr(item, 'foot_names'):
             plan = item
-            if failed_ns < plan.start_ns < fixed_ns:
-                assert all(plan.start_ns + s.lift_off_s * NS <= failed_ns
-                           for s in plan.swings())
-        elif failed_ns <= item.stamps_ns[0] < fixed_ns:
+            continue
+        # A ZMP reference starts at the tick that published it, after that tick's plan (a
+        # plan's own start can be earlier: the stand it began).
+        if failed_ns < item.stamps_ns[0] < fixed_ns:
+            assert all(plan.start_ns + s.lift_off_s * NS <= failed_ns for s in plan.swings())
+        if failed_ns <= item.stamps_ns[0] < fixed_ns:
             times = (item.stamps_ns - plan.start_ns) * 1e-9
             assert zmp_margins(plan, times, item.zmp_in_world, radius).min() > 0.0
             checked += 1
-    assert checked > 100
+    assert checked > 30  # (3.4 s at 10 Hz)
     # Once it can plan again it walks on.
     assert any(plan.start_ns + s.lift_off_s * NS > fixed_ns for s in plan.swings())

@@ -202,16 +202,25 @@ def test_feet_land_where_planned_and_com_tracks_its_reference(bags, name):
         assert np.linalg.norm(foot - np.array(swing['end'])) < FOOT_TOLERANCE_M, swing
         checked += 1
     assert checked >= 4
-    reference = {stamp: np.array([x, y]) for stamp, x, y, _ in series.com_reference}
+    # The reference's states are 20 ms apart: linear between them it is within 0.1 mm of the
+    # IK's Hermite track (the COM accelerates at well under 1 m/s^2: a h^2 / 8 < 5e-5 m).
+    table = np.array(sorted(series.com_reference), dtype=float)
+
+    def reference(stamp_ns):
+        if not table[0, 0] <= stamp_ns <= table[-1, 0]:
+            return None
+        return np.array([np.interp(stamp_ns, table[:, 0], table[:, k]) for k in (1, 2)])
+
     errors = []
     for base, positions in states[::10]:
-        if base[0] in reference:
+        expected = reference(base[0])
+        if expected is not None:
             com = kinematics.com(kinematics.configuration(base, names, positions))
-            errors.append(np.linalg.norm(com[:2] - reference[base[0]]))
+            errors.append(np.linalg.norm(com[:2] - expected))
     assert len(errors) > 100 and max(errors) < COM_TOLERANCE_M
-    monitor = {stamp: np.array([x, y]) for stamp, x, y, _ in series.com}
-    gaps = [np.linalg.norm(monitor[s] - reference[s]) for s in monitor if s in reference]
-    assert max(gaps) < COM_TOLERANCE_M
+    gaps = [np.linalg.norm(np.array([x, y]) - reference(stamp)) for stamp, x, y, _ in series.com
+            if reference(stamp) is not None]
+    assert len(gaps) > 100 and max(gaps) < COM_TOLERANCE_M
 
 
 def test_online_commands_take_effect_and_invalid_ones_are_rejected(bags):

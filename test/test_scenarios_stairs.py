@@ -152,8 +152,12 @@ def test_the_com_climbs_by_the_total_rise_smoothly_and_stands_on_the_landing(raw
     reference = np.array(sorted(set(raw['com_reference'])))
     t = reference[:, 0] * 1e-9
     z, vz, az = reference[:, 3], reference[:, 6], reference[:, 9]
-    # The reference's height, vertical velocity and acceleration are continuous and consistent.
-    assert np.abs(np.diff(z)).max() < 1e-3 and np.abs(np.diff(az)).max() < 0.05
+    # The reference's height, vertical velocity and acceleration are continuous and consistent:
+    # between its states (20 ms apart) the COM climbs at most 0.2 m/s with a jerk of at most
+    # 10 m/s^3.
+    step_s = np.diff(t)
+    assert np.all(np.abs(np.diff(z)) < 0.2 * step_s)
+    assert np.all(np.abs(np.diff(az)) < 10.0 * step_s)
     assert np.allclose(np.gradient(z, t)[1:-1], vz[1:-1], atol=2e-3)
     # The monitor's ZMP is on the plane of the lowest contact, and climbs with it.
     zmp = np.array(sorted(raw['zmp']))

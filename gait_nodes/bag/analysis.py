@@ -29,6 +29,7 @@ independent reader of the bag can check it:
 
 from __future__ import annotations
 
+import bisect
 import json
 import math
 import struct
@@ -46,6 +47,10 @@ from gait_nodes.errors import ConfigError, GaitNodesError
 from gait_nodes.geometry import convex_hull, signed_distance
 from gait_nodes.graph import TOPICS
 from gait_nodes.interfaces import deserialize_message, get_message
+
+#: Samples of each /gait/zmp_reference window kept in the series: its first 0.2 s (the next
+#: window replaces them from its own first sample on) [ns].
+ZMP_REFERENCE_KEPT_NS = 200_000_000
 
 #: Topics whose messages inspect decodes (when their type is the contract's).
 GAIT_TOPICS = ('/tf', '/gait/zmp', '/gait/com', '/gait/support_polygon', '/gait/footsteps',
@@ -137,13 +142,26 @@ class _Collector:
 
     def _gait_zmp_reference(self, msg) -> None:
         reference = contract.zmp_reference_from_msg(msg)
-        self.series.zmp_reference.append((int(reference.stamps_ns[0]),
-                                          *reference.zmp_in_world[0]))
+        # Each window's samples up to the next window's first (the planner publishes at
+        # 10 Hz: its first samples alone would miss the corners in between).
+        series = self.series.zmp_reference
+        first_ns = int(reference.stamps_ns[0])
+        while series and series[-1][0] >= first_ns:
+            series.pop()
+        stamps = reference.stamps_ns.tolist()
+        until = bisect.bisect_right(stamps, first_ns + ZMP_REFERENCE_KEPT_NS)
+        series.extend((stamp, x, y) for stamp, (x, y) in zip(
+            stamps[:until], reference.zmp_in_world[:until].tolist(), strict=True))
         self.series.zmp_reference_last = reference
 
     def _gait_com_reference(self, msg) -> None:
-        state = contract.com_reference_from_msg(msg)[0]
-        self.series.com_reference.append((state.stamp_ns, *state.position_in_world))
+        # A window of committed states: it replaces what is held from its first state on, as
+        # the whole-body IK takes it (older windows' states stay).
+        states = contract.com_reference_from_msg(msg)
+        series = self.series.com_reference
+        while series and series[-1][0] >= states[0].stamp_ns:
+            series.pop()
+        series.extend((state.stamp_ns, *state.position_in_world) for state in states)
 
     def _gait_footsteps(self, msg) -> None:
         self.series.plans.append(contract.footsteps_from_msg(msg))

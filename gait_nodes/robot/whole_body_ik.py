@@ -758,8 +758,9 @@ def com_state_at(states: Sequence[ComState], stamp_ns: int,
                  max_extrapolation_s: float = 0.05) -> tuple[np.ndarray, float]:
     """COM position [m] and body yaw [rad] at ``stamp_ns`` from a COM reference message.
 
-    Linear between the message's points; before the first point, the first; after the last,
-    extrapolated with its velocity for at most ``max_extrapolation_s``, then held.
+    Hermite between the message's points (:class:`ComTrack`); before the first point, the
+    first; after the last, extrapolated with its velocity for at most ``max_extrapolation_s``,
+    then held.
     """
     position, yaw = ComTrack.from_states(states).at(stamp_ns, max_extrapolation_s)
     return np.array(position), yaw
@@ -878,29 +879,45 @@ class _FallbackSwing:
 
 
 class ComTrack:
-    """The states of one COM reference message, ready for :meth:`at` at every tick.
+    """COM reference states, interpolated at any instant: the track the IK follows.
+
+    Between two points the position is the quintic Hermite polynomial of their positions,
+    velocities and accelerations (the cubic one of positions and velocities when the track has
+    no accelerations), and the yaw the cubic Hermite polynomial of their yaws (the difference
+    wrapped to (-pi, pi]) and yaw rates. So a track of a generator's states sampled every few
+    ticks reproduces them between the samples (to the size of the generator's jerk changes),
+    and position, velocity and acceleration are continuous across points. Before the first
+    point: the first; after the last: extrapolated with its velocity for at most
+    ``max_extrapolation_s``, then held.
+
+    A new message replaces the held track from its first point on (:meth:`spliced`).
 
     Args:
-        stamps_ns: (N,) state times [ns], non-decreasing, at least one.
+        stamps_ns: (N,) state times [ns], strictly increasing, at least one.
         positions_in_world: (N, 3) COM positions [m].
         velocities_in_world: (N, 3) COM velocities [m/s].
         yaws_rad: (N,) body yaws [rad].
         yaw_rates_rad_s: (N,) body yaw rates [rad/s].
+        accelerations_in_world: (N, 3) COM accelerations [m/s^2]; None: cubic in position.
     """
 
-    __slots__ = ('_stamps', '_positions', '_velocities', '_yaws', '_yaw_rates')
+    __slots__ = ('_stamps', '_positions', '_velocities', '_accelerations', '_yaws',
+                 '_yaw_rates', '_segment')
 
     def __init__(self, stamps_ns: Sequence[int], positions_in_world: Sequence[Sequence[float]],
                  velocities_in_world: Sequence[Sequence[float]], yaws_rad: Sequence[float],
-                 yaw_rates_rad_s: Sequence[float]):
+                 yaw_rates_rad_s: Sequence[float],
+                 accelerations_in_world: Sequence[Sequence[float]] | None = None):
         if len(stamps_ns) == 0:
             raise ValueError('no COM states')
         # Kept as given (read, never written).
         self._stamps = stamps_ns
         self._positions = positions_in_world
         self._velocities = velocities_in_world
+        self._accelerations = accelerations_in_world
         self._yaws = yaws_rad
         self._yaw_rates = yaw_rates_rad_s
+        self._segment = 0  # the segment of the last query (the next is usually the same)
 
     @classmethod
     def from_states(cls, states: Sequence[ComState]) -> ComTrack:
@@ -910,10 +927,38 @@ class ComTrack:
         return cls([s.stamp_ns for s in states],
                    [np.asarray(s.position_in_world, dtype=float).tolist() for s in states],
                    [np.asarray(s.velocity_in_world, dtype=float).tolist() for s in states],
-                   [s.yaw_rad for s in states], [s.yaw_rate_rad_s for s in states])
+                   [s.yaw_rad for s in states], [s.yaw_rate_rad_s for s in states],
+                   [np.asarray(s.acceleration_in_world, dtype=float).tolist() for s in states])
+
+    @property
+    def stamps_ns(self) -> Sequence[int]:
+        """(N,) state times [ns] (read only)."""
+        return self._stamps
+
+    def spliced(self, newer: ComTrack, keep_s: float = 1.0) -> ComTrack:
+        """This track before ``newer``'s first point, then ``newer`` (a message replacing it).
+
+        As a trajectory controller takes a new trajectory: the held points stamped before the
+        new first point are kept (those more than ``keep_s`` [s] before it are dropped, so
+        that the track stays short), the rest is ``newer``. Mixed with a track without
+        accelerations, the result has none (cubic in position).
+        """
+        first_ns = newer._stamps[0]
+        stop = bisect.bisect_left(self._stamps, first_ns)
+        start = bisect.bisect_left(self._stamps, first_ns - int(keep_s * 1e9), 0, stop)
+        if start == stop:
+            return newer
+        accelerations = None
+        if self._accelerations is not None and newer._accelerations is not None:
+            accelerations = [*self._accelerations[start:stop], *newer._accelerations]
+        return ComTrack([*self._stamps[start:stop], *newer._stamps],
+                        [*self._positions[start:stop], *newer._positions],
+                        [*self._velocities[start:stop], *newer._velocities],
+                        [*self._yaws[start:stop], *newer._yaws],
+                        [*self._yaw_rates[start:stop], *newer._yaw_rates], accelerations)
 
     def at(self, stamp_ns: int, max_extrapolation_s: float = 0.05) -> tuple[list[float], float]:
-        """COM position [m] and body yaw [rad] at ``stamp_ns`` (see :func:`com_state_at`)."""
+        """COM position [m] and body yaw [rad] at ``stamp_ns`` (class docstring)."""
         stamps = self._stamps
         if stamp_ns <= stamps[0]:
             return list(self._positions[0]), float(self._yaws[0])
@@ -922,11 +967,35 @@ class ComTrack:
             (x, y, z), (vx, vy, vz) = self._positions[-1], self._velocities[-1]
             return ([x + dt * vx, y + dt * vy, z + dt * vz],
                     float(self._yaws[-1] + dt * self._yaw_rates[-1]))
-        k = bisect.bisect_right(stamps, stamp_ns) - 1
-        w = (stamp_ns - stamps[k]) / max(stamps[k + 1] - stamps[k], 1)
-        yaw = self._yaws[k] + w * float(_wrap(self._yaws[k + 1] - self._yaws[k]))
-        (ax, ay, az), (bx, by, bz) = self._positions[k], self._positions[k + 1]
-        return [(1 - w) * ax + w * bx, (1 - w) * ay + w * by, (1 - w) * az + w * bz], float(yaw)
+        k = self._segment
+        if not (k + 1 < len(stamps) and stamps[k] <= stamp_ns < stamps[k + 1]):
+            k = self._segment = bisect.bisect_right(stamps, stamp_ns) - 1
+        h = (stamps[k + 1] - stamps[k]) * 1e-9
+        s = (stamp_ns - stamps[k]) / (stamps[k + 1] - stamps[k])
+        s2 = s * s
+        s3 = s2 * s
+        # Cubic Hermite basis (yaw; position without accelerations).
+        c00, c10, c01, c11 = 2 * s3 - 3 * s2 + 1, s3 - 2 * s2 + s, 3 * s2 - 2 * s3, s3 - s2
+        yaw0 = self._yaws[k]
+        yaw = yaw0 + c10 * h * self._yaw_rates[k] + c01 * float(_wrap(self._yaws[k + 1] - yaw0)) \
+            + c11 * h * self._yaw_rates[k + 1]
+        p0, p1 = self._positions[k], self._positions[k + 1]
+        v0, v1 = self._velocities[k], self._velocities[k + 1]
+        if self._accelerations is None:
+            return [c00 * p0[i] + c10 * h * v0[i] + c01 * p1[i] + c11 * h * v1[i]
+                    for i in range(3)], float(yaw)
+        # Quintic Hermite basis: position, velocity, acceleration at both ends.
+        s4 = s3 * s
+        s5 = s4 * s
+        q0 = 1 - 10 * s3 + 15 * s4 - 6 * s5
+        q1 = (s - 6 * s3 + 8 * s4 - 3 * s5) * h
+        q2 = 0.5 * (s2 - 3 * s3 + 3 * s4 - s5) * h * h
+        q3 = 0.5 * (s3 - 2 * s4 + s5) * h * h
+        q4 = (-4 * s3 + 7 * s4 - 3 * s5) * h
+        q5 = 10 * s3 - 15 * s4 + 6 * s5
+        a0, a1 = self._accelerations[k], self._accelerations[k + 1]
+        return [q0 * p0[i] + q1 * v0[i] + q2 * a0[i] + q3 * a1[i] + q4 * v1[i] + q5 * p1[i]
+                for i in range(3)], float(yaw)
 
 
 class FootTargets:
