@@ -9,7 +9,10 @@ moves so that the full-model COM is on the reference. Every ``1 / rate_hz`` it s
 from its last solved one up to ``horizon_s`` ahead of the clock, never past the end of the COM
 reference it holds, each knot once (warm-started from the knots before it) and reached from the
 one before within the joint velocity limits (the step scaled down, as the thesis times its
-swings); then it publishes /joint_commands, a trajectory_msgs/JointTrajectory as a ros2_control
+swings). A knot whose references change before its instant comes (a COM window that revises
+the states ahead, after a new ZMP reference; a new footstep plan; a swing trajectory covering
+it) is solved again, with every later one; knots whose instant has come never change. Then it
+publishes /joint_commands, a trajectory_msgs/JointTrajectory as a ros2_control
 joint_trajectory_controller takes it: every joint of the URDF in the robot's order, the knots
 from the latest one at or before now to the last one solved (header.stamp is the first point's
 time, ``time_from_start`` strictly increasing from 0), positions and velocities (the

@@ -463,6 +463,21 @@ def test_joint_knots_velocities_are_central_differences_within_the_steps():
     assert restarted.window(0)[2] == [[0.0, 0.0], [0.1, 0.0]]  # from rest
 
 
+def test_joint_knots_truncate_after_gives_back_the_state_to_solve_on_from():
+    """Knots after a stamp are forgotten (never the first); the last kept one steps backward."""
+    knots = JointKnots(1)
+    knots.restart(0, np.array([0.0]), 'start')
+    for k in range(1, 5):
+        knots.append(10 * k, np.array([float(k * k)]), np.array([(2 * k - 1) / 10]), k)
+    assert knots.truncate_after(25) == 2
+    assert knots.times_ns == [0, 10, 20]
+    assert knots.window(0)[2][-1] == [0.3]  # the backward step into the knot at 20
+    knots.append(30, np.array([5.0]), np.array([0.1]), 'again')
+    np.testing.assert_allclose(knots.window(0)[2][2], [0.2])  # central again: (0.3 + 0.1) / 2
+    assert knots.truncate_after(-5) == 'start' and knots.times_ns == [0]
+    assert knots.truncate_after(100) == 'start'
+
+
 # -- the node in the inproc runtime ------------------------------------------------------------
 
 
@@ -689,6 +704,62 @@ def test_node_tracks_the_contract_references_checked_by_fk(inproc):
     assert int(values['fallback_swing_ticks']) == 0  # last second: no swing in progress
     assert any(int({kv.key: kv.value for kv in s.values}['fallback_swing_ticks']) > 0
                for s in inputs)
+
+
+class RevisedSource(CrawlSource):
+    """A crawl source whose COM windows change the future from ``revised_at_ns`` on.
+
+    From then, the COM reference after ``revised_at_ns + 0.1 s`` moves 5 mm forward (smoothly,
+    over 0.2 s): the knots the IK has already solved up to its horizon are out of date.
+    """
+
+    revised_at_ns = 3 * NS
+
+    def com_at(self, t_ns: int) -> np.ndarray:
+        com = super().com_at(t_ns)
+        if self.get_clock().now().nanoseconds >= self.revised_at_ns:
+            s_ = (t_ns - self.revised_at_ns - NS // 10) / (0.2 * NS)
+            com = com + [0.005 * _smoothstep_of(s_), 0.0, 0.0]
+        return com
+
+
+def _smoothstep_of(s: float) -> float:
+    s = min(max(s, 0.0), 1.0)
+    return s * s * s * (10.0 + s * (-15.0 + 6.0 * s))
+
+
+def test_node_solves_again_the_knots_a_revised_com_window_changes(inproc):
+    """Knots ahead of now follow the revised COM reference; knots whose instant came stay."""
+    from gait_nodes.whole_body_ik import WholeBodyIk
+
+    node = WholeBodyIk()
+    source = RevisedSource(node.robot, node.q_nominal)
+    collector = Collector()
+    published_ns = []
+    collector.create_subscription(
+        get_message('trajectory_msgs/msg/JointTrajectory'), '/joint_commands',
+        lambda _: published_ns.append(collector.get_clock().now().nanoseconds), 100)
+    executor = runtime.SingleThreadedExecutor()
+    for n in (node, source, collector):
+        executor.add_node(n)
+    executor.spin_for(4.0)
+    robot, plan = node.robot, source.plan
+    knots = knots_of(collector.commands, published_ns)
+    revised = [t for t in knots if source.revised_at_ns + NS // 10 <= t <= 3.6 * NS]
+    assert len(revised) > 50
+    for t in revised:
+        joints = knots[t][0]
+        t_plan = (t - plan.start_ns) * 1e-9
+        stance = plan.contacts_at(t_plan)
+        targets = np.array(plan.stance_positions_at(t_plan))
+        q = robot.configuration(base_from_stance(robot, joints, targets, stance), 0.0, joints)
+        assert np.linalg.norm(robot.com(q) - source.com_at(t)) <= 1e-3
+        # The revision (up to 5 mm) is in the knots, not only within the tolerance.
+    late = max(revised)
+    assert abs(robot.com(robot.configuration(
+        base_from_stance(robot, knots[late][0], np.array(plan.stance_positions_at(
+            (late - plan.start_ns) * 1e-9)), plan.contacts_at((late - plan.start_ns) * 1e-9)),
+        0.0, knots[late][0]))[0] - (source.com_at(late)[0])) <= 2e-4
 
 
 def test_knot_velocities_are_the_derivative_of_the_knots(inproc):
