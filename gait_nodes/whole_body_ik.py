@@ -16,8 +16,9 @@ publishes /joint_commands, a trajectory_msgs/JointTrajectory as a ros2_control
 joint_trajectory_controller takes it: every joint of the URDF in the robot's order, the knots
 from the latest one at or before now to the last one solved (header.stamp is the first point's
 time, ``time_from_start`` strictly increasing from 0), positions and velocities (the
-trajectory's derivative at the knots: central differences, the last one backward, never above
-the limits), no accelerations or efforts. A consumer follows it by its stamps on its own clock,
+trajectory's derivative at the knots: central differences, never above the limits; the last
+knot at rest, so that a consumer that hears nothing more stops there, and so that a Jazzy
+joint_trajectory_controller takes it with allow_nonzero_velocity_at_trajectory_end false), no accelerations or efforts. A consumer follows it by its stamps on its own clock,
 so a late message is no jump: the previous one still covers ``horizon_s`` ahead.
 
 * Before the first COM reference and footstep plan have arrived, the current posture is held
@@ -436,8 +437,10 @@ class WholeBodyIk(GuardedNode):
             self._forget_changed_knots(now_ns)
             self._solve_knots(now_ns)
             start = knots.first_at_or_before(now_ns)
-            # A trajectory that has ended (a late COM reference) ends at rest.
-            self._publish(*knots.window(start, ends_at_rest=knots.times_ns[-1] <= now_ns))
+            # Every window ends at rest: a consumer that hears nothing more stops there (and a
+            # Jazzy joint_trajectory_controller, allow_nonzero_velocity_at_trajectory_end
+            # false by default, takes it); the next window replaces that end long before.
+            self._publish(*knots.window(start, ends_at_rest=True))
             knots.drop_before(start)
         else:
             # The current posture (the nominal stance before any), at rest, now.

@@ -763,7 +763,7 @@ def test_node_solves_again_the_knots_a_revised_com_window_changes(inproc):
 
 
 def test_knot_velocities_are_the_derivative_of_the_knots(inproc):
-    """Central differences of the knots (the last one of a message backward), as sent.
+    """Central differences of the knots (the last one of a message at rest), as sent.
 
     (The first message holds the posture before the references; the first knot of the motion
     starts from rest.)
@@ -775,9 +775,8 @@ def test_knot_velocities_are_the_derivative_of_the_knots(inproc):
     velocities = np.array([v for _, v in knots.values()])
     central = (positions[2:] - positions[:-2]) / (times[2:] - times[:-2])[:, None]
     np.testing.assert_allclose(velocities[1:-1], central, rtol=1e-9, atol=1e-12)
-    last = collector.commands[-1].points
-    backward = (np.array(last[-1].positions) - np.array(last[-2].positions)) / 0.005
-    np.testing.assert_allclose(last[-1].velocities, backward, rtol=1e-9, atol=1e-12)
+    # Every window ends at rest (a consumer hearing nothing more stops there).
+    assert all(not any(msg.points[-1].velocities) for msg in collector.commands)
 
 
 def test_node_holds_the_last_knot_on_a_stale_reference_and_walks_on(inproc):
