@@ -2,7 +2,9 @@
 
 With --runtime dds every node is its own process (python -m gait_nodes.<node>), as on a
 robot; with --runtime inproc all nodes share one process and one lockstep executor, and the
-duration is simulated time. The command starts whichever contract nodes are installed.
+duration is simulated time. The command starts whichever contract nodes are installed. The
+summary's message counts and rates come from the bag when recording (over dds the launcher then
+subscribes to nothing but /gait/command_status), else from the launcher's own subscriptions.
 """
 
 from __future__ import annotations
@@ -193,7 +195,9 @@ def run_processes(options, names: list[str], ros: list[str], runtime_name: str) 
     exit_codes: dict[str, int] = {}
     try:
         monitor = runtime.Node('gait_run_monitor')
-        counter = TopicCounter(monitor)
+        # Recording, the traffic is counted from the bag: a subscriber of every stream here
+        # would be one more reader each node process sends every message to.
+        counter = None if options.record else TopicCounter(monitor)
         driver = CommandDriver(monitor, get_scenario(options.scenario).commands)
         executor = runtime.SingleThreadedExecutor()
         executor.add_node(monitor)
@@ -225,8 +229,8 @@ def run_processes(options, names: list[str], ros: list[str], runtime_name: str) 
             shutil.rmtree(ready_dir, ignore_errors=True)
     return {
         'runtime': runtime_name, 'nodes': names, 'simulated_s': None, 'wall_s': round(wall, 3),
-        'real_time_factor': None, 'topics': counter.table(), 'exit_codes': exit_codes,
-        'commands': driver.statuses,
+        'real_time_factor': None, 'topics': counter.table() if counter else {},
+        'exit_codes': exit_codes, 'commands': driver.statuses,
     }
 
 
@@ -406,6 +410,10 @@ def main(args: list[str] | None = None) -> int:
         plot_dir = None if options.no_plot else (options.plot or
                                                   options.record.rstrip('/') + '_plots')
         summary['inspect'] = _inspect_recording(options.record, plot_dir)
+        if not summary['topics']:
+            summary['topics'] = {
+                row['topic']: {'messages': row['count'], 'rate_hz': row['rate_hz']}
+                for row in summary['inspect'].get('topics', []) if row['topic'] in graph.TOPICS}
     print_summary(summary, options.json)
     failed = [name for name, code in summary['exit_codes'].items() if code != 0]
     return 1 if failed else 0

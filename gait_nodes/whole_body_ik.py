@@ -18,8 +18,9 @@ from the latest one at or before now to the last one solved (header.stamp is the
 time, ``time_from_start`` strictly increasing from 0), positions and velocities (the
 trajectory's derivative at the knots: central differences, never above the limits; the last
 knot at rest, so that a consumer that hears nothing more stops there, and so that a Jazzy
-joint_trajectory_controller takes it with allow_nonzero_velocity_at_trajectory_end false), no accelerations or efforts. A consumer follows it by its stamps on its own clock,
-so a late message is no jump: the previous one still covers ``horizon_s`` ahead.
+joint_trajectory_controller takes it with allow_nonzero_velocity_at_trajectory_end false), no
+accelerations or efforts. A consumer follows it by its stamps on its own clock, so a late
+message is no jump: the previous one still covers ``horizon_s`` ahead.
 
 * Before the first COM reference and footstep plan have arrived, the current posture is held
   (a one-point trajectory at the present instant, at rest): the robot's /joint_states (and /tf
@@ -95,9 +96,9 @@ NODE_NAME = 'whole_body_ik'
 #: Foot error and COM error above which a tick is reported as off target [m] (issue accuracy).
 FOOT_ERROR_WARN_M = 1e-4
 COM_ERROR_WARN_M = 1e-3
-#: A COM window that moves the COM (or the yaw) of a solved knot by more than this (a
-#: micrometre: below any mechanical meaning, above the interpolation of equal windows) changed it
-#: [m or rad].
+#: A COM window that moves a COM state (position, velocity, yaw summed) by more than this (a
+#: micrometre: below any mechanical meaning, above the interpolation of equal windows sampled
+#: at other instants) changed it [m, m/s, rad].
 COM_CHANGE_M = 1e-6
 
 
@@ -291,27 +292,16 @@ class WholeBodyIk(GuardedNode):
             self.diagnostics.drop('/gait/com_reference', str(exc))
             return
         held = self._com_track
-        self._com_track = track if held is None else held.spliced(track)
         if held is not None and self._moving:
-            self._compare_com(held, self._com_track)
+            # A window normally repeats the committed states and extends them; one that
+            # changes them (a new ZMP reference) has its knots solved again from there.
+            changed_ns = held.first_change_ns(track, COM_CHANGE_M)
+            if changed_ns is not None:
+                self._references_changed(changed_ns)
+        self._com_track = track if held is None else held.spliced(track)
         self._com_end_ns = self._com_track.stamps_ns[-1]
         self._com_received_ns = self.get_clock().now().nanoseconds
         self.inputs.heard('/gait/com_reference', self._com_received_ns)
-
-    def _compare_com(self, held: ComTrack, new: ComTrack) -> None:
-        """Solve again the knots at and after the first at which ``new`` differs from ``held``.
-
-        A COM window normally repeats what the last one said for the instants both cover (the
-        controller commits its states); it differs from the instant a new ZMP reference
-        changed the plan on.
-        """
-        extrapolation = self.params.com_extrapolation_s
-        for stamp_ns in self._knots.times_ns[1:]:
-            (x0, y0, z0), yaw0 = held.at(stamp_ns, extrapolation)
-            (x1, y1, z1), yaw1 = new.at(stamp_ns, extrapolation)
-            if abs(x1 - x0) + abs(y1 - y0) + abs(z1 - z0) + abs(yaw1 - yaw0) > COM_CHANGE_M:
-                self._references_changed(stamp_ns)
-                return
 
     def _on_footsteps(self, msg) -> None:
         try:

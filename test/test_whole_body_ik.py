@@ -24,6 +24,7 @@ from gait_nodes.interfaces import get_message
 from gait_nodes.robot.description import example_robot_data_dir
 from gait_nodes.robot.model import load_robot_model
 from gait_nodes.robot.whole_body_ik import (
+    ComTrack,
     IkSettings,
     IkTargets,
     JointKnots,
@@ -463,6 +464,25 @@ def test_joint_knots_velocities_are_central_differences_within_the_steps():
     assert restarted.window(0)[2] == [[0.0, 0.0], [0.1, 0.0]]  # from rest
 
 
+def test_com_track_first_change_is_where_a_later_window_departs_from_it():
+    """A window repeating the held states and extending them changes nothing; one that
+    departs changes the track from the point before the first that differs.
+    """
+    def track(stamps, xs):
+        return ComTrack(stamps, [[x, 0.0, 0.8] for x in xs], [[0.1, 0.0, 0.0]] * len(xs),
+                        [0.0] * len(xs), [0.0] * len(xs), [[0.0] * 3] * len(xs))
+
+    held = track([0, 20, 40, 60], [0.0, 0.002, 0.004, 0.006])
+    assert held.first_change_ns(track([20, 40, 60, 80], [0.002, 0.004, 0.006, 0.008]),
+                                1e-9) is None
+    assert held.first_change_ns(track([20, 40, 60, 80], [0.002, 0.004, 0.0065, 0.008]),
+                                1e-9) == 40
+    assert held.first_change_ns(track([40, 60], [0.005, 0.006]), 1e-9) == 40
+    # Between the held points: compared with the held track's interpolation there.
+    assert held.first_change_ns(track([30, 70], [*held.at(30)[0][:1], 0.009]), 1e-9) is None
+    assert held.first_change_ns(track([30, 50], [0.0031, 0.005]), 1e-9) == 30
+
+
 def test_joint_knots_truncate_after_gives_back_the_state_to_solve_on_from():
     """Knots after a stamp are forgotten (never the first); the last kept one steps backward."""
     knots = JointKnots(1)
@@ -716,6 +736,7 @@ class RevisedSource(CrawlSource):
     revised_at_ns = 3 * NS
 
     def com_at(self, t_ns: int) -> np.ndarray:
+        """The crawl source's COM, moved forward from ``revised_at_ns`` on."""
         com = super().com_at(t_ns)
         if self.get_clock().now().nanoseconds >= self.revised_at_ns:
             s_ = (t_ns - self.revised_at_ns - NS // 10) / (0.2 * NS)

@@ -957,6 +957,35 @@ class ComTrack:
                         [*self._yaws[start:stop], *newer._yaws],
                         [*self._yaw_rates[start:stop], *newer._yaw_rates], accelerations)
 
+    def first_change_ns(self, newer: ComTrack, tolerance: float) -> int | None:
+        """The earliest instant [ns] from which ``newer`` changes this track, or None.
+
+        ``newer`` is a later window of the same reference (it will be :meth:`spliced` in):
+        where it only repeats this track's states and extends it, nothing changed. A point
+        of ``newer`` that differs (position, velocity or yaw, summed, by more than
+        ``tolerance`` [m, m/s, rad]) changes the track from the point before it on (the
+        interpolation between them changes). A point stamped between this track's points is
+        compared with this track's interpolation there.
+        """
+        stamps, last_ns = self._stamps, self._stamps[-1]
+        for j, stamp_ns in enumerate(newer._stamps):
+            if stamp_ns > last_ns:
+                return None  # an extension
+            k = bisect.bisect_left(stamps, stamp_ns)
+            (x1, y1, z1), yaw1 = newer._positions[j], newer._yaws[j]
+            if stamps[k] == stamp_ns:
+                (x0, y0, z0), yaw0 = self._positions[k], self._yaws[k]
+                (u0, v0, w0), (u1, v1, w1) = self._velocities[k], newer._velocities[j]
+                difference = abs(u1 - u0) + abs(v1 - v0) + abs(w1 - w0)
+            else:
+                (x0, y0, z0), yaw0 = self.at(stamp_ns)
+                difference = 0.0
+            difference += abs(x1 - x0) + abs(y1 - y0) + abs(z1 - z0) + abs(
+                math.remainder(yaw1 - yaw0, 2 * math.pi))
+            if difference > tolerance:
+                return newer._stamps[j - 1] if j else stamp_ns
+        return None
+
     def at(self, stamp_ns: int, max_extrapolation_s: float = 0.05) -> tuple[list[float], float]:
         """COM position [m] and body yaw [rad] at ``stamp_ns`` (class docstring)."""
         stamps = self._stamps
@@ -977,7 +1006,8 @@ class ComTrack:
         # Cubic Hermite basis (yaw; position without accelerations).
         c00, c10, c01, c11 = 2 * s3 - 3 * s2 + 1, s3 - 2 * s2 + s, 3 * s2 - 2 * s3, s3 - s2
         yaw0 = self._yaws[k]
-        yaw = yaw0 + c10 * h * self._yaw_rates[k] + c01 * float(_wrap(self._yaws[k + 1] - yaw0)) \
+        yaw = yaw0 + c10 * h * self._yaw_rates[k] \
+            + c01 * math.remainder(self._yaws[k + 1] - yaw0, 2 * math.pi) \
             + c11 * h * self._yaw_rates[k + 1]
         p0, p1 = self._positions[k], self._positions[k + 1]
         v0, v1 = self._velocities[k], self._velocities[k + 1]
