@@ -465,8 +465,9 @@ def test_joint_knots_velocities_are_central_differences_within_the_steps():
 
 
 def test_com_track_first_change_is_where_a_later_window_departs_from_it():
-    """A window repeating the held states and extending them changes nothing; one that
-    departs changes the track from the point before the first that differs.
+    """A window repeating the held states changes nothing; one that departs does.
+
+    It changes the track from the point before the first that differs.
     """
     def track(stamps, xs):
         return ComTrack(stamps, [[x, 0.0, 0.8] for x in xs], [[0.1, 0.0, 0.0]] * len(xs),
