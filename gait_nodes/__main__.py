@@ -356,6 +356,9 @@ def _inspect_recording(bag: str, plot_dir: str | None) -> dict:
     report = inspection.report
     keep = ('message_count', 'duration_s', 'complete', 'damage', 'metadata_check', 'gait')
     kept = {key: report[key] for key in keep if key in report}
+    kept['topics'] = {row['topic']: {'messages': row['count'], 'rate_hz': row['rate_hz']}
+                      for row in report.get('topics', [])
+                      if row['topic'] in graph.TOPICS and row['count']}
     if plot_dir:
         from gait_nodes.bag.plots import write_plots
 
@@ -411,9 +414,7 @@ def main(args: list[str] | None = None) -> int:
                                                   options.record.rstrip('/') + '_plots')
         summary['inspect'] = _inspect_recording(options.record, plot_dir)
         if not summary['topics']:
-            summary['topics'] = {
-                row['topic']: {'messages': row['count'], 'rate_hz': row['rate_hz']}
-                for row in summary['inspect'].get('topics', []) if row['topic'] in graph.TOPICS}
+            summary['topics'] = summary['inspect'].get('topics', {})
     print_summary(summary, options.json)
     failed = [name for name, code in summary['exit_codes'].items() if code != 0]
     return 1 if failed else 0
