@@ -397,6 +397,28 @@ class ZmpReference:
                                _slid_from=(weakref.ref(self), shift))
         return result
 
+    def corners(self, tolerance_m: float = 1e-9) -> ZmpReference:
+        """The same reference with only the samples where it bends (and both ends).
+
+        A sample on the straight line of its two neighbours (time against ZMP and plane
+        height, within ``tolerance_m`` [m]) says nothing that linear interpolation of the
+        others does not: a planner's piecewise-linear reference sampled every 10 ms is a few
+        corners per step, which is what goes on the wire (every consumer interpolates
+        linearly between the poses of /gait/zmp_reference).
+        """
+        if len(self.stamps_ns) < 3:
+            return self
+        t = (self.stamps_ns - self.stamps_ns[0]) * 1e-9
+        values = np.column_stack([self.zmp_in_world, self.plane_heights_m])
+        weight = (t[1:-1] - t[:-2]) / (t[2:] - t[:-2])
+        between = values[:-2] + (values[2:] - values[:-2]) * weight[:, None]
+        keep = np.ones(len(t), dtype=bool)
+        keep[1:-1] = np.abs(values[1:-1] - between).max(axis=1) > tolerance_m
+        if keep.all():
+            return self
+        return ZmpReference(self.stamps_ns[keep], self.zmp_in_world[keep],
+                            self.plane_heights_m[keep])
+
     @property
     def horizon_s(self) -> float:
         """Time from the first to the last sample [s]."""

@@ -642,7 +642,7 @@ class FootstepPlanner(GuardedNode):
                           <= AIRBORNE_M]
             plane = np.full(count, float(ground.min() if len(ground) else held.min()))
         self.zmp_publisher.publish(self._zmp_messages.to_msg(
-            ZmpReference(stamps, np.tile(pause['zmp'], (count, 1)), plane)))
+            ZmpReference(stamps, np.tile(pause['zmp'], (count, 1)), plane).corners()))
         if stale:
             pause['fresh_ns'] = None
             return True
@@ -836,7 +836,8 @@ class FootstepPlanner(GuardedNode):
         self._check_swings(plan, now_ns)
         reference = self.planner.zmp_reference(now_ns, self.origin_ns, horizon,
                                                self.settings['zmp_sample_period_s'])
-        self.zmp_publisher.publish(self._zmp_messages.to_msg(reference))
+        # Its corners only: the consumers interpolate linearly between the poses.
+        self.zmp_publisher.publish(self._zmp_messages.to_msg(reference.corners()))
 
     def report_state(self) -> None:
         """Once a second: the gait, the twist, the rhythm and the margin of the planned ZMP."""

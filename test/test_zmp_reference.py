@@ -179,3 +179,24 @@ def test_slid_flat_windows_equal_windows_sampled_whole(gait):
     commands = {0.1: Twist2D(0.1), 3.0: Twist2D(0.05, 0.02, 0.1), 7.0: Twist2D()}
     checked = check_slid_windows(planner, commands, 3_000_000_000, 10_000_000_000)
     assert checked > 400
+
+
+def test_corners_keep_the_reference_and_drop_the_straight_samples():
+    """A piecewise-linear reference sampled every 10 ms goes on the wire as its corners."""
+    from gait_nodes.contract import ZmpReference
+
+    stamps = np.arange(0, 2_000_000_001, 10_000_000, dtype=np.int64)
+    t = stamps * 1e-9
+    x = np.interp(t, [0.0, 0.4, 0.9, 1.3, 2.0], [0.0, 0.0, 0.1, 0.1, 0.25])
+    y = np.interp(t, [0.0, 0.4, 0.9, 1.3, 2.0], [0.0, 0.05, 0.05, -0.05, -0.05])
+    heights = np.interp(t, [0.0, 1.0, 1.5, 2.0], [0.0, 0.0, 0.1, 0.1])
+    reference = ZmpReference(stamps, np.column_stack([x, y]), heights)
+    corners = reference.corners()
+    assert corners.stamps_ns.tolist() == [int(round(s * 1e9)) for s in
+                                          (0.0, 0.4, 0.9, 1.0, 1.3, 1.5, 2.0)]
+    np.testing.assert_allclose(corners.sample(stamps), reference.zmp_in_world, atol=1e-12)
+    np.testing.assert_allclose(np.interp(stamps, corners.stamps_ns, corners.plane_heights_m),
+                               heights, atol=1e-12)
+    # Nothing to drop: the same object.
+    bent = ZmpReference(stamps[:3], np.array([[0.0, 0.0], [0.1, 0.0], [0.1, 0.1]]))
+    assert bent.corners() is bent
