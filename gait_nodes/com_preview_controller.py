@@ -25,7 +25,8 @@ at or before now when a new ZMP reference changes the plan they previewed (by mo
 effect when it makes them. The generator never computes further than the held ZMP reference's
 end minus ``preview_s``: a reference that covers ``preview_s`` but not ``preview_s +
 horizon_s`` is used, and the window reaches only as far as it allows (at least one
-``publish_period_s`` past now, the reference held at its end as below); the planner's
+``publish_period_s`` past now, the reference held at its end as below; a stale reference, held
+at its end, the full ``horizon_s``); the planner's
 ``zmp_horizon_s`` (2.5 s) covers ``preview_s + horizon_s`` and one of its periods.
 
 /gait/zmp_reference is a stream: silent for more than ``stale_after_s`` it is reported stale
@@ -447,8 +448,13 @@ class ComPreviewController(GuardedNode):
         """The last instant to compute: ``horizon_s`` ahead, within the held reference."""
         preview = self._settings.preview
         ahead_ns = round(self._values['horizon_s'] * 1e9)
+        if ZMP_TOPIC in self.inputs.stale:
+            # The planner is gone: the reference held at its end is all there will be, and
+            # the IK needs the full horizon to finish the swings in the air (a window one
+            # publication long ends before the IK's next knot: the robot froze mid-swing).
+            return now_ns + ahead_ns
         covered_ns = int(self._reference.stamps_ns[-1]) - preview.dt_ns * preview.preview_steps
-        # At least through the next publication: on a stale reference, held at its end.
+        # At least through the next publication (the reference held at its end).
         return max(min(now_ns + ahead_ns, covered_ns),
                    now_ns + round(self._values['publish_period_s'] * 1e9))
 

@@ -12,7 +12,9 @@ robot's velocity and acceleration limits would, the trajectory's velocity as fee
 (:class:`gait_nodes.sim.kinematics.PositionActuators`): the joints follow the stamps the
 commands carry, not the moments their messages arrive. It places the floating base on the stance
 feet so that they do not slip (:class:`gait_nodes.sim.kinematics.KinematicSimulation`; which
-feet stand comes from the latest /gait/footsteps plan, without one from the foot heights) and
+feet stand comes from the latest /gait/footsteps plan, a foot due down touching down once it
+is within ``contact_height_tolerance_m`` of its planned foothold, without a plan from the foot
+heights) and
 publishes /joint_states (positions, velocities) and /tf (odom -> base_link).
 
 The ZMP monitor (:mod:`gait_nodes.sim.zmp_monitor`) evaluates the full multi-body model one tick
@@ -429,13 +431,19 @@ class KinematicSimulator(GuardedNode):
         previous_ns = self._history[-1][0]
         dt_s = (now_ns - previous_ns) * 1e-9 if now_ns > previous_ns else period_ns * 1e-9
 
-        contacts = None
+        contacts = heights = None
         if self._plan is not None:
-            contacts = self._plan_contacts.at((now_ns - self._plan.start_ns) * 1e-9)
+            t_s = (now_ns - self._plan.start_ns) * 1e-9
+            contacts = self._plan_contacts.at(t_s)
+            if any(down and foot is None
+                   for down, foot in zip(contacts.tolist(), self.simulation.latched,
+                                         strict=True)):
+                # A foot due down: it touches down on its foothold, not in the air.
+                heights = self._plan.stance_positions_at(t_s)[self._plan_contacts.order, 2]
         trajectory = self.trajectory
         command, command_velocity = trajectory.sample(now_ns)
         trajectory.discard_before(now_ns)
-        step = self.simulation.step(command, dt_s, contacts, command_velocity)
+        step = self.simulation.step(command, dt_s, contacts, command_velocity, heights)
         header = self._publish_state(now_ns, step.q, step.actuators)
         self._history.append((now_ns, step.q, step.contact_points_in_world, header))
         self._account(step)

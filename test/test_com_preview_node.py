@@ -55,10 +55,13 @@ class Planner(runtime.Node):
         self.publisher = self.create_publisher(get_message('nav_msgs/msg/Path'),
                                                '/gait/zmp_reference', 10)
         self.extra = []  # messages to publish before the next good one
+        self.silent = False  # True: the planner is gone
         self.create_timer(0.05, self.publish)
 
     def publish(self):
         """Publish the queued extra messages, then the window at now."""
+        if self.silent:
+            return
         for msg in self.extra:
             self.publisher.publish(msg)
         self.extra = []
@@ -458,6 +461,34 @@ def test_a_reference_short_of_preview_plus_horizon_is_used_as_far_as_it_reaches(
     assert not [s for s in recorder.statuses if 'dropped' in s.message]
     error = tracking_error(recorder, plan)
     assert np.all(np.sqrt(np.mean(error ** 2, axis=0)) <= 0.010)
+
+
+def test_a_stale_reference_held_at_its_end_still_gives_the_full_horizon(start):
+    # The planner gone mid-walk (killed): the controller runs on the last reference, held at
+    # its end, and its windows still reach horizon_s ahead, so that the whole-body IK finishes
+    # the swings in the air. (Limited to the reference's end minus preview_s, the windows
+    # reached one publication past now: each ended before the IK's next knot, the IK held, and
+    # the robot stood frozen with a foot in the air until the planner came back.)
+    start('-p', f'robot:={BIPED}')
+    plan = biped_walk_vertices(steps=4)
+    gone_s = 2.0
+
+    def leave(context):
+        context['planner'].silent = True
+
+    recorder = run(plan, 5.0, [(gone_s, leave)], length_s=2.5)['recorder']
+    stale_ns = (gone_s + DEFAULTS['stale_after_s'] + 0.1) * NS_PER_S
+    horizon_ns = DEFAULTS['horizon_s'] * NS_PER_S
+    late = [(clock_ns, states) for clock_ns, states in recorder.messages if clock_ns > stale_ns]
+    assert late
+    for clock_ns, states in late:
+        assert states[-1].stamp_ns >= clock_ns + horizon_ns - SAMPLE * NS_PER_S
+    assert any('/gait/zmp_reference' in s.message and level_value(s.level) == 1
+               for s in recorder.statuses)
+    # Held at its end: the COM comes to rest over the reference's last ZMP, without a jump.
+    assert_no_jump(recorder)
+    _, position, velocity, _ = recorder.arrays()
+    assert np.linalg.norm(velocity[-1, :2]) < 0.02
 
 
 def test_horizon_and_periods_change_at_run_time_without_a_jump(start):

@@ -938,3 +938,35 @@ def test_two_point_feet_pointing_against_the_guess_fall_back_to_gauss_newton(rob
     np.testing.assert_array_equal(
         fit_base_pose(guess, in_base, in_world, 0.0).homogeneous,
         fit_base_pose_gauss_newton(guess, in_base, in_world, 0.0).homogeneous)
+
+
+def test_a_foot_still_in_the_air_at_its_planned_touch_down_lands_where_it_comes_down(
+        inproc, robot, q_nominal):
+    # The plan puts front_left down at 0.6 s; the commands keep it 5 cm up until 1.0 s, then
+    # lower it (a swing running late: the IK held, the planner gone). It is no contact while
+    # in the air: latched there, the lowered foot held the base up and tilted it (the other
+    # feet left the ground by +-1.4 cm in the killed-planner fault test).
+    solver = WholeBodyIkSolver(robot)
+    feet0, yaws0 = robot.foot_poses(q_nominal)
+    com0 = robot.com(q_nominal) + [-0.03, -0.06, 0.0]
+    landing = feet0.copy()
+    landing[0] += [0.1, 0.0, 0.0]
+    up = landing.copy()
+    up[0, 2] += 0.05
+    q_up = solver.solve(IkTargets(up, yaws0, 0.0, com_in_world=com0), q_nominal).q
+    q_down = solver.solve(IkTargets(landing, yaws0, 0.0, com_in_world=com0), q_up).q
+    plan = FootstepPlan(0, robot.foot_names, np.array([0.0, 0.2, 0.6]),
+                        np.array([feet0, feet0, landing]), np.tile(yaws0, (3, 1)))
+    schedule = [(k * NS // 200, joint_command(robot.joint_names, robot.joint_positions(q)))
+                for k, q in ((0, q_nominal), (50, q_up), (200, q_down))]
+    simulator, collector = run_simulator(2.5, schedule, plan)
+    simulation = simulator.simulation
+    assert simulation.contacts.all()
+    # It touched down on the ground (where the IK put it), not 5 cm up.
+    np.testing.assert_allclose(simulation.contact_points()[0], landing[0], atol=2e-3)
+    # The base stayed level and the other feet where they stood.
+    rotation = pin.XYZQUATToSE3(simulation.q[:7]).rotation
+    assert abs(rotation[2, 2] - 1.0) < 1e-6
+    np.testing.assert_allclose(simulation.contact_points()[1:], feet0[1:], atol=1e-6)
+    feet, _ = robot.foot_poses(simulation.q)
+    np.testing.assert_allclose(feet[:, 2], 0.0, atol=2e-3)

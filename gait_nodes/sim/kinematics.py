@@ -21,7 +21,10 @@ Levenberg-Marquardt damping, whose steps do not enter the directions the feet le
 Which feet are in contact is the caller's choice (the footstep plan's contact schedule); without
 one, a foot is in contact when its contact point is within a tolerance of the ground (a foot in
 the air lands there once it stops descending). A foot that touches down is latched where it
-lands; a foot that lifts off is released.
+lands; a foot that lifts off is released. With the schedule's ground heights, a foot the
+schedule puts down while it is still above them by more than the tolerance (a swing running
+late) is not a contact until it has come down within the tolerance and stopped descending:
+latched in the air, it would hold the base up as the foot is lowered, and tilt it.
 """
 
 from __future__ import annotations
@@ -545,7 +548,8 @@ class SimulationSettings:
     Attributes:
         ground_height_m: Height of the ground plane in the world [m].
         contact_height_tolerance_m: Without a contact schedule, a foot whose contact point is
-            at most this far above the ground is in contact [m].
+            at most this far above the ground is in contact; with one and its ground heights,
+            a foot due down touches down once this close to them [m].
         rotation_weight_m: Orientation weight of flat feet in the base fit [m/rad] (0: feet
             are points even on a robot whose IK holds the soles' orientation).
     """
@@ -614,6 +618,8 @@ class KinematicSimulation:
         self._joints_follow_base = (
             model.nq == 7 + len(robot.joint_names)
             and np.array_equal(robot.q_indices(robot.joint_names), np.arange(7, model.nq)))
+        # Feet due down that were still in the air: index -> last height above the ground [m].
+        self._late: dict[int, float] = {}
         # The last read-only contacts given to step() (by identity), their copy and its list.
         self._contacts_given: tuple = (None, None, None)
         self.joints = robot.joint_positions(self.q)
@@ -673,6 +679,23 @@ class KinematicSimulation:
             self._points = points
         return self._points
 
+    def _still_in_the_air(self, k: int, height_m: float) -> bool:
+        """Whether foot ``k``, due down, ``height_m`` above its ground [m], is not down yet.
+
+        On time (within the tolerance when it is first due) it touches down at once; late (a
+        swing running late), once within the tolerance and no longer descending, where it
+        comes to rest.
+        """
+        previous = self._late.get(k)
+        if previous is None and height_m <= self.settings.contact_height_tolerance_m:
+            return False
+        if previous is not None and height_m <= self.settings.contact_height_tolerance_m \
+                and height_m >= previous - DESCENT_TOLERANCE_M:
+            del self._late[k]
+            return False
+        self._late[k] = height_m
+        return True
+
     def _latched_stance(self, kept: tuple[int, ...]) -> tuple:
         """``(kept, centred, centre, positions)`` of the latched feet ``kept`` in the world.
 
@@ -687,7 +710,8 @@ class KinematicSimulation:
 
     def step(self, commanded_joints: np.ndarray, dt_s: float,
              contacts: np.ndarray | None = None,
-             commanded_velocities: np.ndarray | None = None) -> SimulationStep:
+             commanded_velocities: np.ndarray | None = None,
+             contact_heights_m: np.ndarray | None = None) -> SimulationStep:
         """Advance by ``dt_s`` [s] toward ``commanded_joints`` (joint vector).
 
         Args:
@@ -697,6 +721,10 @@ class KinematicSimulation:
             contacts: (F,) booleans from a contact schedule, or None to decide by foot height.
             commanded_velocities: (J,) the command's velocities at the end of the step [rad/s]
                 (a trajectory's feed-forward), or None for a still command.
+            contact_heights_m: (F,) with ``contacts``: the height of the ground under each foot
+                [m] (the schedule's footholds). A foot not latched yet touches down only once
+                its contact point is within ``contact_height_tolerance_m`` of it. None: a
+                scheduled foot touches down wherever it is.
         """
         actuators = self.actuators.step(self.joints, self.joint_velocities, commanded_joints,
                                         dt_s, commanded_velocities)
@@ -735,15 +763,26 @@ class KinematicSimulation:
                 squared.append(dx * dx + dy * dy + dz * dz)
             slip = math.sqrt(max(squared))
         touched = []
+        in_the_air = False
         for k, d in enumerate(down):
             if not d:
+                self._late.pop(k, None)
                 if latched[k] is not None:
                     latched[k] = None
                     self._points = self._stance = None
             elif latched[k] is None:
-                latched[k] = base * feet[k]
+                foot = base * feet[k]
+                if contact_heights_m is not None and self._still_in_the_air(
+                        k, foot.translation[2] - self.robot.foot_frame_height_m
+                        - contact_heights_m[k]):
+                    in_the_air = True
+                    continue
+                latched[k] = foot
                 self._points = self._stance = None
                 touched.append(self.robot.foot_names[k])
+        if in_the_air:
+            contacts = self.contacts
+            contacts.flags.writeable = False
         self.base = base
         self.joints = actuators.positions_rad
         self.joint_velocities = actuators.velocities_rad_s
