@@ -352,6 +352,10 @@ class ComPreviewController(GuardedNode):
             points.pop()
         self._generator = copy.copy(generator)  # (the one about to step to that state)
         self._generator.set_reference(self._reference)
+        self._compute_and_publish(now_ns)
+
+    def _compute_and_publish(self, now_ns: int) -> None:
+        """Compute up to the end the reference allows, publish the window from now."""
         try:
             self._compute(self._end_ns(now_ns))
         except ComPlanningError as exc:
@@ -437,12 +441,7 @@ class ComPreviewController(GuardedNode):
             self.destroy_subscription(self._measured_com_subscription)
             self._measured_com.clear()
         self._keep_to_the_clock(now_ns)
-        try:
-            self._compute(self._end_ns(now_ns))
-        except ComPlanningError as exc:
-            self.diagnostics.report('generator', ERROR, f'{self._settings.method}: {exc}')
-            return
-        self._publish(now_ns)
+        self._compute_and_publish(now_ns)
 
     def _end_ns(self, now_ns: int) -> int:
         """The last instant to compute: ``horizon_s`` ahead, within the held reference."""
