@@ -515,11 +515,16 @@ class Collector(runtime.Node):
     def __init__(self):
         super().__init__('collector')
         self.commands, self.statuses = [], []
+        self.published_ns = []  # when each /joint_commands came (delivery is instant inproc)
         self.create_subscription(get_message('trajectory_msgs/msg/JointTrajectory'),
-                                 '/joint_commands', self.commands.append, 100)
+                                 '/joint_commands', self._on_command, 100)
         self.create_subscription(get_message('diagnostic_msgs/msg/DiagnosticArray'),
                                  '/diagnostics',
                                  lambda msg: self.statuses.extend(msg.status), 100)
+
+    def _on_command(self, msg):
+        self.commands.append(msg)
+        self.published_ns.append(self.get_clock().now().nanoseconds)
 
     def status(self, aspect):
         """Statuses received for ``aspect``."""
@@ -757,16 +762,12 @@ def test_node_solves_again_the_knots_a_revised_com_window_changes(inproc):
     node = WholeBodyIk()
     source = RevisedSource(node.robot, node.q_nominal)
     collector = Collector()
-    published_ns = []
-    collector.create_subscription(
-        get_message('trajectory_msgs/msg/JointTrajectory'), '/joint_commands',
-        lambda _: published_ns.append(collector.get_clock().now().nanoseconds), 100)
     executor = runtime.SingleThreadedExecutor()
     for n in (node, source, collector):
         executor.add_node(n)
     executor.spin_for(4.0)
     robot, plan = node.robot, source.plan
-    knots = knots_of(collector.commands, published_ns)
+    knots = knots_of(collector.commands, collector.published_ns)
     revised = [t for t in knots if source.revised_at_ns + NS // 10 <= t <= 3.6 * NS]
     assert len(revised) > 50
     for t in revised:
@@ -1038,10 +1039,6 @@ def test_joint_commands_of_an_inproc_walk_keep_the_controller_rules(scenario_nam
         driver_node = runtime.Node('driver', use_global_arguments=False)
         driver = CommandDriver(driver_node, scenario.commands)
         collector = Collector()
-        published_ns = []
-        collector.create_subscription(
-            get_message('trajectory_msgs/msg/JointTrajectory'), '/joint_commands',
-            lambda _: published_ns.append(collector.get_clock().now().nanoseconds), 100)
         executor = runtime.SingleThreadedExecutor()
         for node in [*nodes, driver_node, collector]:
             executor.add_node(node)
@@ -1052,6 +1049,7 @@ def test_joint_commands_of_an_inproc_walk_keep_the_controller_rules(scenario_nam
         runtime.shutdown()
     commands = collector.commands
     assert len(commands) == pytest.approx(8.0 * 20, abs=1)
+    published_ns = collector.published_ns
     for msg, now in zip(commands, published_ns, strict=True):
         check_controller_rules(msg, robot)
         times = knot_times_ns(msg)
