@@ -193,16 +193,21 @@ def test_sway_method_is_continuous_and_comes_to_rest(start):
     assert generator.sway_plans > 0
 
 
-def test_method_and_parameter_switches_mid_walk_do_not_jump(start):
-    start('-p', f'robot:={BIPED}')
-    plan = biped_walk_vertices(steps=6)
-    results = []
-
+def _parameter_setter(results: list):
+    """``setter(**values)``: an action setting the controller's parameters, results kept."""
     def setter(**values):
         def apply(context):
             parameters = [Parameter(name, value=value) for name, value in values.items()]
             results.append(context['controller'].set_parameters(parameters))
         return apply
+    return setter
+
+
+def test_method_and_parameter_switches_mid_walk_do_not_jump(start):
+    start('-p', f'robot:={BIPED}')
+    plan = biped_walk_vertices(steps=6)
+    results = []
+    setter = _parameter_setter(results)
 
     actions = [(3.1, setter(com_method='polynomial')), (4.37, setter(com_method='preview')),
                (5.02, setter(R=1e-5, preview_s=1.2)), (5.61, setter(com_method='sway')),
@@ -495,12 +500,7 @@ def test_horizon_and_periods_change_at_run_time_without_a_jump(start):
     start('-p', f'robot:={BIPED}')
     plan = biped_walk_vertices(steps=6)
     results = []
-
-    def setter(**values):
-        def apply(context):
-            parameters = [Parameter(name, value=value) for name, value in values.items()]
-            results.append(context['controller'].set_parameters(parameters))
-        return apply
+    setter = _parameter_setter(results)
 
     actions = [(2.03, setter(horizon_s=0.1)), (3.11, setter(publish_period_s=0.02)),
                (4.07, setter(horizon_s=0.15, sample_period_s=0.01)),
