@@ -250,7 +250,10 @@ def _kill_and_restart(graph: Graph, name: str, consumer: str | None, topic: str,
     x_restart = graph.base_x()
     com_restart = graph.com_x()
     if consumer is not None:
-        ok = graph.spin_until(lambda: graph.statuses(name_of_status, restarted, OK),
+        # From the stale report on: a restarted node may be heard (and its consumer say OK)
+        # before its ready file is seen here (the swing policy sends a swing due within its
+        # 0.5 s lead as soon as it has the latched plan).
+        ok = graph.spin_until(lambda: graph.statuses(name_of_status, warned, OK),
                               15.0, f'{consumer} to report its {status} OK again')
     plans_before = len(graph.plans)
     graph.spin(RECOVERY_S)
