@@ -34,24 +34,96 @@ def robosimian():
     return load_robot_model('robosimian')
 
 
-def test_robosimian_matches_the_thesis_figures(robosimian):
+# RoboSimian as published in Project Chrono's model (src/chrono_models/robot/robosimian/
+# RoboSimian.cpp), copied here as printed there, independently of tools/make_robot_urdfs.py.
+# Chrono's chassis frame has z down and y to the right (its demos turn the robot over by pi
+# about x); angles are printed to 5 decimals, so positions agree to about 1e-5 m.
+CHRONO_MOUNTS = {  # limb: (xyz, rpy) of link 0 on the chassis
+    'fr': ((0.29326, 0.20940, 0.03650), (0.0, -1.57080, -0.26180)),
+    'rr': ((-0.29326, 0.20940, 0.03650), (0.0, -1.57080, 0.26180)),
+    'rl': ((-0.29326, -0.20940, 0.03650), (0.0, -1.57080, 2.87979)),
+    'fl': ((0.29326, -0.20940, 0.03650), (0.0, -1.57080, 3.40339)),
+}
+CHRONO_JOINTS = [  # (xyz, rpy, axis) of joints 1..7 in the parent link
+    ((0.17203, 0, 0), (3.14159, 0, 0), (1, 0, 0)),
+    ((0, 0, 0), (0, 0, 0), (0, -1, 0)),
+    ((0.28650, -0.11700, 0), (0, 0, 0), (1, 0, 0)),
+    ((0, 0, 0), (0, 0, 0), (0, -1, 0)),
+    ((0.28650, -0.11700, 0), (0, 0, 0), (1, 0, 0)),
+    ((0, 0, 0), (0, 0, 0), (0, -1, 0)),
+    ((0.19250, -0.11700, 0), (0, 0, 0), (1, 0, 0)),
+]
+# Masses [kg]: chassis; pitch link (joints 1, 3, 5), roll link (2, 4, 6), force-torque
+# adapter and sensor, wheel mount (7), wheel.
+CHRONO_MASSES = {'chassis': 46.658335, 'pitch': 0.428770, 'roll': 4.078540,
+                 'ft_adapter': 0.253735, 'ft_sensor': 0.195418, 'wheel_mount': 3.1775,
+                 'wheel': 1.499326}
+CHRONO_FOOT_BEYOND_JOINT_7_M = 0.12024 + 0.055  # foot centre + the thesis' foot radius
+
+
+def chrono_rotation(rpy):
+    r, p, y = rpy
+    return (pin.utils.rotate('z', y) @ pin.utils.rotate('y', p) @ pin.utils.rotate('x', r))
+
+
+def chrono_chain(limb, angles):
+    """Joint 1..7 origins and the sole in base_link, from the published figures alone."""
+    to_base = pin.utils.rotate('x', math.pi)
+    xyz, rpy = CHRONO_MOUNTS[limb]
+    position, rotation = to_base @ np.array(xyz), to_base @ chrono_rotation(rpy)
+    origins = []
+    for (offset, joint_rpy, axis), angle in zip(CHRONO_JOINTS, angles, strict=True):
+        position = position + rotation @ np.array(offset, dtype=float)
+        rotation = rotation @ chrono_rotation(joint_rpy) @ pin.exp3(np.array(axis) * angle)
+        origins.append(position)
+    sole = position + rotation @ np.array([CHRONO_FOOT_BEYOND_JOINT_7_M, 0.0, 0.0])
+    return np.array(origins), sole, rotation
+
+
+@pytest.mark.parametrize('limb', ['fl', 'fr', 'rl', 'rr'])
+def test_robosimian_urdf_is_the_published_chain(robosimian, limb):
+    rng = np.random.default_rng(7)
+    configurations = [np.zeros(7), *rng.uniform(-math.pi, math.pi, (4, 7))]
+    data = robosimian.new_data()
+    joints = [f'{limb}_joint_{k}' for k in range(1, 8)]
+    for angles in configurations:
+        q = robosimian.configuration(np.zeros(3), 0.0, dict(zip(joints, angles, strict=True)))
+        pin.framesForwardKinematics(robosimian.model, data, q)
+        origins, sole, link_7 = chrono_chain(limb, angles)
+        urdf_origins = [data.oMi[robosimian.model.getJointId(j)].translation for j in joints]
+        np.testing.assert_allclose(urdf_origins, origins, atol=2e-5)
+        foot = data.oMf[robosimian.model.getFrameId(f'{limb}_foot')]
+        np.testing.assert_allclose(foot.translation, sole, atol=2e-5)
+        # The foot frame is level (z up) when link 7 points straight down.
+        np.testing.assert_allclose(foot.rotation[:, 2], -link_7[:, 0], atol=2e-5)
+
+
+def test_robosimian_masses_are_the_published_ones(robosimian):
     description = robosimian.description
-    assert 'approximation' in description.description
+    published = CHRONO_MASSES
+    limb = (3 * published['pitch'] + 3 * published['roll'] + published['ft_adapter']
+            + published['ft_sensor'] + published['wheel_mount'] + published['wheel'])
+    assert robosimian.mass_kg == pytest.approx(published['chassis'] + 4 * limb, abs=1e-6)
+    assert robosimian.mass_kg == pytest.approx(121.25, abs=0.01)
+    model = robosimian.model
+    # Everything a limb joint carries (fixed parts merged into the moving links).
+    limb_mass = sum(model.inertias[model.getJointId(j)].mass for j in description.joint_names)
+    assert limb_mass == pytest.approx(4 * limb, abs=1e-6)
+    assert limb_mass / robosimian.mass_kg == pytest.approx(0.615, abs=0.001)  # thesis: ~60 %
+    per_joint = [published['pitch'], published['roll']] * 3 + [
+        published['wheel_mount'] + published['wheel']]
+    per_joint[5] += published['ft_adapter'] + published['ft_sensor']
+    for foot in description.feet:
+        masses = [model.inertias[model.getJointId(j)].mass for j in foot.joints]
+        np.testing.assert_allclose(masses, per_joint, atol=1e-9)
+    assert model.inertias[1].mass == pytest.approx(published['chassis'])
+    assert 'Chrono' in description.description
     assert len(description.feet) == 4
-    assert all(len(foot.joints) == 7 for foot in description.feet)
-    assert robosimian.mass_kg == pytest.approx(100.0, rel=0.1)
-    limb_mass = sum(robosimian.model.inertias[robosimian.model.getJointId(j)].mass
-                    for j in description.joint_names)
-    assert limb_mass / robosimian.mass_kg == pytest.approx(0.6, abs=0.05)
     assert description.foot_radius_m == 0.055
-    assert 0.6 <= description.body_height_m <= 0.7
+    assert description.body_height_m == 0.7
     assert np.all(robosimian.velocity_limits_rad_s == 1.0)
     # The URDF says 1 rad/s too, and Pinocchio's model carries the YAML's limits.
     assert np.all(robosimian.model.velocityLimit[6:] == 1.0)
-    # Identical limbs: same link masses.
-    masses = [[robosimian.model.inertias[robosimian.model.getJointId(j)].mass
-               for j in foot.joints] for foot in description.feet]
-    assert all(m == masses[0] for m in masses)
 
 
 @pytest.mark.parametrize('name', ['robosimian', 'biped'])
@@ -131,7 +203,7 @@ def write_variant(tmp_path, change, robot='robosimian'):
     (lambda d: d.update(base_frame='fl_link_2'), 'is not the root link'),
     (lambda d: d['extra'].update(locked_joints=['wrist']), 'extra.locked_joints: must list limb'),
     (lambda d: d['extra'].update(posture={'fl_joint_3': 9.0}),
-     r'extra.posture.fl_joint_3: must be a number in \[-2.8, 2.8\]'),
+     r'extra.posture.fl_joint_3: must be a number in \[-6.283\d*, 6.283\d*\]'),
     (lambda d: d['extra'].update(posture={'elbow': 0.1}), "'elbow' is not a 1-DOF joint"),
     (lambda d: d['extra'].update(foot_orientation='full'), 'foot_orientation: must be one of'),
     (lambda d: d['extra'].update(foot_frame_height_m=-1), 'foot_frame_height_m: must be'),
