@@ -30,13 +30,14 @@ red spheres, its Figure 5): a circle. On that circle (angle ``phi``):
   and once falling (the third choice): the two solutions have opposite signs of ``det(J)``, the
   determinant of the sole pose's 6x6 Jacobian in joints 1-6.
 
-So up to 2^3 = 8 solutions, numbered by three bits, each 1 where its quantity is positive (the
-thesis' "k-th family" is ``k - 1``; its 3rd family, 010, is ``2``, its 8th, 111, is ``7``; they
-differ in every joint)::
+So up to 2^3 = 8 solutions, numbered by three bits (the thesis' "k-th family" is ``k - 1``; its
+3rd family, 010, is ``2``, its 8th, 111, is ``7``; they differ in every joint). As in the
+thesis' construction ("the binary representations of 0~7 ... determine which solution to
+choose for each of the joints"), a 0 digit takes the principal, positive option::
 
-    bit 2 (4): base:    sin(q2) > 0
-    bit 1 (2): wrist:   sin(q5) > 0
-    bit 0 (1): meeting: det(J) > 0
+    bit 2 (4): base:    0 sin(q2) > 0, 1 sin(q2) < 0
+    bit 1 (2): wrist:   0 sin(q5) > 0, 1 sin(q5) < 0
+    bit 0 (1): meeting: 0 det(J) > 0,  1 det(J) < 0
 
 (angles and Jacobian of the front-right limb; a mirrored limb is in the family of its mirror
 image).
@@ -87,6 +88,8 @@ import pinocchio as pin
 from gait_nodes.errors import ConfigError
 
 FAMILIES = tuple(range(8))
+#: What a family number means (see the module docstring); part of cached tables' identity.
+FAMILY_NUMBERING = 'robosimian limb: bits sin(q2), sin(q5), det(J) of joints 1-6; 0 positive'
 #: Default largest joint step between consecutive trajectory samples counted as continuous.
 MAX_JOINT_STEP_RAD = 0.25
 #: Samples of the circle of ``P3`` that bracket the roots (two roots closer than 2 pi / this are
@@ -466,7 +469,8 @@ class RoboSimianLimbIk:
     def _solve_chunk(self, targets: np.ndarray, yaws: np.ndarray, family: int,
                      wrap: bool) -> tuple[np.ndarray, np.ndarray]:
         geo = self.geometry
-        base_bit, wrist_bit, meeting_bit = family_bits(family)
+        # The sheets and crossings below are written for 1 = positive; a bit is 1 = negative.
+        base_bit, wrist_bit, meeting_bit = (1 - bit for bit in family_bits(family))
         # bit 2: 0 is sin(q2) < 0; s2 is sin of link 2's angle to joint 1's axis, signed
         # as q2 * axis sign.
         sheet_base = (1.0 if base_bit else -1.0) * geo.axis_signs[1]

@@ -1,17 +1,19 @@
 """Where default swing value tables live, and building one on first use.
 
 A node asked for ``swing: value_table`` without a ``table`` file uses
-``$XDG_CACHE_HOME/gait_nodes/`` (default ``~/.cache/gait_nodes/``), one file per robot URDF,
-family, step height and joint velocity limit, built with the default grid when missing.
+``$XDG_CACHE_HOME/gait_nodes/`` (default ``~/.cache/gait_nodes/``), one file per robot (its
+URDF, its YAML and the limb IK's family numbering), family, step height and joint velocity
+limit, built with the default grid when missing.
 """
 
 from __future__ import annotations
 
+import hashlib
 import os
 from collections.abc import Callable
 from pathlib import Path
 
-from gait_nodes.swing.kinematics import urdf_sha256
+from gait_nodes.robot.limb_ik import FAMILY_NUMBERING
 from gait_nodes.swing.table import ValueTable, load_table
 
 
@@ -23,8 +25,15 @@ def cache_dir() -> Path:
 
 def default_table_path(robot, family: int, step_height_m: float,
                        joint_velocity_limit_rad_s: float) -> Path:
-    """The cache file of a table for these settings (the URDF hash is in the name)."""
-    digest = urdf_sha256(robot.description.urdf_path)[:12]
+    """The cache file of a table for these settings (the robot's hash is in the name).
+
+    The hash covers the URDF, the robot YAML (ground height, stance) and the limb IK's family
+    numbering, so a table of another robot, stance or family is never taken for this one.
+    """
+    identity = hashlib.sha256(Path(robot.description.urdf_path).read_bytes())
+    identity.update(Path(robot.description.path).read_bytes())
+    identity.update(FAMILY_NUMBERING.encode())
+    digest = identity.hexdigest()[:12]
     return cache_dir() / (f'swing_{robot.name}_{digest}_f{family}_h{step_height_m:g}'
                           f'_w{joint_velocity_limit_rad_s:g}.npz')
 
