@@ -197,21 +197,13 @@ class SwingTiming:
         if not (np.isfinite(feet).all() and np.isfinite(yaws).all() and np.isfinite(com).all()
                 and math.isfinite(body_yaw_rad)):
             raise ValueError('swing probe targets hold a NaN or infinite value')
-        from gait_nodes.robot.whole_body_ik import IkTargets, seed_configuration
-
         yaw_lists = yaws.tolist()
         solutions = [np.array(q_start, dtype=float)]
         joints = []
         for k in range(len(u)):
-            # Started where the last solutions head (as the IK node does), each limb put by
-            # the limb IK in the family there: RoboSimian's limbs need large joint motions for
-            # small foot motions in places, where a Newton step from the extrapolation alone
-            # can land on another family's branch.
-            start = self._solver.warm_start(solutions[-3:])
-            start = seed_configuration(self.robot, IkTargets(feet[k], yaws[k], body_yaw_rad,
-                                                             com_in_world=com),
-                                       self.timing.family, base_position_in_world=start[:3])
-            result = self._solver.solve_trusted(feet[k], yaw_lists[k], body_yaw_rad, start, com)
+            # Started where the last solutions head (as the IK node does): one Newton step.
+            result = self._solver.solve_trusted(feet[k], yaw_lists[k], body_yaw_rad,
+                                                self._solver.warm_start(solutions[-3:]), com)
             if result.foot_position_errors_m.max() > 1e-4 or result.com_error_m > 1e-4:
                 raise SwingPolicyError(f'a swing to {np.round(feet[-1], 3).tolist()} leaves '
                                        f'the reach of the limbs')
