@@ -155,8 +155,11 @@ def test_too_fast_a_command_walks_the_fastest_feasible_speed_and_says_so():
     assert 0.0 < applied.vx_m_s < 0.5
     assert notes and 'fastest rhythm the joint velocity limit allows' in notes[-1]
     rhythm = planner.rhythm()
-    # The fastest speed is the one whose stride is the longest allowed.
-    assert applied.vx_m_s * rhythm.cycle_s == pytest.approx(params.step_length_m, rel=1e-3)
+    # The fastest speed is the one whose stride is the longest allowed, or (RoboSimian: the
+    # swing time grows faster than its stride beyond about 0.15 m) the last with a rhythm.
+    assert applied.vx_m_s * rhythm.cycle_s <= params.step_length_m * (1 + 1e-3)
+    _, notes = planner.set_velocity(Twist2D(1.01 * applied.vx_m_s), 0.0)
+    assert notes and 'fastest rhythm' in notes[-1]
     slower, notes = planner.set_velocity(Twist2D(0.5 * applied.vx_m_s), 0.0)
     assert slower.vx_m_s == pytest.approx(0.5 * applied.vx_m_s) and not notes
 
@@ -212,7 +215,7 @@ def test_every_planned_swing_has_the_time_its_own_step_needs():
                                                    for f in sorted(slot.feet)))
             assert slot.touch_down_s - slot.lift_off_s >= needed[key] * (1 - 1e-9)
             swings += 1
-    assert swings > 10
+    assert swings >= 5  # RoboSimian at 1 rad/s: a swing takes 2-5 s
     assert {step.gait for step in planner.steps} == {'crawl', 'trot'}
 
 
