@@ -65,7 +65,7 @@ def test_finite_differenced_trajectory_matches_the_formula(robosimian):
 def test_multimass_correction_on_the_robot_model(robosimian):
     description = robosimian.description
     params = GaitParameters.for_robot(description, gait='crawl', step_period_s=4.0)
-    planner = plan_walk(description, params, [(0.0, Twist2D(0.04, 0.0, 0.0))], 10.0)
+    planner = plan_walk(description, params, [(0.0, Twist2D(0.02, 0.0, 0.0))], 10.0)
     dt = 0.02
     reference = planner.zmp(np.arange(0.0, 8.0, dt))
     correction = correct_plan(robosimian, planner.footstep_plan(), reference, dt,

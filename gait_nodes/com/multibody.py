@@ -28,6 +28,7 @@ from gait_nodes.robot.whole_body_ik import (
     WholeBodyIkSolver,
     current_swing,
     fallback_swing_pose,
+    seed_configuration,
 )
 
 #: Most IK solves spent on the first sample of a trajectory.
@@ -76,8 +77,9 @@ def robot_multibody_zmp(robot: RobotModel, plan: FootstepPlan, times_s: np.ndarr
                                 base_position_in_world=np.array([x, y, body_height_m]))
             if q is None:
                 # Converge the first sample fully: a start still converging over the next
-                # samples would read as a violent motion to the finite differences.
-                q = robot.configuration([x, y, body_height_m], float(body_yaws_rad[k]))
+                # samples would read as a violent motion to the finite differences. Seeded by
+                # the closed-form limb IK where the robot has one (its default family).
+                q = seed_configuration(robot, targets)
                 for _ in range(FIRST_SAMPLE_SOLVES):
                     result = solver.solve(targets, q)
                     q = result.q
