@@ -68,8 +68,8 @@ from gait_nodes.diagnostics import ERROR, OK, WARN, DiagnosticsReporter
 from gait_nodes.errors import ComPlanningError, GaitNodesError
 from gait_nodes.faults import FaultGuard, GuardedNode
 from gait_nodes.interfaces import get_message
-from gait_nodes.robot.description import load_robot_description
 from gait_nodes.paths import node_defaults as shipped_node_defaults
+from gait_nodes.robot.description import load_robot_description
 from gait_nodes.runtime import DurabilityPolicy, QoSProfile, SetParametersResult
 from gait_nodes.watchdog import InputWatchdog
 

@@ -10,9 +10,9 @@ from com_references import NS_PER_S, biped_walk_vertices, sample_vertices, windo
 
 from gait_nodes import contract, runtime
 from gait_nodes.com_preview_controller import (
-    node_defaults,
     MAX_CATCH_UP_TICKS,
     ComPreviewController,
+    node_defaults,
     plan_yaw,
 )
 from gait_nodes.diagnostics import level_value
