@@ -33,8 +33,9 @@ _PR_SET_PDEATHSIG = 1
 #: BLAS thread. The nodes' linear algebra is small (the sway and polynomial COM plans solve
 #: 45x45 KKT systems ten times a second); with OpenBLAS's worker threads on a loaded machine such
 #: a solve took 13 ms instead of 0.03 ms, and the workers spinning between calls cost go2_trot's
-#: COM controller 0.5 core (2 cores, another job running, Jazzy's numpy 1.26 and numpy 2.3
-#: alike). BLAS reads these when it loads, so they are set for the process, not in it; a value
+#: COM controller 0.5 core (2 cores, another job running, Jazzy's numpy 1.26; the newer numpy
+#: of the default venv showed the same spikes, up to 0.3 s for one 180x180 solve). BLAS reads
+#: these when it loads, so they are set for the process, not in it; a value
 #: already in the environment wins.
 NODE_ENVIRONMENT_DEFAULTS = {'OPENBLAS_NUM_THREADS': '1', 'OMP_NUM_THREADS': '1',
                              'MKL_NUM_THREADS': '1'}
