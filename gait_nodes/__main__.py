@@ -28,6 +28,7 @@ from gait_nodes.cli import (
     READY_FILE_ENV,
     ArgumentParser,
     fail,
+    node_environment,
     split_args,
 )
 from gait_nodes.errors import ArgumentError, GaitNodesError
@@ -206,8 +207,8 @@ def run_processes(options, names: list[str], ros: list[str], runtime_name: str) 
         for name, command in commands.items():
             # Own session: a Ctrl-C in the terminal reaches this launcher only, which then
             # stops the nodes in order (a node interrupted while importing would crash).
-            env = dict(os.environ, **{READY_FILE_ENV: str(ready_files[name]),
-                                      LAUNCHER_PID_ENV: str(os.getpid())})
+            env = node_environment(os.environ, **{READY_FILE_ENV: str(ready_files[name]),
+                                                  LAUNCHER_PID_ENV: str(os.getpid())})
             processes[name] = subprocess.Popen(command, env=env, start_new_session=True)
         _wait_ready(processes, ready_files, exit_codes, executor)
         driver.start()

@@ -29,6 +29,21 @@ READY_FILE_ENV = 'GAIT_NODES_READY_FILE'
 LAUNCHER_PID_ENV = 'GAIT_NODES_LAUNCHER_PID'
 #: prctl option: signal delivered to this process when its parent dies (Linux).
 _PR_SET_PDEATHSIG = 1
+#: Environment defaults of node processes (the launchers' ``run`` and ``gait.launch.py``): one
+#: BLAS thread. The nodes' linear algebra is small (the sway and polynomial COM plans solve
+#: 45x45 KKT systems ten times a second); with OpenBLAS's worker threads on a loaded machine such
+#: a solve took 13 ms instead of 0.03 ms, and the workers spinning between calls cost go2_trot's
+#: COM controller 0.5 core (2 cores, another job running, Jazzy's numpy 1.26; the newer numpy
+#: of the default venv showed the same spikes, up to 0.3 s for one 180x180 solve). BLAS reads
+#: these when it loads, so they are set for the process, not in it; a value
+#: already in the environment wins.
+NODE_ENVIRONMENT_DEFAULTS = {'OPENBLAS_NUM_THREADS': '1', 'OMP_NUM_THREADS': '1',
+                             'MKL_NUM_THREADS': '1'}
+
+
+def node_environment(environment: dict, **extra: str) -> dict:
+    """``environment`` for a node process: the BLAS defaults under it, ``extra`` over it."""
+    return {**NODE_ENVIRONMENT_DEFAULTS, **environment, **extra}
 
 
 def stop_with_launcher() -> bool:

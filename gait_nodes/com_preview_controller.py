@@ -13,7 +13,7 @@ COM climbs with the feet, with continuous velocity and acceleration; on flat gro
 ``com_height_m``); without a plan it is ``com_height_m``.
 
 Time is in the data: the generator steps by ``dt_s`` (5 ms) on its own time grid and runs
-``horizon_s`` (0.5 s) ahead of the clock. Every ``publish_period_s`` (50 ms) the node computes
+``horizon_s`` (0.5 s) ahead of the clock. Every ``publish_period_s`` (0.1 s) the node computes
 up to ``now + horizon_s`` and publishes the window of its computed states, ``sample_period_s``
 (20 ms) apart, from the latest one at or before now to the last one computed (header stamp: the
 first point's time). A consumer that misses a message, or gets it late, still holds the states
@@ -68,6 +68,7 @@ from gait_nodes.diagnostics import ERROR, OK, WARN, DiagnosticsReporter
 from gait_nodes.errors import ComPlanningError, GaitNodesError
 from gait_nodes.faults import FaultGuard, GuardedNode
 from gait_nodes.interfaces import get_message
+from gait_nodes.paths import node_defaults as shipped_node_defaults
 from gait_nodes.robot.description import load_robot_description
 from gait_nodes.runtime import DurabilityPolicy, QoSProfile, SetParametersResult
 from gait_nodes.watchdog import InputWatchdog
@@ -79,21 +80,10 @@ COM_TOPIC = '/gait/com_reference'
 MEASURED_COM_TOPIC = '/gait/com'
 #: Least span of /gait/com samples a measured COM velocity is taken over [s].
 VELOCITY_SPAN_S = 0.02
-#: Declared parameters and their defaults (also in config/com_preview_controller.yaml).
-DEFAULTS = {
-    'robot': 'robosimian',
-    'com_method': 'preview',
-    'com_height_m': 0.0,
-    'dt_s': 0.005,
-    'preview_s': 1.6,
-    'Q': 1.0,
-    'R': 1e-6,
-    'status_period_s': 1.0,
-    'stale_after_s': 0.5,
-    'horizon_s': 0.5,
-    'publish_period_s': 0.05,
-    'sample_period_s': 0.02,
-}
+def node_defaults() -> dict:
+    """The declared parameters and their defaults: ``config/com_preview_controller.yaml``."""
+    return shipped_node_defaults(NODE_NAME)
+
 #: Most generator steps the controller catches up when its computed end fell behind the clock;
 #: further behind, the state is carried over to now.
 MAX_CATCH_UP_TICKS = 50
@@ -157,8 +147,9 @@ class ComPreviewController(GuardedNode):
 
     def __init__(self):
         super().__init__(NODE_NAME)
+        self._defaults = node_defaults()
         values = {name: self.declare_parameter(name, default).value
-                  for name, default in DEFAULTS.items()}
+                  for name, default in self._defaults.items()}
         self._robot = load_robot_description(values['robot'])
         self._values = values
         self._settings = self._make_settings(values, self._robot)  # raises when invalid
@@ -255,7 +246,7 @@ class ComPreviewController(GuardedNode):
 
     def _on_set_parameters(self, parameters) -> SetParametersResult:
         values = dict(self._values)
-        values.update({p.name: p.value for p in parameters if p.name in DEFAULTS})
+        values.update({p.name: p.value for p in parameters if p.name in self._defaults})
         try:
             robot = self._robot if values['robot'] == self._values['robot'] \
                 else load_robot_description(values['robot'])

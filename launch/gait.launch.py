@@ -17,11 +17,17 @@ import os
 
 from ament_index_python.packages import get_package_share_directory
 from launch import LaunchDescription
-from launch.actions import DeclareLaunchArgument
+from launch.actions import DeclareLaunchArgument, SetEnvironmentVariable
 from launch.conditions import IfCondition
-from launch.substitutions import LaunchConfiguration, NotEqualsSubstitution
+from launch.substitutions import (
+    EnvironmentVariable,
+    LaunchConfiguration,
+    NotEqualsSubstitution,
+)
 from launch_ros.actions import Node
 from launch_ros.parameter_descriptions import ParameterValue
+
+from gait_nodes.cli import NODE_ENVIRONMENT_DEFAULTS
 
 PACKAGE = 'gait_nodes'
 
@@ -79,6 +85,9 @@ def generate_launch_description():
         ),
     ]
 
+    # One BLAS thread per node unless the environment says otherwise (see gait_nodes.cli).
+    environment = [SetEnvironmentVariable(name, EnvironmentVariable(name, default_value=value))
+                   for name, value in NODE_ENVIRONMENT_DEFAULTS.items()]
     nodes = []
     for node_name in GAIT_NODES:
         overrides = {'use_sim_time': use_sim_time, 'robot': robot}
@@ -111,4 +120,4 @@ def generate_launch_description():
         )
     )
 
-    return LaunchDescription(arguments + nodes)
+    return LaunchDescription(arguments + environment + nodes)

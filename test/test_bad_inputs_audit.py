@@ -276,6 +276,7 @@ def test_odd_joint_commands_are_refused_or_held_within_the_limits(inproc, robot_
     limits = robot_model.velocity_limits_rad_s
     accelerations = robot_model.acceleration_limits_rad_s2
     states = collector.messages['/joint_states']
+    period_s = 1.0 / simulator.params.rate_hz
     previous = np.zeros(len(names))
     for msg in states:
         positions = np.array(msg.position)
@@ -283,7 +284,7 @@ def test_odd_joint_commands_are_refused_or_held_within_the_limits(inproc, robot_
         assert np.all((positions >= lower - 1e-12) & (positions <= upper + 1e-12))
         assert np.all(np.abs(msg.velocity) <= limits * (1 + 1e-9))
         assert np.all(np.abs(np.array(msg.velocity) - previous)
-                      <= accelerations * 0.005 * (1 + 1e-9))
+                      <= accelerations * period_s * (1 + 1e-9))
         previous = np.array(msg.velocity)
     before = [np.array(m.position) for m in states if stamp_ns(m) <= NS // 5]
     for positions in before:  # the refused command moved nothing

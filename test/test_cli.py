@@ -205,3 +205,13 @@ def test_run_help(tmp_path):
     result = run(['-m', 'gait_nodes', 'run', '--help'], cwd=tmp_path)
     assert result.returncode == 0, result.stderr
     assert '--duration' in result.stdout and '--runtime' in result.stdout
+
+
+def test_node_processes_get_one_blas_thread_unless_the_environment_says_otherwise():
+    from gait_nodes.cli import NODE_ENVIRONMENT_DEFAULTS, node_environment
+
+    environment = node_environment({'OMP_NUM_THREADS': '4', 'PATH': '/bin'}, EXTRA='x')
+    assert environment['OPENBLAS_NUM_THREADS'] == environment['MKL_NUM_THREADS'] == '1'
+    assert environment['OMP_NUM_THREADS'] == '4'  # the user's setting wins
+    assert environment['PATH'] == '/bin' and environment['EXTRA'] == 'x'
+    assert set(NODE_ENVIRONMENT_DEFAULTS) <= set(environment)

@@ -10,9 +10,9 @@ from com_references import NS_PER_S, biped_walk_vertices, sample_vertices, windo
 
 from gait_nodes import contract, runtime
 from gait_nodes.com_preview_controller import (
-    DEFAULTS,
     MAX_CATCH_UP_TICKS,
     ComPreviewController,
+    node_defaults,
     plan_yaw,
 )
 from gait_nodes.diagnostics import level_value
@@ -26,6 +26,7 @@ G = 9.81
 ZC = 0.814
 DT = 0.005
 #: Spacing of the published states [s].
+DEFAULTS = node_defaults()
 SAMPLE = DEFAULTS['sample_period_s']
 
 
@@ -354,10 +355,14 @@ def test_yaw_follows_the_footstep_plan(start):
     assert any(s.yaw_rate_rad_s > 0 for s in recorder.states)
 
 
-def test_shipped_defaults_match_the_declared_parameters():
+def test_the_node_declares_the_shipped_defaults(start):
+    start()
+    controller = ComPreviewController()
     path = HERE.parent / 'config' / 'com_preview_controller.yaml'
     shipped = yaml.safe_load(path.read_text())['com_preview_controller']['ros__parameters']
-    assert shipped == DEFAULTS
+    declared = {name: controller.get_parameter(name).value for name in shipped}
+    assert declared == shipped
+    controller.destroy_node()
 
 
 def starvation(starved_s):

@@ -17,6 +17,11 @@ import subprocess
 import sys
 from pathlib import Path
 
+from gait_nodes.kinematic_simulator import node_defaults as simulator_defaults
+
+#: Monitor samples per second: the simulator's default rate [Hz].
+SIM_RATE_HZ = simulator_defaults()['rate_hz']
+
 REPO = Path(__file__).resolve().parent.parent
 
 
@@ -32,7 +37,7 @@ def test_the_default_walk_over_dds_keeps_the_zmp_inside_and_the_feet_where_plann
         [sys.executable, '-m', 'gait_nodes.inspect', str(bag), '--json'], env=env,
         capture_output=True, text=True, timeout=300, check=True).stdout)['gait']
     margin = report['zmp_margin']
-    assert margin['samples'] > 0.8 * 20 * 200
+    assert margin['samples'] > 0.8 * 20 * SIM_RATE_HZ
     assert margin['samples_outside'] <= 3, margin
     assert margin['min_m'] > -0.3, margin  # a late sample costs centimetres, not metres
     assert report['diagnostics']['by_level'].get('ERROR', 0) <= 3, \

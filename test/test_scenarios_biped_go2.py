@@ -27,9 +27,13 @@ from bag_topics import decode_gait_topics
 from gait_nodes.bag.analysis import inspect_bag
 from gait_nodes.diagnostics import ERROR, OK
 from gait_nodes.errors import ConfigError
+from gait_nodes.kinematic_simulator import node_defaults as simulator_defaults
 from gait_nodes.robot.description import example_robot_data_dir
 from gait_nodes.robot.model import load_robot_model
 from gait_nodes.scenarios import get_scenario
+
+#: Monitor samples per second: the simulator's default rate [Hz].
+SIM_RATE_HZ = simulator_defaults()['rate_hz']
 
 ROOT = Path(__file__).resolve().parents[1]
 #: Scenario -> (run duration [s], commanded forward speed [m/s], window of steady walking [s]).
@@ -84,7 +88,7 @@ def test_no_error_and_the_zmp_stays_inside_the_support_polygon(inspected, name):
     assert levels.get('ERROR', 0) == 0, report['diagnostics']['first_error']
     margin = report['zmp_margin']
     assert margin['samples_outside'] == 0 and margin['min_m'] > 0.0, margin
-    assert margin['samples'] >= 0.99 * RUNS[name][0] * 200
+    assert margin['samples'] >= 0.99 * RUNS[name][0] * SIM_RATE_HZ
 
 
 @pytest.mark.parametrize('name', RUNS)
@@ -130,7 +134,7 @@ def test_the_biped_stops_and_stands(inspected, raw):
     com = np.array(sorted(series.com))
     assert np.linalg.norm(com[-1, 1:3] - feet[:, :2].mean(axis=0)) < 0.005
     velocities = np.array(series.joints['/joint_states'].velocities)
-    assert np.abs(velocities[-200:]).max() < 0.05
+    assert np.abs(velocities[-round(SIM_RATE_HZ):]).max() < 0.05  # over the last second
 
 
 @pytest.mark.parametrize('name', RUNS)
@@ -175,7 +179,7 @@ def test_the_monitor_com_tracks_the_com_reference(raw, name):
     com = com[(com[:, 0] >= stamps[0]) & (com[:, 0] <= stamps[-1])]
     expected = np.column_stack([np.interp(com[:, 0], stamps, reference[:, i])
                                 for i in (1, 2, 3)])
-    assert len(com) > 0.9 * RUNS[name][0] * 200
+    assert len(com) > 0.9 * RUNS[name][0] * SIM_RATE_HZ
     assert np.abs(com[:, 1:] - expected).max() < COM_TOLERANCE_M
 
 
@@ -236,6 +240,6 @@ def test_a_momentum_zmp_recomputed_from_the_bag_is_the_monitors(raw, name):
                     c[1] - (height * force[1] - rate[3]) / force[2], plane]
         worst_zmp = max(worst_zmp, float(np.linalg.norm(zmp[stamp] - expected)))
         checked += 1
-    assert checked > 0.9 * RUNS[name][0] * 200
+    assert checked > 0.9 * RUNS[name][0] * SIM_RATE_HZ
     assert worst_com < 1e-9
     assert worst_zmp < 1e-3

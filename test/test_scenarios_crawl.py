@@ -21,6 +21,7 @@ from gait_nodes.bag.analysis import executed_swings, inspect_bag, zmp_margins
 from gait_nodes.bag.reader import BagReader
 from gait_nodes.diagnostics import ERROR, WARN, level_value
 from gait_nodes.interfaces import deserialize_message, get_message
+from gait_nodes.kinematic_simulator import node_defaults as simulator_defaults
 from gait_nodes.robot.description import load_robot_description
 
 #: Simulated seconds per scenario: a crawl cycle (about 9 s) after the first full stride; the
@@ -35,6 +36,9 @@ FOOT_TOLERANCE_M = 0.003
 #: Monitor COM within this of the COM reference, horizontally [m].
 COM_TOLERANCE_M = 0.003
 
+
+#: Monitor samples per second: the simulator's default rate [Hz].
+SIM_RATE_HZ = simulator_defaults()['rate_hz']
 
 @pytest.fixture(scope='module')
 def bags(tmp_path_factory):
@@ -94,7 +98,7 @@ def test_zmp_inside_the_support_polygon_and_no_error_or_saturation(bags, name):
     path, inspection = bags(name)
     gait = inspection.report['gait']
     stamps, margins = zmp_margins(inspection.series)
-    assert len(margins) > 0.9 * DURATIONS_S[name] * 200
+    assert len(margins) > 0.9 * DURATIONS_S[name] * SIM_RATE_HZ
     assert margins.min() >= MIN_MARGIN_M, (
         f'ZMP margin {margins.min():.4f} m at {stamps[np.argmin(margins)] * 1e-9:.3f} s')
     assert gait['diagnostics']['by_level'].get('ERROR', 0) == 0, gait['diagnostics']

@@ -36,8 +36,11 @@ from gait_nodes.robot.whole_body_ik import (
     swing_pose_at,
 )
 from gait_nodes.runtime import Parameter, qos_profile_latched
+from gait_nodes.whole_body_ik import node_defaults
 
 NS = 1_000_000_000
+#: The node's knot spacing (config/whole_body_ik.yaml) [ns].
+KNOT_NS = round(node_defaults()['sample_period_s'] * NS)
 
 
 def _example_robot_data_present() -> bool:
@@ -692,14 +695,14 @@ def test_node_tracks_the_contract_references_checked_by_fk(inproc):
         # From the latest knot at or before the present (the message's publication time)
         # to about horizon_s ahead.
         times = knot_times_ns(msg)
-        assert times[-1] - times[0] >= 0.3 * NS - 5_000_000 or times[0] < plan.start_ns
+        assert times[-1] - times[0] >= 0.3 * NS - KNOT_NS or times[0] < plan.start_ns
     # (The first message holds the nominal stance: it comes before the references.)
     assert len(collector.commands[0].points) == 1
     knots = knots_of(collector.commands[1:])
     times = np.array(list(knots))
-    assert np.all(np.diff(times) == 5_000_000)
+    assert np.all(np.diff(times) == KNOT_NS)
     positions = np.array([p for p, _ in knots.values()])
-    steps = np.abs(np.diff(positions, axis=0)) / 0.005
+    steps = np.abs(np.diff(positions, axis=0)) / (KNOT_NS / NS)
     assert np.all(steps <= limits * (1 + 1e-9))
     checked_swings = {'front_left': 0, 'rear_right': 0}
     for now, (joints, _) in knots.items():
@@ -723,7 +726,7 @@ def test_node_tracks_the_contract_references_checked_by_fk(inproc):
                 expected, _ = fallback_swing_pose(swing, t_plan, 0.06)
             assert np.linalg.norm(feet[k] - expected) <= 1e-4
             checked_swings[name] += 1
-    assert min(checked_swings.values()) > 300
+    assert min(checked_swings.values()) > 1.5 * NS // KNOT_NS  # (swings of 2 s)
     tracking = collector.status('tracking')
     assert tracking and all(level_value(s.level) == 0 for s in tracking)
     inputs = collector.status('inputs')
@@ -969,12 +972,12 @@ def test_node_drops_nan_input_and_keeps_going(inproc):
     drops = collector.status('input /gait/com_reference')
     assert len(drops) == 1 and 'NaN' in drops[0].message
     assert node.diagnostics.dropped == {'/gait/com_reference': 1}
-    # The trajectory goes on through the dropped message: knots every 5 ms around it.
+    # The trajectory goes on through the dropped message: knots every KNOT_NS around it.
     for msg in collector.commands:
         check_controller_rules(msg, node.robot)
     times = np.array(list(knots_of(collector.commands)))
     assert np.all(np.diff(times[(times > nan_at - NS // 2) & (times < nan_at + NS // 2)])
-                  == 5_000_000)
+                  == KNOT_NS)
 
 
 def test_node_parameters_are_validated_and_a_rejected_change_changes_nothing(inproc):
