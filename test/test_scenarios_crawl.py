@@ -24,9 +24,9 @@ from gait_nodes.interfaces import deserialize_message, get_message
 from gait_nodes.kinematic_simulator import node_defaults as simulator_defaults
 from gait_nodes.robot.description import load_robot_description
 
-#: Simulated seconds per scenario: a crawl cycle (about 9 s) after the first full stride; the
+#: Simulated seconds per scenario: two crawl cycles (about 17 s each) after the first swing; the
 #: online scenario changes its walk until 16 s.
-DURATIONS_S = {'robosimian_crawl': 14.0, 'robosimian_crawl_polynomial': 14.0, 'online': 20.0}
+DURATIONS_S = {'robosimian_crawl': 38.0, 'robosimian_crawl_polynomial': 38.0, 'online': 20.0}
 #: The first swing lifts off this soon after the first /cmd_vel [s].
 FIRST_SWING_WITHIN_S = 2.0
 #: Least ZMP margin inside the recorded support polygon at every sample [m].

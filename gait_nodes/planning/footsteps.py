@@ -50,8 +50,8 @@ START_SHIFT_S = 1.0
 #: Part of that weight shift during which the ZMP reference holds still (the COM controller's
 #: preview of the shift).
 START_HOLD_FRACTION = 0.5
-#: A step re-timed for swings longer than its rhythm's gets this much more than they need, so
-#: that the later touch-downs (and footholds) it causes still fit; at most MAX_RETIMING times.
+#: A step re-timed for swings longer than its rhythm's gets this much more than they need (for
+#: the COM's drift over the longer swing); at most MAX_RETIMING times.
 RETIMING_ALLOWANCE = 0.02
 MAX_RETIMING = 4
 #: Time from a measured start with feet in the air to their landing swing's lift-off [s].
@@ -657,13 +657,18 @@ class GaitPlanner:
                 last = step.slots[-1]
                 self._before = (last.touch_down_s, last.positions_after, last.yaws_after)
 
-    def _next_step(self, state: _State, swing_s: float | None = None, retimed: int = 0
-                   ) -> Step:
-        """The step after ``state``; with ``swing_s``, its swings last that long [s].
+    def _next_step(self, state: _State, timed: tuple[float, float] | None = None,
+                   retimed: int = 0, planned: tuple[dict, float] | None = None) -> Step:
+        """The step after ``state``; with ``timed``, its (swing, transfer) times [s].
 
-        With ``timing: joint_limit`` a step whose swings need more time than its rhythm gives
-        (the first steps, a change of gait or velocity, the closing steps: footholds that do
-        not follow the steady pattern) is planned again with the time they need.
+        With ``timing: joint_limit`` a step whose swings or transfer (the body's move with every
+        foot down) need more time than its rhythm gives
+        (the first steps, a change of gait or velocity, the closing steps, and every step where
+        the body's sway takes the limbs where they are slower than at the nominal stance) is
+        planned again with the time they need. The retimed step keeps the footholds of the
+        rhythm's plan (``planned``: foot -> (target, yaw, anchor), and the rhythm's step end)
+        and the path waits for the time it adds: a longer swing to a foothold further ahead
+        would need more time again, and the strides would grow until a swing leaves the reach.
         """
         params, twist = self._params, self._twist
         gait = params.resolved_gait(self.robot)
@@ -671,10 +676,8 @@ class GaitPlanner:
         offsets = self.layout.offsets(params.step_width_m)
         t0 = state.time_s
         params = self.timed(params, twist)
-        if swing_s is not None:
-            params = rhythm_module.rhythm_for_swing(gait, swing_s,
-                                                    self._timing.lift_and_lower_s(),
-                                                    self._timing.name).apply(params)
+        if timed is not None:
+            params = Rhythm(*timed, len(groups[0]), self._timing.name).apply(params)
         if twist.is_zero():
             rest = state.last_anchor if state.mode == 'walking' else state.rest_pose
             targets = place(rest, offsets)
@@ -736,6 +739,12 @@ class GaitPlanner:
                 return place(anchor, offsets[foot:foot + 1])[0], anchor[2], anchor
 
             mode = 'walking'
+        if planned is not None:
+            footholds = planned[0]
+
+            def target_of(foot, touch_down_s):
+                return footholds[foot]
+        chosen: dict[int, tuple] = {}
         swing = params.swing_s
         extra = self._start_shift_s(params) if state.mode == 'standing' else 0.0
         t1 = t0 + params.transfer_s(gait) + extra
@@ -750,7 +759,7 @@ class GaitPlanner:
             moving = []
             after, after_yaws = positions.copy(), foot_yaws.copy()
             for foot in feet:
-                target, yaw, anchor = target_of(foot, touch_down)
+                target, yaw, anchor = chosen[foot] = target_of(foot, touch_down)
                 if forward is not None and foot in state.measured \
                         and (target - positions[foot]) @ forward[foot] < 0.0:
                     continue
@@ -765,6 +774,9 @@ class GaitPlanner:
                 slots.append(SwingSlot(lift_off, touch_down, tuple(moving), after, after_yaws))
                 positions, foot_yaws = after, after_yaws
         t_end = t1 + len(groups[group_index]) * swing
+        if planned is not None and mode == 'walking':
+            # The path waits for the time the retimed step adds.
+            path = dict(path, path_start_s=path['path_start_s'] + t_end - planned[1])
         if not slots:
             times = np.array([t0, t_end])
             points = np.array([state.zmp, zmp_reference.stand_point(self.layout, positions)])
@@ -780,8 +792,17 @@ class GaitPlanner:
             measured=(state.measured.difference(*(slot.feet for slot in slots))
                       if mode == 'walking' else frozenset()), **path)
         needed = self._needed_swing_s(gait, state, slots, points, params.com_height_m)
-        if needed > swing * (1.0 + 1e-9) and retimed < MAX_RETIMING:
-            return self._next_step(state, needed * (1.0 + RETIMING_ALLOWANCE), retimed + 1)
+        transfer = params.transfer_s(gait)
+        needed_transfer = self._needed_transfer_s(state, points, params.com_height_m)
+        if (needed > swing * (1.0 + 1e-9) or needed_transfer > transfer * (1.0 + 1e-9)) \
+                and retimed < MAX_RETIMING:
+            swing = max(swing, needed * (1.0 + RETIMING_ALLOWANCE))
+            in_rhythm = rhythm_module.rhythm_for_swing(gait, swing,
+                                                       self._timing.lift_and_lower_s(), '')
+            transfer = max(in_rhythm.transfer_s, transfer,
+                           needed_transfer * (1.0 + RETIMING_ALLOWANCE))
+            return self._next_step(state, (swing, transfer), retimed + 1,
+                                   planned or (chosen, t_end))
         if extra > 0.0 and kind == 'walk':
             # From standstill the ZMP stays put for part of the weight shift: the plan reaches
             # the COM controller when the command comes, and a ZMP that starts moving at once
@@ -819,6 +840,24 @@ class GaitPlanner:
             needed = max(needed, self._timing.step_s(swings, feet, yaws, body_yaw, com))
             positions, yaws = slot.positions_after, slot.yaws_after
         return needed
+
+    def _needed_transfer_s(self, state: _State, zmp_points: np.ndarray,
+                           com_height_m: float) -> float:
+        """Least time [s] of the step's transfer, the COM following the ZMP's move (0: none).
+
+        :meth:`gait_nodes.swing.timing.SwingTiming.transfer_s` with the feet where they stand
+        and the COM moved from the first ZMP knot to the second (the end of the transfer).
+        """
+        if self._params.timing != 'joint_limit' or self._timing is None \
+                or len(zmp_points) < 3:
+            return 0.0
+        feet = self._with_heights(state.positions)
+        height = com_height_m + feet[:, 2].min()
+        com_from, com_to = (np.array([*point, height]) for point in zmp_points[:2])
+        if np.linalg.norm(com_to - com_from) < ALREADY_THERE:
+            return 0.0
+        body_yaw = float(np.angle(np.exp(1j * state.yaws).sum()))
+        return self._timing.transfer_s(feet, state.yaws, body_yaw, com_from, com_to)
 
     @staticmethod
     def _first_cycle_path_s(state: _State, groups, group_index: int, offsets: np.ndarray,

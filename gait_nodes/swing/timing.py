@@ -13,13 +13,13 @@ Two models, both for robots with closed-form limb IK (``extra.limb_ik``, thesis 
 * :class:`PolynomialSwingTiming`: the sixth-order swing (Lucy) between the lift-off and landing
   places around the nominal foot position.
 
-Either swing is timed through the whole-body IK, not the limb alone: while a limb (15 % of the
-RoboSimian-like robot's mass) swings, the body moves the other way so that the full-model COM
-stays on its reference (thesis III.B.1), which speeds the swinging limb's joints up by about a
-fifth. The time is the least one at which no joint of any limb exceeds its limit, times
+Either swing is timed through the whole-body IK, not the limb alone: while a limb (15 % of
+RoboSimian's mass) swings, the body moves the other way so that the full-model COM
+stays on its reference (thesis III.B.1), which changes the swinging limb's joint speeds. The time is the least one at which no joint of any limb exceeds its limit, times
 ``1 + BODY_MOTION_MARGIN`` for what the probe at the nominal stance does not see: the crawl's
-sideways sway puts the body up to 0.1 m off the nominal stance during a swing, and the COM keeps
-walking.
+sideways sway puts the body off the nominal stance during a swing, the other feet are a part of
+a stride off theirs, and the COM keeps walking. The planner probes every planned step where it
+happens and retimes a step the model timed short (:mod:`gait_nodes.planning.footsteps`).
 
 The value table's path is a polyline timed with the fastest joint at the limit on every segment:
 its velocity jumps at every waypoint, and a foot that changes velocity in one tick makes the
@@ -50,9 +50,17 @@ STEP_PROBE_SAMPLES = 61
 SMOOTHING_S = 0.2
 #: Fine time step of the smoothing convolution [s].
 FINE_STEP_S = 0.001
-#: Relative extra swing time for the sway and walk of the body during the swing (measured on
-#: the RoboSimian crawl: the whole-body probe's times were 16 % short of what the joints needed).
-BODY_MOTION_MARGIN = 0.25
+#: Relative extra swing time for the sway and walk of the body during the swing. Measured on
+#: RoboSimian's crawl at its fastest stride (0.22 m, value-table and polynomial swings alike):
+#: the planner's probe of each swing where it happens (the COM on the ZMP reference, 0.035 m to
+#: the side, the other feet in the crawl's pattern) needs 1.36 times the time probed at the
+#: nominal stance; 0.4 leaves 3 %, so that steady steps are not retimed.
+BODY_MOTION_MARGIN = 0.4
+#: Samples of a probed transfer (the body's move with every foot down).
+TRANSFER_PROBE_SAMPLES = 21
+#: Peak over mean speed of the COM's move in a transfer (a minimum-jerk move's 15/8): the probe
+#: moves it at constant speed.
+TRANSFER_PEAK_FACTOR = 1.875
 #: Lattice of the cached table timings: step x, step y [m], turn [rad].
 LATTICE = (0.02, 0.02, 0.05)
 #: The 8 corners of a lattice cell, as offsets.
@@ -123,7 +131,7 @@ class SwingTiming:
     through the whole-body IK: the other feet stand at their nominal places and the full-model
     COM stays where it is at the nominal stance, so the body moves under the swinging limb as
     it does when the robot walks (it compensates the limb's mass: about 15 % of the foot's
-    displacement for the RoboSimian-like robot), and every joint of every limb counts. The
+    displacement for RoboSimian), and every joint of every limb counts. The
     swing then lasts ``max_j max_u |dq_j / du| / W`` times ``1 + BODY_MOTION_MARGIN``.
 
     Args:
@@ -184,16 +192,18 @@ class SwingTiming:
     def _time_through_ik(self, u, feet, yaws, body_yaw_rad, com, q_start) -> float:
         """``max |dq/du| / W`` over every joint, the feet following ``feet`` (N, F, 3).
 
-        The full-model COM is held at ``com`` and the body level at ``body_yaw_rad``.
+        The full-model COM follows ``com`` ((3,): held; (N, 3): a path) and the body is level
+        at ``body_yaw_rad``.
         """
         # What IkTargets would check at every sample, checked once for all of them.
         feet = np.asarray(feet, dtype=float)
         yaws = np.asarray(yaws, dtype=float)
         com = np.asarray(com, dtype=float)
         if feet.shape != (len(u), len(self._feet), 3) or yaws.shape != feet.shape[:2] \
-                or com.shape != (3,):
+                or com.shape not in ((3,), (len(u), 3)):
             raise ValueError(f'swing probe: feet must be (N, F, 3) with (N, F) yaws and a (3,) '
-                             f'COM, got {feet.shape}, {yaws.shape} and {com.shape}')
+                             f'or (N, 3) COM, got {feet.shape}, {yaws.shape} and {com.shape}')
+        coms = np.broadcast_to(com, (len(u), 3))
         if not (np.isfinite(feet).all() and np.isfinite(yaws).all() and np.isfinite(com).all()
                 and math.isfinite(body_yaw_rad)):
             raise ValueError('swing probe targets hold a NaN or infinite value')
@@ -203,7 +213,7 @@ class SwingTiming:
         for k in range(len(u)):
             # Started where the last solutions head (as the IK node does): one Newton step.
             result = self._solver.solve_trusted(feet[k], yaw_lists[k], body_yaw_rad,
-                                                self._solver.warm_start(solutions[-3:]), com)
+                                                self._solver.warm_start(solutions[-3:]), coms[k])
             if result.foot_position_errors_m.max() > 1e-4 or result.com_error_m > 1e-4:
                 raise SwingPolicyError(f'a swing to {np.round(feet[-1], 3).tolist()} leaves '
                                        f'the reach of the limbs')
@@ -255,6 +265,29 @@ class SwingTiming:
         q = self._seed_solver.solve(first, q).q
         return (1.0 + STEP_MARGIN) * self.factor * self._time_through_ik(
             u, feet, yaws, body_yaw_rad, com_in_world, q)
+
+    def transfer_s(self, feet_in_world: np.ndarray, foot_yaws_rad: np.ndarray,
+                   body_yaw_rad: float, com_from: np.ndarray, com_to: np.ndarray) -> float:
+        """Least time [s] of a transfer: the COM moved from ``com_from`` to ``com_to``.
+
+        Every foot stays down at ``feet_in_world`` ((F, 3), yaws ``foot_yaws_rad``); the
+        whole-body IK moves the body so that the full-model COM goes along the segment, and the
+        time is that of the fastest joint at the limit with the COM's speed peaking
+        :data:`TRANSFER_PEAK_FACTOR` times above its mean (thesis III.C.1: the body's move is
+        timed at the joint limit as a swing is).
+        """
+        from gait_nodes.robot.whole_body_ik import IkTargets, seed_configuration
+
+        u = np.linspace(0.0, 1.0, TRANSFER_PROBE_SAMPLES)
+        com_from, com_to = np.asarray(com_from, dtype=float), np.asarray(com_to, dtype=float)
+        feet = np.repeat(np.asarray(feet_in_world, dtype=float)[None], len(u), axis=0)
+        yaws = np.repeat(np.asarray(foot_yaws_rad, dtype=float)[None], len(u), axis=0)
+        first = IkTargets(feet[0], yaws[0], body_yaw_rad, com_in_world=com_from)
+        q = self._seed_solver.solve(first, seed_configuration(self.robot, first,
+                                                              self.timing.family)).q
+        coms = com_from + u[:, None] * (com_to - com_from)
+        return TRANSFER_PEAK_FACTOR * self.factor * self._time_through_ik(
+            u, feet, yaws, body_yaw_rad, coms, q)
 
     def _lattice_s(self, step_in_base: np.ndarray, turn_rad: float) -> float:
         """:meth:`raw_s` interpolated on :data:`LATTICE` (cached; the planner asks often)."""
@@ -331,12 +364,19 @@ class TableSwingTiming(SwingTiming):
         self.policy = policy
 
     def shape(self, step_in_base, turn_rad):
-        """The table's greedy path for the step, smoothed (see :meth:`SwingTiming.shape`)."""
+        """The table's greedy path for the step, smoothed (see :meth:`SwingTiming.shape`).
+
+        The path ends on the table's goal; it is moved (as the swing-leg policy moves it onto a
+        planned swing) to run from half a step behind to half a step ahead of the nominal foot
+        position, where a steady walk makes it: the limbs' speed depends on where they are.
+        """
         path, _ = self.policy.path_for_step(step_in_base, turn_rad)
         polyline = SwingTrajectory('probe', 0, path.times_s, path.states[:, :3],
                                    path.states[:, 3])
         smoothed, needed = smooth_trajectory(polyline, None, needed_probe_period(path))
         states = np.column_stack([smoothed.positions_in_world, smoothed.yaws_rad])
+        nominal = self.robot.description.feet[self._reference].nominal_position_in_base
+        states[:, :2] += np.asarray(nominal[:2]) - 0.5 * (states[0, :2] + states[-1, :2])
         return smoothed.times_s / needed, states
 
 
