@@ -9,9 +9,10 @@ Here every step of a gait (see :mod:`gait_nodes.planning.gait_params`) is a tran
 feet down, the ZMP moves) followed by its swing slots, two steps a cycle, so each transfer gets
 half of the thesis' body move (at least :data:`MIN_TRANSFER_S`, for the sideways sway the
 ZMP makes even in place) and each swing lasts what a :class:`gait_nodes.swing.timing.
-SwingTiming` says the swing needs at the limit:
+SwingTiming` says the swing needs at the limit; ``T_body`` is the time the stance limbs need at
+the limit to move the body half its cycle displacement (``SwingTiming.steady_transfer_s``):
 
-    T_transfer = max(MIN_TRANSFER_S, (T_swing - T_up - T_down) / 2),
+    T_transfer = max(MIN_TRANSFER_S, (T_swing - T_up - T_down) / 2, T_body),
     step period = T_transfer + slots T_swing,   cycle T = 2 step period,
     duty factor = 1 - T_swing / T.
 
@@ -78,7 +79,8 @@ class Rhythm:
         return params.replace(step_period_s=self.step_period_s, duty_factor=self.duty_factor)
 
 
-def rhythm_for_swing(gait: str, swing_s: float, in_place_s: float, source: str) -> Rhythm:
+def rhythm_for_swing(gait: str, swing_s: float, in_place_s: float, source: str,
+                     body_move_s: float = 0.0) -> Rhythm:
     """The rhythm of ``gait`` whose swings last ``swing_s`` (eq. (2)'s body move per transfer).
 
     Args:
@@ -86,8 +88,9 @@ def rhythm_for_swing(gait: str, swing_s: float, in_place_s: float, source: str) 
         swing_s: Swing time [s].
         in_place_s: Swing time of a step in place (lift and lowering) [s].
         source: What the swing times come from.
+        body_move_s: Least transfer time for the body's move at the joint limit [s].
     """
-    transfer = max(MIN_TRANSFER_S, 0.5 * (swing_s - in_place_s))
+    transfer = max(MIN_TRANSFER_S, 0.5 * (swing_s - in_place_s), body_move_s)
     return Rhythm(float(swing_s), float(transfer), SWING_SLOTS[gait], source)
 
 
@@ -138,7 +141,11 @@ def walking_rhythm(gait: str, layout: FootLayout, params: GaitParameters, twist,
             swing_s = swing_time_s(timing, displacements, turn)
         except SwingPolicyError as exc:
             raise GaitParameterError(f'no gait rhythm walks {twist.as_tuple()}: {exc}') from None
-        following = rhythm_for_swing(gait, swing_s, in_place, timing.name)
+        # The COM moves half of the body's cycle displacement in each of the cycle's two
+        # transfers (the crawl's sway too: the margin of steady_transfer_s).
+        move = 0.5 * rhythm.cycle_s * np.array([twist.vx_m_s, twist.vy_m_s])
+        following = rhythm_for_swing(gait, swing_s, in_place, timing.name,
+                                     timing.steady_transfer_s(move))
         if abs(following.cycle_s - rhythm.cycle_s) < CYCLE_TOLERANCE_S:
             return following
         if following.cycle_s > MAX_CYCLE_S:

@@ -169,6 +169,7 @@ class SwingTiming:
         self._com = pin.centerOfMass(robot.model, robot.new_data(), self._q_nominal).copy()
         self._feet = robot.nominal_feet_in_world(self._q_nominal[:3], 0.0)
         self._cache: dict[tuple[int, int, int], float] = {}
+        self._transfer_cache: dict[tuple[int, int], float] = {}  # see steady_transfer_s
 
     def shape(self, step_in_base: np.ndarray, turn_rad: float
               ) -> tuple[np.ndarray, np.ndarray]:
@@ -343,6 +344,31 @@ class SwingTiming:
                 known.clear()
             known[key] = (1.0 + BODY_MOTION_MARGIN) * self._lattice_s(key[:2], key[2])
         return known[key]
+
+    def steady_transfer_s(self, move_in_base: np.ndarray) -> float:
+        """Transfer time [s] of a steady walk whose COM moves ``move_in_base`` (2,) per transfer.
+
+        :meth:`transfer_s` at the nominal stance, the COM moved along x and y by the move's
+        sizes (the robot is symmetric), interpolated on :data:`LATTICE` (cached), times
+        ``1 + BODY_MOTION_MARGIN`` for the sway the nominal stance does not see.
+        """
+        point = [abs(float(value)) / spacing for value, spacing in
+                 zip(move_in_base[:2], LATTICE[:2], strict=True)]
+        low = [math.floor(value) for value in point]
+        total = 0.0
+        for i in (0, 1):
+            for j in (0, 1):
+                w = (1.0 - abs(point[0] - low[0] - i)) * (1.0 - abs(point[1] - low[1] - j))
+                if w == 0.0:
+                    continue
+                key = (low[0] + i, low[1] + j)
+                if key not in self._transfer_cache:
+                    half = 0.5 * np.array([key[0] * LATTICE[0], key[1] * LATTICE[1], 0.0])
+                    self._transfer_cache[key] = (0.0 if not half.any() else self.transfer_s(
+                        self._feet, np.zeros(len(self._feet)), 0.0, self._com - half,
+                        self._com + half))
+                total += w * self._transfer_cache[key]
+        return (1.0 + BODY_MOTION_MARGIN) * total
 
     def lift_and_lower_s(self) -> float:
         """Swing time [s] of a step in place (the lift and the lowering), with the margin."""
