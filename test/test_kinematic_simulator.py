@@ -47,6 +47,8 @@ NS = 1_000_000_000
 RATE_HZ = node_defaults()['rate_hz']
 PERIOD_NS = round(NS / RATE_HZ)
 PERIOD_S = PERIOD_NS / NS
+#: Simulated seconds of the crawl the simulator follows (its first two steps at 0.03 m/s).
+CRAWL_S = 20.0
 #: How far the drawn polygon's edges lie outside the foot circles, per metre of radius.
 CIRCUMSCRIBED = 1 / math.cos(math.pi / POLYGON_SEGMENTS_PER_FOOT) - 1
 
@@ -276,7 +278,7 @@ def test_two_point_feet_under_a_translating_body_do_not_tilt_it(robot, q_nominal
 
 
 def test_a_swing_foot_without_plan_is_released_and_latched_where_it_lands(robot, q_nominal):
-    """Contacts by foot height: lift the front-left foot 5 cm, move it 10 cm forward, lower it."""
+    """Contacts by foot height: lift the front-left foot 5 cm, move it 6 cm forward, lower it."""
     solver = WholeBodyIkSolver(robot)
     feet0, yaws0 = robot.foot_poses(q_nominal)
     com0 = robot.com(q_nominal)
@@ -288,8 +290,8 @@ def test_a_swing_foot_without_plan_is_released_and_latched_where_it_lands(robot,
         t = k * dt
         feet = feet0.copy()
         s = min(max((t - 0.5) / 1.5, 0.0), 1.0)
-        feet[0] += [0.1 * s, 0.0, 0.05 * math.sin(math.pi * s)]
-        targets = IkTargets(feet, yaws0, 0.0, com_in_world=com0 + [0.0, -0.08, 0.0])
+        feet[0] += [0.06 * s, 0.0, 0.05 * math.sin(math.pi * s)]
+        targets = IkTargets(feet, yaws0, 0.0, com_in_world=com0 + [0.0, -0.04, 0.0])
         q_ik = solver.solve(targets, q_ik).q
         step = simulation.step(robot.joint_positions(q_ik), dt)
         if lifted is None and not step.contacts[0]:
@@ -300,7 +302,7 @@ def test_a_swing_foot_without_plan_is_released_and_latched_where_it_lands(robot,
         for f in np.flatnonzero(step.contacts[1:]) + 1:
             np.testing.assert_allclose(step.contact_points_in_world[f], feet0[f], atol=1e-7)
     assert lifted is not None and landed is not None and lifted < landed
-    np.testing.assert_allclose(simulation.contact_points()[0], feet0[0] + [0.1, 0.0, 0.0],
+    np.testing.assert_allclose(simulation.contact_points()[0], feet0[0] + [0.06, 0.0, 0.0],
                                atol=1e-6)
 
 
@@ -402,7 +404,7 @@ def crawl(tmp_path_factory):
         collector = Collector()
         for node in [*nodes.values(), VelocityCommand(0.03), collector]:
             executor.add_node(node)
-        executor.spin_for(9.0)
+        executor.spin_for(CRAWL_S)
         yield nodes['kinematic_simulator'], collector
     finally:
         runtime.shutdown()
@@ -412,7 +414,7 @@ def test_crawl_moves_the_robot_forward(crawl):
     simulator, collector = crawl
     assert simulator.robot.name == 'robosimian'
     stamps, qs = configurations(simulator.robot, collector)
-    assert len(stamps) == 9 * RATE_HZ
+    assert len(stamps) == CRAWL_S * RATE_HZ
     assert np.all(np.diff(stamps) == PERIOD_NS)
     assert qs[-1][0] - qs[0][0] > 0.05
     plans = [plan for _, plan in collector.plans]
@@ -954,9 +956,9 @@ def test_a_foot_still_in_the_air_at_its_planned_touch_down_lands_where_it_comes_
     # feet left the ground by +-1.4 cm in the killed-planner fault test).
     solver = WholeBodyIkSolver(robot)
     feet0, yaws0 = robot.foot_poses(q_nominal)
-    com0 = robot.com(q_nominal) + [-0.03, -0.06, 0.0]
+    com0 = robot.com(q_nominal) + [-0.02, -0.04, 0.0]
     landing = feet0.copy()
-    landing[0] += [0.1, 0.0, 0.0]
+    landing[0] += [0.06, 0.0, 0.0]
     up = landing.copy()
     up[0, 2] += 0.05
     q_up = solver.solve(IkTargets(up, yaws0, 0.0, com_in_world=com0), q_nominal).q

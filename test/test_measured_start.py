@@ -106,13 +106,15 @@ def test_a_walk_paused_across_a_contact_change_resumes_within_a_stride():
     # first step was a stride plus 2.1 cm (0.321 m for a 0.3 m stride), re-timed for the longer
     # swing, its foothold moved on with the longer cycle, re-timed again, until the swing left
     # the reach of the limbs (SwingPolicyError with the value-table timing: the planner died).
-    feet = np.array([[0.5, 0.525, 0.0], [0.5, -0.525, 0.0], [-0.4165, 0.525, 0.0],
-                     [-0.5, -0.525, 0.0]])
-    start = MeasuredStart(feet, np.zeros(4), np.array([0.0215, 0.008]))
+    # The measured state (recorded with 0.3 m strides) is scaled to RoboSimian's 0.2 m ones
+    # around its nominal stance (x +-0.6 m, y +-0.5 m).
+    feet = np.array([[0.6, 0.5, 0.0], [0.6, -0.5, 0.0], [-0.5443, 0.5, 0.0],
+                     [-0.6, -0.5, 0.0]])
+    start = MeasuredStart(feet, np.zeros(4), np.array([0.0143, 0.008]))
     params, nominal = _resumed_crawl(None, None)
     _, planner = _resumed_crawl(start, _centred_pose(nominal, feet))
     twist, _ = planner.set_velocity(Twist2D(0.04), 0.0)
-    planner.advance(40.0)
+    planner.advance(80.0)
     plan = planner.footstep_plan()
     stride = twist.vx_m_s * planner.rhythm().cycle_s
     assert stride <= params.step_length_m
@@ -129,10 +131,13 @@ def test_a_resumed_walk_starts_with_the_group_that_need_not_wait():
     # front right's first step to stay within a stride, which put the rear left and front left
     # feet ahead of their footholds: a whole step without a swing, the first lift-off 5.6 s
     # after the landing. Started with the front right's group, none waits.
-    feet = np.array([[0.65, 0.525, 0.0], [0.5, -0.525, 0.0], [-0.419057, 0.525, 0.0],
-                     [-0.309391, -0.525, 0.0621674]])
-    start = MeasuredStart(feet, np.zeros(4), np.array([0.115, -0.0701]))
-    params, planner = _resumed_crawl(start, (0.105388, 0.0, 0.0))
+    # (Scaled to 0.2 m strides around the nominal stance as above, the rear right foot ahead
+    # of its first foothold; the COM half as far to the side: RoboSimian's body moves twice as
+    # far as its COM, and no further than 0.1 m.)
+    feet = np.array([[0.7, 0.5, 0.0], [0.6, -0.5, 0.0], [-0.546038, 0.5, 0.0],
+                     [-0.45, -0.5, 0.0621674]])
+    start = MeasuredStart(feet, np.zeros(4), np.array([0.0767, -0.035]))
+    params, planner = _resumed_crawl(start, (0.070259, 0.0, 0.0))
     twist, _ = planner.set_velocity(Twist2D(0.04), 0.0)
     planner.advance(30.0)
     landing, walk = planner.footstep_plan().swings()[:2]

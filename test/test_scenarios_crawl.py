@@ -27,8 +27,9 @@ from gait_nodes.robot.description import load_robot_description
 #: Simulated seconds per scenario: two crawl cycles (about 17 s each) after the first swing; the
 #: online scenario changes its walk until 16 s.
 DURATIONS_S = {'robosimian_crawl': 38.0, 'robosimian_crawl_polynomial': 38.0, 'online': 20.0}
-#: The first swing lifts off this soon after the first /cmd_vel [s].
-FIRST_SWING_WITHIN_S = 2.0
+#: The first swing lifts off this soon after the first /cmd_vel [s]: the weight shift (at most
+#: 1 s) and the first transfer (RoboSimian's 1.8 s at the joint limit).
+FIRST_SWING_WITHIN_S = 3.0
 #: Least ZMP margin inside the recorded support polygon at every sample [m].
 MIN_MARGIN_M = 0.02
 #: Landed feet (Pinocchio FK of /tf + /joint_states) within this of the plan [m].

@@ -28,13 +28,13 @@ from gait_nodes.robot.model import load_robot_model
 from gait_nodes.starvation import InprocGraph
 
 NS_PER_S = 10**9
-#: The crawl's first swing (rear left) is in the air from about 2.0 s to 4.3 s.
-STARVED_AT_S = 3.0
+#: The crawl's first swing (rear left) is in the air from about 3.1 s to 6.0 s.
+STARVED_AT_S = 4.5
 #: Longer than the IK's horizon (0.3 s) and the simulator's stale_after_s (0.25 s): the
 #: trajectory runs out, the walk pauses (a shorter gap is ridden through on the horizon).
 STARVED_FOR_S = 0.6
 #: Simulated time: the resumed walk's landing and the first steps after it.
-DURATION_S = 6.5
+DURATION_S = 12.0
 #: Height above the ground under which a foot is down [m].
 ON_GROUND_M = 1e-3
 
@@ -97,13 +97,13 @@ def test_a_walk_resumed_after_a_starved_ik_puts_the_foot_down_and_stays_balanced
 
 # --- every node starved at random phases of the gait (issue 18, item 4) -----------------------
 
-#: The polynomial crawl's cycle is about 9.5 s: a random instant in [2, 12] s (its first lift-off
-#: is at about 2 s) is a random phase of the gait.
-PHASES_S = (2.0, 12.0)
+#: The polynomial crawl's cycle is about 17.6 s: a random instant in [3, 21] s (its first
+#: lift-off is at about 3.1 s) is a random phase of the gait.
+PHASES_S = (3.0, 21.0)
 GAPS_S = (0.05, 0.5)
 #: Walking observed after the node is back [s], and how far the base gets in it at least [m]
-#: (the crawl walks about 0.03 m/s in bursts; one held or stopped walks < 1 cm).
-RECOVERY_S = 8.0
+#: (the crawl walks about 0.012 m/s in bursts; one held or stopped walks < 1 cm).
+RECOVERY_S = 15.0
 WALKS_ON_M = 0.05
 #: A random case per node, runtime semantics and seed.
 SEEDS = (0, 1)
@@ -230,11 +230,11 @@ def test_a_node_starved_at_a_random_phase_leaves_the_walk_going(node_name, at_s,
 
 
 def test_the_walk_paused_across_a_contact_change_walks_on():
-    # bench/starve.py whole_body_ik 4.10 0.15 --pause, the value-table crawl: the IK starved
-    # just after the rear left foot landed pauses the walk; the planner resumes it from the
+    # bench/starve.py whole_body_ik 6.2 0.15 --pause, the value-table crawl: the IK starved
+    # just after the rear left foot landed (at 6.1 s) pauses the walk; the planner resumes it from the
     # measured stance (it used to plan a first step beyond the limbs' reach and exit with
     # SwingPolicyError).
-    result = _starved_walk('robosimian_crawl', 'whole_body_ik', 4.10, 0.15, True)
+    result = _starved_walk('robosimian_crawl', 'whole_body_ik', 6.2, 0.15, True)
     print(result)
     assert not result['faults']
     assert result['walked_after_m'] > WALKS_ON_M

@@ -272,7 +272,7 @@ def walk_plan(step_period_s=2.0):
     from gait_nodes.robot.description import load_robot_description
 
     description = load_robot_description('robosimian')
-    params = GaitParameters.for_robot(description, gait='crawl', step_length_m=0.3,
+    params = GaitParameters.for_robot(description, gait='crawl', step_length_m=0.2,
                                       step_period_s=step_period_s)
     planner = plan_walk(description, params, [(0.0, Twist2D(0.1, 0.0, 0.0))], 8.0)
     return planner.footstep_plan(0.0)
@@ -325,7 +325,7 @@ def test_node_lowers_a_foot_left_in_the_air_with_the_polynomial_swing(start, tmp
     start('-p', f'table:={table.save(tmp_path / "tiny.npz")}', '-p',
           'joint_velocity_limit_rad_s:=1.0')
     description = load_robot_description('robosimian')
-    params = GaitParameters.for_robot(description, gait='crawl', step_length_m=0.3,
+    params = GaitParameters.for_robot(description, gait='crawl', step_length_m=0.2,
                                       step_period_s=2.0)
     planner = GaitPlanner(description, params)
     feet = np.column_stack([place(np.zeros(3), planner.layout.offsets(params.step_width_m)),

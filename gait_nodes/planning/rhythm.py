@@ -123,6 +123,22 @@ def swing_time_s(timing, displacements: np.ndarray, turn_rad: float,
                default=timing.lift_and_lower_s())
 
 
+def transfer_move(gait: str, layout: FootLayout, params: GaitParameters, twist,
+                  rhythm: Rhythm) -> np.ndarray:
+    """(2,) the COM's move in one transfer of steady walking at ``rhythm``, body frame [m].
+
+    Half the body's cycle displacement (two transfers a cycle); a crawl's ZMP also sways
+    between the diagonals (:func:`gait_nodes.planning.zmp_reference.steady_crawl_zmp_move`,
+    for a straight crawl of the same stride).
+    """
+    from gait_nodes.planning.zmp_reference import steady_crawl_zmp_move
+
+    move = 0.5 * rhythm.cycle_s * np.array([twist.vx_m_s, twist.vy_m_s])
+    if gait != 'crawl':
+        return move
+    return steady_crawl_zmp_move(layout, rhythm.apply(params), 2.0 * float(np.hypot(*move)))
+
+
 def walking_rhythm(gait: str, layout: FootLayout, params: GaitParameters, twist,
                    timing) -> Rhythm:
     """The steady rhythm of ``gait`` at ``twist`` (the fixed point, see the module docstring).
@@ -139,13 +155,11 @@ def walking_rhythm(gait: str, layout: FootLayout, params: GaitParameters, twist,
         displacements, turn = cycle_displacements(layout, params, twist, rhythm.cycle_s)
         try:
             swing_s = swing_time_s(timing, displacements, turn)
+            body_move_s = timing.steady_transfer_s(transfer_move(gait, layout, params, twist,
+                                                                 rhythm))
         except SwingPolicyError as exc:
             raise GaitParameterError(f'no gait rhythm walks {twist.as_tuple()}: {exc}') from None
-        # The COM moves half of the body's cycle displacement in each of the cycle's two
-        # transfers (the crawl's sway too: the margin of steady_transfer_s).
-        move = 0.5 * rhythm.cycle_s * np.array([twist.vx_m_s, twist.vy_m_s])
-        following = rhythm_for_swing(gait, swing_s, in_place, timing.name,
-                                     timing.steady_transfer_s(move))
+        following = rhythm_for_swing(gait, swing_s, in_place, timing.name, body_move_s)
         if abs(following.cycle_s - rhythm.cycle_s) < CYCLE_TOLERANCE_S:
             return following
         if following.cycle_s > MAX_CYCLE_S:

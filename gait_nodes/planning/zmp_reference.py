@@ -119,20 +119,21 @@ def crawl_knots(layout: FootLayout, slots: Sequence[tuple[Sequence[int], np.ndar
     return np.array([z0, point, point]), kept
 
 
-def crawl_margin_feasible(robot, params) -> float:
-    """Largest margin [m] a steady straight crawl at full stride leaves (both lateral steps).
+def _steady_crawl_steps(layout: FootLayout, params, step_length_m: float):
+    """The two steps of a steady straight crawl: ``(hind, fore, start, mid)`` for each side.
 
-    Foot positions follow the planner's placement (each foot lands where the body will be at the
-    middle of its stance), with the body moving ``step_length_m`` per cycle.
+    Foot positions follow the planner's placement (each foot lands where the body will be at
+    the middle of its stance), with the body moving ``step_length_m`` per cycle; ``start`` and
+    ``mid`` ((F, 2), before the hind and before the fore swing) are relative to the body's pose
+    at the start of the step.
     """
-    layout = FootLayout.of(robot)
     offsets = layout.offsets(params.step_width_m)
     cycle, half = params.cycle_s, params.step_period_s
     swing, transfer = params.swing_s, params.transfer_s('crawl')
-    speed = params.step_length_m / cycle
-    worst = np.inf
-    for side, (hind, fore) in enumerate(layout.swing_groups('crawl')):
-        other_hind, other_fore = layout.swing_groups('crawl')[1 - side]
+    speed = step_length_m / cycle
+    groups = layout.swing_groups('crawl')
+    for side, (hind, fore) in enumerate(groups):
+        other_hind, other_fore = groups[1 - side]
         # Touch-down times relative to the start of this step (steady state, straight).
         last = {hind[0]: transfer + swing - cycle, fore[0]: half - cycle,
                 other_hind[0]: transfer + swing - half, other_fore[0]: 0.0}
@@ -141,10 +142,31 @@ def crawl_margin_feasible(robot, params) -> float:
             start[foot, 0] += speed * t_down
         mid = start.copy()
         mid[hind[0], 0] = offsets[hind[0], 0] + speed * (transfer + swing)
+        yield hind, fore, start, mid
+
+
+def crawl_margin_feasible(robot, params) -> float:
+    """Largest margin [m] a steady straight crawl at full stride leaves (both lateral steps)."""
+    layout = FootLayout.of(robot)
+    worst = np.inf
+    for hind, fore, start, mid in _steady_crawl_steps(layout, params, params.step_length_m):
         normals, offsets_region = crawl_region(layout, [(hind, start), (fore, mid)], 0.0)
         _, radius = support.chebyshev_centre(normals, offsets_region)
         worst = min(worst, radius)
     return float(worst)
+
+
+def steady_crawl_zmp_move(layout: FootLayout, params, stride_m: float) -> np.ndarray:
+    """(2,) the ZMP's move in a transfer of a steady straight crawl, in the body frame [m].
+
+    The knots of the two steps (:func:`crawl_knots` on :func:`_steady_crawl_steps`' stances,
+    each relative to the body at its step's start) joined across the body's half-cycle move:
+    ``stride_m / 2`` forward and the sway between the diagonals.
+    """
+    knots = [crawl_knots(layout, [(hind, start), (fore, mid)], mid, params.zmp_margin_m,
+                         np.zeros(2))[0][1]
+             for hind, fore, start, mid in _steady_crawl_steps(layout, params, stride_m)]
+    return knots[1] + [0.5 * stride_m, 0.0] - knots[0]
 
 
 def interp_floats(x: float, xs: list[float], ys: list[float]) -> float:
