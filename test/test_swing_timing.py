@@ -17,7 +17,12 @@ from swing_helpers import FAMILY, STEP_HEIGHT_M, robot, tiny_table
 from gait_nodes.contract import SwingTrajectory
 from gait_nodes.planning.footsteps import GaitPlanner, Twist2D, plan_walk
 from gait_nodes.planning.gait_params import GaitParameters
-from gait_nodes.planning.rhythm import MIN_TRANSFER_S, cycle_displacements, swing_time_s
+from gait_nodes.planning.rhythm import (
+    MIN_TRANSFER_S,
+    cycle_displacements,
+    swing_time_s,
+    transfer_move,
+)
 from gait_nodes.robot.whole_body_ik import IkTargets, WholeBodyIkSolver
 from gait_nodes.swing.policy import SwingPolicy
 from gait_nodes.swing.timing import (
@@ -139,10 +144,13 @@ def test_rhythm_is_the_fixed_point_of_eq_2():
     rhythm = planner.rhythm(params, twist)
     displacements, turn = cycle_displacements(planner.layout, params, twist, rhythm.cycle_s)
     assert rhythm.swing_s == pytest.approx(swing_time_s(timing, displacements, turn), rel=1e-5)
-    # Thesis eq. (2): four swings and the body's move (the swing's horizontal part) per cycle.
+    # Thesis eq. (2): four swings and the body's move (the swing's horizontal part) per cycle,
+    # the move at least as long as the stance limbs need at the limit.
     in_place = timing.lift_and_lower_s()
-    transfer = max(MIN_TRANSFER_S, 0.5 * (rhythm.swing_s - in_place))
-    assert rhythm.cycle_s == pytest.approx(4 * rhythm.swing_s + 2 * transfer)
+    body_move = timing.steady_transfer_s(transfer_move('crawl', planner.layout, params, twist,
+                                                       rhythm))
+    transfer = max(MIN_TRANSFER_S, 0.5 * (rhythm.swing_s - in_place), body_move)
+    assert rhythm.cycle_s == pytest.approx(4 * rhythm.swing_s + 2 * transfer, rel=1e-6)
     assert rhythm.duty_factor > 0.75
     # The stride the velocity asks for over that cycle.
     assert np.abs(displacements[:, 0]).max() == pytest.approx(0.006 * rhythm.cycle_s)
@@ -219,6 +227,68 @@ def test_every_planned_swing_has_the_time_its_own_step_needs():
     assert {step.gait for step in planner.steps} == {'crawl', 'trot'}
 
 
+def test_every_transfer_has_the_time_its_body_move_needs():
+    # The body's move with every foot down is timed at the joint limit as a swing is: the
+    # steady crawl's rhythm gives it that time, and any other step is re-timed to it.
+    timing = polynomial_timing()
+    params = _joint_limit_params()
+    probed = []
+    transfer_s = timing.transfer_s
+
+    def spy(feet, yaws, body_yaw, com_from, com_to):
+        needed = transfer_s(feet, yaws, body_yaw, com_from, com_to)
+        probed.append((tuple(com_from[:2]), needed))
+        return needed
+
+    timing.step_s, timing.transfer_s = timing.step_s, spy
+    try:
+        planner = plan_walk(robot().description, params, [(0.5, Twist2D(0.03))], 60.0,
+                            swing_timing=timing)
+    finally:
+        del timing.transfer_s, timing.step_s
+    needed = dict(probed)
+    walking = [step for step in planner.steps if step.slots]
+    assert len(walking) >= 5
+    for step in walking:
+        transfer = step.slots[0].lift_off_s - step.start_s
+        assert transfer >= needed[tuple(step.zmp_points[0])] * (1 - 1e-9)
+    # Steady steps keep the rhythm's period: it already holds the transfer they need.
+    rhythm = planner.rhythm()
+    assert walking[-1].end_s - walking[-1].start_s == pytest.approx(rhythm.step_period_s)
+
+
+def test_a_retimed_step_keeps_its_footholds_and_the_path_waits():
+    # Every swing probed twice as long as it is (as a body sway the rhythm's model does not see
+    # would; the model has 1.4 times the probe's time at most): each step is re-timed, keeps the footholds the rhythm chose
+    # and delays the path by the time it adds. (Re-planned with the longer swing to footholds
+    # further ahead, the strides grew with every re-timing until a swing left the reach.)
+    timing = polynomial_timing()
+    params = _joint_limit_params()
+    step_s = timing.step_s
+    timing.step_s = lambda *args: 2.0 * step_s(*args)
+    try:
+        planner = plan_walk(robot().description, params, [(0.5, Twist2D(0.01))], 120.0,
+                            swing_timing=timing)
+    finally:
+        del timing.step_s
+    rhythm = planner.rhythm()
+    stride = 0.01 * rhythm.cycle_s
+    walking = [step for step in planner.steps if step.slots]
+    assert len(walking) >= 6
+    for k, step in enumerate(walking):
+        before = step.positions_start
+        for slot in step.slots:
+            moved = slot.positions_after[list(slot.feet)] - before[list(slot.feet)]
+            assert np.abs(moved[:, 0]).max() <= stride * (1 + 1e-6)
+            if k >= 2:  # the first steps (shorter than a stride) may fit their rhythm
+                assert slot.touch_down_s - slot.lift_off_s > 1.3 * rhythm.swing_s
+            before = slot.positions_after
+    # Steady: every foot a stride a (longer) cycle, the footholds a stride apart.
+    last = walking[-1].slots[-1]
+    assert np.abs(last.positions_after - walking[-3].slots[-1].positions_after)[:, 0] \
+        == pytest.approx(stride, rel=1e-6)
+
+
 def test_a_command_from_standstill_starts_the_walk_at_once():
     params = _joint_limit_params()
     planner = GaitPlanner(robot().description, params, swing_timing=polynomial_timing())
@@ -226,7 +296,8 @@ def test_a_command_from_standstill_starts_the_walk_at_once():
     planner.set_velocity(Twist2D(0.02), 7.3)
     planner.advance(20.0)
     first = min(slot.lift_off_s for step in planner.steps for slot in step.slots)
-    assert 7.3 < first <= 7.3 + 2.0
+    # After the weight shift (at most 1 s) and the first transfer (1.8 s at the joint limit).
+    assert 7.3 < first <= 7.3 + 3.0
     # The ZMP reference is continuous where the standstill was cut.
     times = np.linspace(7.0, 8.0, 201)
     zmp = planner.zmp(times)
