@@ -36,10 +36,10 @@ PARAMS = {'robot': 'robosimian', 'gait': 'crawl', 'swing': 'polynomial',
 VELOCITY_M_S = 0.04
 START_TIMEOUT_S = 60.0
 #: Walking observed after a restart [s]: two crawl steps.
-RECOVERY_S = 8.0
+RECOVERY_S = 15.0
 #: "It walks on": at least this far in RECOVERY_S after a restart [m]. The crawl asked 0.04
-#: m/s walks 0.0317 (joint limit), in bursts, and restarts from standstill (weight shift):
-#: 8-20 cm measured; a robot that does not walk on makes < 1 cm.
+#: m/s walks about 0.012 (RoboSimian's joint limit), in bursts, and restarts from standstill
+#: (weight shift and a 1.8 s transfer); a robot that does not walk on makes < 1 cm.
 WALKS_ON_M = 0.05
 
 
@@ -308,9 +308,11 @@ def test_each_node_killed_and_restarted_in_turn_the_walk_goes_on(graph):
     # balanced (the published footsteps end within the ZMP reference: the base no longer slid
     # back ~8 cm under a held COM reference).
     assert planner['foothold_jump_m'] < 0.01
-    # 2.2 cm measured: the IK finishes every swing that lifted off within the ZMP horizon
-    # (value-table swings outlast it) on the held reference; 8.4 cm before the fixes.
-    assert planner['min_x_after'] > planner['x_before'] - 0.04
+    # The IK finishes every swing that lifted off within the ZMP horizon (value-table swings
+    # outlast it) on the held reference: 2.2 cm back with the earlier, lighter-limbed
+    # approximation, 6.8 cm with RoboSimian (its body moves twice as far as its COM);
+    # 8.4 cm for the approximation before the fixes.
+    assert planner['min_x_after'] > planner['x_before'] - 0.08
     _assert_walks_on(planner, back_m=0.02)
 
     ik = _kill_and_restart(graph, 'whole_body_ik', 'kinematic_simulator', '/joint_commands')
@@ -413,4 +415,5 @@ def test_start_order_does_not_change_the_walk(tmp_path, monkeypatch):
         np.testing.assert_allclose(feet_a[foot], feet_b[foot], atol=2e-6)
     # The same distance at the same times of the walk (from its first lift-off).
     np.testing.assert_allclose(x_a, x_b, atol=0.01)
-    assert x_a[-1] > x_a[0] + VELOCITY_M_S * 2.0
+    # It walks (3.4 cm in those 4 s measured: the crawl asked 0.04 m/s walks about 0.012).
+    assert x_a[-1] > x_a[0] + 0.02

@@ -38,9 +38,11 @@ from gait_nodes.planning.layout import FootLayout
 MIN_TRANSFER_S = 0.3
 #: The fixed point is found when the cycle changes by less than this [s].
 CYCLE_TOLERANCE_S = 1e-6
+#: The body's move is timed again until its time changes by less than this [s].
+BODY_MOVE_TOLERANCE_S = 1e-3
 #: Longest cycle [s] before a rhythm is declared infeasible.
 MAX_CYCLE_S = 2.0 * 60.0
-MAX_ITERATIONS = 100
+MAX_ITERATIONS = 500
 
 
 @dataclass(frozen=True)
@@ -151,17 +153,24 @@ def walking_rhythm(gait: str, layout: FootLayout, params: GaitParameters, twist,
 
     in_place = timing.lift_and_lower_s()
     rhythm = rhythm_for_swing(gait, in_place, in_place, timing.name)
+    # The body's move is timed at each fixed point of the swings (a crawl's sway costs a
+    # milliseconds-long geometric construction), then the swings' fixed point is found again
+    # with it, until it no longer changes.
+    body_move_s = 0.0
     for _ in range(MAX_ITERATIONS):
         displacements, turn = cycle_displacements(layout, params, twist, rhythm.cycle_s)
         try:
             swing_s = swing_time_s(timing, displacements, turn)
-            body_move_s = timing.steady_transfer_s(transfer_move(gait, layout, params, twist,
-                                                                 rhythm))
+            following = rhythm_for_swing(gait, swing_s, in_place, timing.name, body_move_s)
+            if abs(following.cycle_s - rhythm.cycle_s) < CYCLE_TOLERANCE_S:
+                needed = timing.steady_transfer_s(transfer_move(gait, layout, params, twist,
+                                                                following))
+                if abs(needed - body_move_s) < BODY_MOVE_TOLERANCE_S:
+                    return following
+                body_move_s = needed
+                following = rhythm_for_swing(gait, swing_s, in_place, timing.name, needed)
         except SwingPolicyError as exc:
             raise GaitParameterError(f'no gait rhythm walks {twist.as_tuple()}: {exc}') from None
-        following = rhythm_for_swing(gait, swing_s, in_place, timing.name, body_move_s)
-        if abs(following.cycle_s - rhythm.cycle_s) < CYCLE_TOLERANCE_S:
-            return following
         if following.cycle_s > MAX_CYCLE_S:
             break
         rhythm = following

@@ -14,8 +14,9 @@ Two models, both for robots with closed-form limb IK (``extra.limb_ik``, thesis 
   places around the nominal foot position.
 
 Either swing is timed through the whole-body IK, not the limb alone: while a limb (15 % of
-RoboSimian's mass) swings, the body moves the other way so that the full-model COM
-stays on its reference (thesis III.B.1), which changes the swinging limb's joint speeds. The time is the least one at which no joint of any limb exceeds its limit, times
+RoboSimian's mass) swings, the body moves the other way so that the full-model COM stays on
+its reference (thesis III.B.1), which changes the swinging limb's joint speeds. The time is
+the least one at which no joint of any limb exceeds its limit, times
 ``1 + BODY_MOTION_MARGIN`` for what the probe at the nominal stance does not see: the crawl's
 sideways sway puts the body off the nominal stance during a swing, the other feet are a part of
 a stride off theirs, and the COM keeps walking. The planner probes every planned step where it
