@@ -232,8 +232,8 @@ def test_a_node_starved_at_a_random_phase_leaves_the_walk_going(node_name, at_s,
 def test_the_walk_paused_across_a_contact_change_walks_on():
     # bench/starve.py whole_body_ik 6.2 0.15 --pause, the value-table crawl: the IK starved
     # just after the rear left foot landed (at 6.1 s) pauses the walk; the planner resumes it
-    # from the measured stance (it used to plan a first step beyond the limbs' reach and exit with
-    # SwingPolicyError).
+    # from the measured stance (it used to plan a first step beyond the limbs' reach and exit
+    # with SwingPolicyError).
     result = _starved_walk('robosimian_crawl', 'whole_body_ik', 6.2, 0.15, True)
     print(result)
     assert not result['faults']
