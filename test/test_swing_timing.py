@@ -262,8 +262,9 @@ def test_every_transfer_has_the_time_its_body_move_needs():
 def test_a_retimed_step_keeps_its_footholds_and_the_path_waits():
     # Every swing probed twice as long as it is (as a body sway the rhythm's model does not see
     # would; the model has 1.4 times the probe's time at most): each step is re-timed, keeps
-    # the footholds the rhythm chose and delays the path by the time it adds. (Re-planned with the longer swing to footholds
-    # further ahead, the strides grew with every re-timing until a swing left the reach.)
+    # the footholds the rhythm chose and delays the path by the time it adds. (Re-planned with
+    # the longer swing to footholds further ahead, the strides grew with every re-timing until
+    # a swing left the reach.)
     timing = polynomial_timing()
     params = _joint_limit_params()
     step_s = timing.step_s
