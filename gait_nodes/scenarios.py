@@ -54,7 +54,7 @@ def _cmd(at_s: float, text_or_object) -> TimedCommand:
 
 SCENARIOS: dict[str, Scenario] = {s.name: s for s in (
     Scenario('robosimian_crawl',
-             'RoboSimian-like quadruped, crawl, preview-control COM, value-table swing',
+             'RoboSimian, crawl, preview-control COM, value-table swing',
              'robosimian', {'gait': 'crawl', 'swing': 'value_table', 'com_method': 'preview',
                             'timing': 'joint_limit'},
              (_vel(0.0, 0.04),)),

@@ -18,7 +18,7 @@ FAMILY = 2
 
 
 def robot():
-    """The shipped RoboSimian-like model."""
+    """The shipped RoboSimian model."""
     return load_robot_model('robosimian')
 
 

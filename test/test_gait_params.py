@@ -184,7 +184,7 @@ def test_schema_agrees_with_the_dataclass():
 
 
 def test_auto_follows_the_thesis_crossover_on_the_robot_that_has_it():
-    # RoboSimian-like robot with closed-form limb IK: 'auto' is whichever of the value-table
+    # RoboSimian, a robot with closed-form limb IK: 'auto' is whichever of the value-table
     # crawl and the ZMP trot is faster at its joint limit; a robot without it: its first gait.
     from gait_nodes.planning.gait_params import auto_gait
     from gait_nodes.robot.description import load_robot_description

@@ -47,7 +47,7 @@ def zmp_gait_joint_speed(robot, gait: str, step_length_m: float, step_period_s: 
     """Largest joint speed [rad/s] of a ZMP gait in steady walking (inf if out of reach).
 
     Args:
-        robot: A RobotModel with RoboSimian-like limb IK.
+        robot: A RobotModel with RoboSimian's limb IK.
         gait: 'crawl' or 'trot'.
         step_length_m: Stride of each foot per swing [m].
         step_period_s: One step, half a cycle [s].

@@ -34,7 +34,7 @@ class LimbTiming:
     """IK of swing-foot states in one family and move times at a joint velocity limit.
 
     Args:
-        robot: A :class:`gait_nodes.robot.model.RobotModel` with RoboSimian-like limbs
+        robot: A :class:`gait_nodes.robot.model.RobotModel` with RoboSimian's limbs
             (``extra.limb_ik``).
         family: IK family 0..7 (the thesis' k-th family is ``k - 1``).
         joint_velocity_limit_rad_s: The limit ``W`` every joint saturates at [rad/s].

@@ -218,7 +218,7 @@ def build_table(robot, family: int, step_height_m: float, joint_velocity_limit_r
     """Build a swing-leg value table for a robot, IK family, step height and limit.
 
     Args:
-        robot: :class:`gait_nodes.robot.model.RobotModel` with RoboSimian-like limb IK.
+        robot: :class:`gait_nodes.robot.model.RobotModel` with RoboSimian's limb IK.
         family: IK family 0..7.
         step_height_m: Swing plane above the ground [m] (lift and lowering distance).
         joint_velocity_limit_rad_s: The limit every joint saturates at [rad/s].
