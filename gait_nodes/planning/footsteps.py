@@ -351,6 +351,7 @@ class GaitPlanner:
         self._keep_out_m = check_walkable(self._terrain, robot, params)
         self._timing = swing_timing
         self._rhythms: dict = {}
+        self._sways: dict = {}  # the steady crawl's sway (rhythm.transfer_move)
         self._clamped: dict = {}
         self._requested = Twist2D()
         self._twist = Twist2D()
@@ -426,7 +427,8 @@ class GaitPlanner:
             gait = params.resolved_gait(self.robot)
             try:
                 self._rhythms[key] = rhythm_module.walking_rhythm(gait, self.layout, params,
-                                                                  twist, self._timing)
+                                                                  twist, self._timing,
+                                                                  self._sways)
             except GaitParameterError as exc:
                 self._rhythms[key] = exc
         result = self._rhythms[key]

@@ -38,6 +38,8 @@ from gait_nodes.planning.layout import FootLayout
 MIN_TRANSFER_S = 0.3
 #: The fixed point is found when the cycle changes by less than this [s].
 CYCLE_TOLERANCE_S = 1e-6
+#: Decimals of the stride [m], swing and transfer [s] a crawl's sway is constructed for.
+SWAY_ROUNDING = (3, 2, 2)
 #: The body's move is timed again until its time changes by less than this [s].
 BODY_MOVE_TOLERANCE_S = 1e-3
 #: Longest cycle [s] before a rhythm is declared infeasible.
@@ -126,24 +128,38 @@ def swing_time_s(timing, displacements: np.ndarray, turn_rad: float,
 
 
 def transfer_move(gait: str, layout: FootLayout, params: GaitParameters, twist,
-                  rhythm: Rhythm) -> np.ndarray:
+                  rhythm: Rhythm, memo: dict | None = None) -> np.ndarray:
     """(2,) the COM's move in one transfer of steady walking at ``rhythm``, body frame [m].
 
     Half the body's cycle displacement (two transfers a cycle); a crawl's ZMP also sways
     between the diagonals (:func:`gait_nodes.planning.zmp_reference.steady_crawl_zmp_move`,
-    for a straight crawl of the same stride).
+    for a straight crawl of the same stride, its stride and times rounded to
+    :data:`SWAY_ROUNDING`, so that ``memo`` (a dict kept between calls) can keep it: the
+    construction takes milliseconds and every new velocity command asks it often).
     """
     from gait_nodes.planning.zmp_reference import steady_crawl_zmp_move
 
     move = 0.5 * rhythm.cycle_s * np.array([twist.vx_m_s, twist.vy_m_s])
     if gait != 'crawl':
         return move
-    return steady_crawl_zmp_move(layout, rhythm.apply(params), 2.0 * float(np.hypot(*move)))
+    stride_m, swing_s, transfer_s = (round(value, digits) for value, digits in zip(
+        (2.0 * float(np.hypot(*move)), rhythm.swing_s, rhythm.transfer_s), SWAY_ROUNDING,
+        strict=True))
+    key = (params, stride_m, swing_s, transfer_s)
+    memo = {} if memo is None else memo
+    if key not in memo:
+        if len(memo) > 4096:
+            memo.clear()
+        steady = Rhythm(swing_s, transfer_s, rhythm.slots, rhythm.source).apply(params)
+        memo[key] = steady_crawl_zmp_move(layout, steady, stride_m)
+    return memo[key]
 
 
 def walking_rhythm(gait: str, layout: FootLayout, params: GaitParameters, twist,
-                   timing) -> Rhythm:
+                   timing, memo: dict | None = None) -> Rhythm:
     """The steady rhythm of ``gait`` at ``twist`` (the fixed point, see the module docstring).
+
+    ``memo``: kept between calls for :func:`transfer_move`.
 
     Raises:
         GaitParameterError: No rhythm exists (the cycle grows without bound: a velocity the
@@ -164,7 +180,7 @@ def walking_rhythm(gait: str, layout: FootLayout, params: GaitParameters, twist,
             following = rhythm_for_swing(gait, swing_s, in_place, timing.name, body_move_s)
             if abs(following.cycle_s - rhythm.cycle_s) < CYCLE_TOLERANCE_S:
                 needed = timing.steady_transfer_s(transfer_move(gait, layout, params, twist,
-                                                                following))
+                                                                following, memo))
                 if abs(needed - body_move_s) < BODY_MOVE_TOLERANCE_S:
                     return following
                 body_move_s = needed
