@@ -214,6 +214,13 @@ def value_iteration(timing: LimbTiming, grid: SwingGrid, actions: SwingActions,
     """Converged cost-to-go ``V`` on the grid (see the module docstring).
 
     Args:
+        timing: IK and move times of one family at a limit.
+        grid: The state mesh.
+        actions: The action set.
+        goal_index: The goal's node (its value held at 0).
+        tolerance_s: Stop when no value changes by more than this in a sweep [s].
+        max_iterations: Most sweeps.
+        progress: Show a tqdm progress bar.
         costs: ``(costs, feasible)`` of :func:`one_step_costs` for this timing, grid and
             actions, when already computed (they do not depend on the goal); None: computed.
 
