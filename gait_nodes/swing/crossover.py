@@ -43,7 +43,8 @@ SAMPLE_S = 0.01
 
 
 def zmp_gait_joint_speed(robot, gait: str, step_length_m: float, step_period_s: float,
-                         family: int, step_height_m: float = 0.1, cycles: int = 4) -> float:
+                         family: int, step_height_m: float = 0.1, cycles: int = 4,
+                         stance_only: bool = False) -> float:
     """Largest joint speed [rad/s] of a ZMP gait in steady walking (inf if out of reach).
 
     Args:
@@ -54,6 +55,8 @@ def zmp_gait_joint_speed(robot, gait: str, step_length_m: float, step_period_s: 
         family: IK family of every limb.
         step_height_m: Swing height of the polynomial swing [m].
         cycles: Gait cycles walked; the joint speed is taken over the last half of them.
+        stance_only: Only the stance limbs' joints count (thesis IV.A.2, Fig. 10: the joint
+            speed that carrying the body on the ZMP plan needs), not the swinging limb's.
     """
     description = robot.description
     try:
@@ -74,14 +77,17 @@ def zmp_gait_joint_speed(robot, gait: str, step_length_m: float, step_period_s: 
     timing = LimbTiming(robot, family, 1.0)
     ik = timing.ik
     feet = np.empty((len(times), len(plan.foot_names), 3))
+    swinging = np.zeros((len(times), len(plan.foot_names)), dtype=bool)
     for k, t in enumerate(times):
         feet[k] = plan.stance_positions_at(t)
     for swing in plan.swings():
+        # Samples touching the swing (lift-off and touch-down included) for stance_only.
+        f = plan.foot_names.index(swing.foot)
+        swinging[(times >= swing.lift_off_s) & (times <= swing.touch_down_s), f] = True
         inside = (times > swing.lift_off_s) & (times < swing.touch_down_s)
         if not inside.any():
             continue
         _, coefficients = polynomial_swing(swing, 0, step_height_m)
-        f = plan.foot_names.index(swing.foot)
         feet[inside, f] = evaluate(coefficients, times[inside] - swing.lift_off_s)[:, :3]
     body = np.column_stack([com.positions_in_world,
                             np.full(len(times), description.body_height_m)])
@@ -91,7 +97,11 @@ def zmp_gait_joint_speed(robot, gait: str, step_length_m: float, step_period_s: 
         q, feasible = ik.solve(targets, np.zeros(len(targets)), family, foot)
         if not feasible.all():
             return float('inf')
-        worst = max(worst, float(np.abs(np.diff(q[:, :6], axis=0)).max() / SAMPLE_S))
+        speeds = np.abs(np.diff(q[:, :6], axis=0)).max(axis=1) / SAMPLE_S
+        if stance_only:
+            stance = ~swinging[window, f]
+            speeds = speeds[stance[:-1] & stance[1:]]
+        worst = max(worst, float(speeds.max(initial=0.0)))
     return worst
 
 
