@@ -132,16 +132,21 @@ class ZmpGaitTable:
 
 
 @functools.lru_cache(maxsize=8)
-def zmp_gait_table(robot_name: str, gait: str, family: int, step_height_m: float
-                   ) -> ZmpGaitTable:
-    """:class:`ZmpGaitTable` of a robot (cached per process)."""
+def zmp_gait_table(robot_name: str, gait: str, family: int, step_height_m: float,
+                   stance_only: bool = False) -> ZmpGaitTable:
+    """:class:`ZmpGaitTable` of a robot (cached per process).
+
+    ``stance_only``: only the stance limbs' joint speed limits the gait (the thesis' Figs. 10
+    and 21), as if the swing leg were free; otherwise every limb's.
+    """
     from gait_nodes.robot.model import load_robot_model
 
     robot = load_robot_model(robot_name)
     reach = robot.description.reach.max_step_length_m
     lengths = np.array(STEP_FRACTIONS) * reach
     periods = np.array(STEP_PERIODS_S)
-    speeds = np.array([[zmp_gait_joint_speed(robot, gait, s, t, family, step_height_m)
+    speeds = np.array([[zmp_gait_joint_speed(robot, gait, s, t, family, step_height_m,
+                                              stance_only=stance_only)
                         for t in periods] for s in lengths])
     return ZmpGaitTable(gait, lengths, periods, speeds)
 
