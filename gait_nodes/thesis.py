@@ -539,6 +539,8 @@ def write_figures(results: Results, out_dir: Path) -> list[Path]:
         axes.plot(steps, finite([e.corrected_m for e in errors]), 'o-',
                   label=f'+ one multi-mass correction, T {period:g} s')
     axes.axhline(FOOT_RADIUS_M, color='k', lw=0.8, ls=':', label='foot radius 0.055 m')
+    # Log scale: where the full model's IK loses a foot the error jumps by orders.
+    axes.set_yscale('log')
     axes.set(xlabel='step size [m]', ylabel='max |ZMP ref - full-model ZMP| [m]',
              title='Fig. 8: ZMP error of the simplified models (ZMP crawl)')
     axes.legend(fontsize=8)
