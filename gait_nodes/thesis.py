@@ -7,6 +7,8 @@
   one multi-mass correction (:mod:`gait_nodes.com.multimass`, our stand-in for the nine-link
   model), ZMP crawl (:mod:`gait_nodes.swing.crossover`'s plan), steady cycles only;
 - Fig. 10: largest stance-limb joint speed of that ZMP crawl against step size;
+- Fig. 12: joint travel per metre of a small move along the swing's line (the thesis' reason
+  for the drop of Fig. 14: the joints move more close to the body);
 - Figs. 14, 17-19: crawl speed (thesis eq. (2)) against step size from value tables on the
   thesis' setting (:meth:`GridSpec.thesis`), IK families 2 and 7 (the thesis' 3rd and 8th),
   step heights 0.1 and 0.06 m;
@@ -53,6 +55,7 @@ THESIS = {
     'fig8_useful_step': 'about 0.4 m (error < foot radius 0.055 m)',
     'fig10_speed_at_0.2': 'about 1 rad/s',
     'fig10_largest_step': 'slightly below 0.2 m',
+    'fig12_travel': 'more joint travel close to the body',
     'fig14_optimum': '0.34 m (interior)',
     'fig15_outward': 'curves outward in y',
     'fig16_straight': 'straight is slower',
@@ -277,6 +280,27 @@ def build_tables(robot, settings: Settings, centre_x_m: float, log) -> Tables:
     return result
 
 
+def joint_travel_along_x(robot, family: int, step_m: float = 0.01
+                         ) -> tuple[np.ndarray, np.ndarray]:
+    """Thesis Figs. 11-12: largest joint travel per metre of a small move along x [rad/m].
+
+    At y -0.5 m, z -0.6 m (the swing's line), yaw 0, x from 0.2 to 0.8 m every 0.01 m; NaN
+    where the family does not reach either end.
+    """
+    from gait_nodes.swing.kinematics import LimbTiming
+    from gait_nodes.swing.value_iteration import THESIS_GOAL_Y_M, THESIS_GOAL_Z_M
+
+    timing = LimbTiming(robot, family, 1.0)
+    x = np.round(np.arange(0.2, 0.8 + 1e-9, 0.01), 6)
+    states = np.column_stack([x, np.full_like(x, THESIS_GOAL_Y_M),
+                              np.full_like(x, THESIS_GOAL_Z_M), np.zeros_like(x)])
+    q, ok = timing.joints(states)
+    moved = states + np.array([step_m, 0.0, 0.0, 0.0])
+    q_next, ok_next = timing.joints(moved)
+    travel = np.abs(q_next - q).max(axis=1) / step_m
+    return x, np.where(ok & ok_next, travel, np.nan)
+
+
 def straight_swing(start: np.ndarray, goal: np.ndarray, spacing_m: float = 0.01) -> np.ndarray:
     """(W, 4) waypoints on the straight line from ``start`` to ``goal``, yaw interpolated."""
     count = max(int(np.ceil(np.linalg.norm(goal[:3] - start[:3]) / spacing_m)), 1)
@@ -302,6 +326,7 @@ class Results:
     perturbations: list = field(default_factory=list)
     perturbations_of: tuple = ()                         # (family, height) of the path
     families_q: tuple | None = None
+    joint_travel: dict = field(default_factory=dict)     # family -> (x, rad/m along x)
     # (limit, value-table crawl, ZMP crawl limited by its stance limbs, by every limb) [m/s]
     crossover: list = field(default_factory=list)
     seconds: dict = field(default_factory=dict)
@@ -347,6 +372,8 @@ def run(robot, settings: Settings, log) -> Results:
                                               settings.amplitude_m)
     results.perturbations_of = best_key
 
+    for family in FAMILIES:
+        results.joint_travel[family] = joint_travel_along_x(robot, family)
     ik = policy.timing.ik
     point = np.array([[0.6, -0.54, -0.6]])
     results.families_q = tuple(ik.solve(point, 0.0, f)[0][0, :6] for f in FAMILIES)
@@ -446,6 +473,14 @@ def rows(results: Results) -> list[tuple[str, str, str, str]]:
                 f'{speeds[step_02]:.2f} rad/s', THESIS['fig10_speed_at_0.2']))
     out.append(('Fig. 10', 'largest step within 1 rad/s',
                 f'{max(within):g} m' if within else 'none', THESIS['fig10_largest_step']))
+    x, travel = results.joint_travel[FAMILIES[0]]
+    peak = int(np.nanargmax(np.where(x < 0.6, travel, np.nan)))
+    behind = np.nanmax(travel[x <= 0.3 + 1e-9])
+    ahead = np.nanmedian(travel[(x >= 0.45) & (x <= 0.75)])
+    out.append(('Fig. 12', f'joint travel per metre along x, family {FAMILIES[0]}, y -0.5 z '
+                '-0.6', f'peak {travel[peak]:.1f} rad/m at x {x[peak]:.2f} m; <= '
+                f'{behind:.1f} at x <= 0.3 m; median {ahead:.1f} at x 0.45-0.75 m',
+                THESIS['fig12_travel']))
     family, height = FAMILIES[0], s.step_heights_m[0]
     out.append(('Fig. 14', f'optimal step, family {family} (thesis {family + 1}), '
                 f'{height:g} m, centred', _optimum_text(results.centred[family, height]),
@@ -557,6 +592,17 @@ def write_figures(results: Results, out_dir: Path) -> list[Path]:
     axes.legend(fontsize=8)
     axes.grid(alpha=0.3)
     save(figure, 'fig10_joint_speed.png')
+
+    figure, axes = plt.subplots(figsize=(7, 4.5))
+    for family, (x, travel) in results.joint_travel.items():
+        axes.plot(x, travel, label=f'family {family} (thesis {family + 1})')
+    axes.set_yscale('log')
+    axes.set(xlabel='x [m] (y -0.5 m, z -0.6 m, yaw 0)',
+             ylabel='max joint travel per metre along x [rad/m]',
+             title='Fig. 12: joint travel of a small move along the swing line')
+    axes.grid(alpha=0.3)
+    axes.legend()
+    save(figure, 'fig12_joint_travel.png')
 
     def speed_plot(name, title, keys):
         figure, axes = plt.subplots(figsize=(7, 4.5))

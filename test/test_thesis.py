@@ -13,7 +13,8 @@ import pytest
 
 from gait_nodes import thesis
 
-FIGURES = ('fig08_zmp_error.png', 'fig10_joint_speed.png', 'fig14_step_vs_speed.png',
+FIGURES = ('fig08_zmp_error.png', 'fig10_joint_speed.png', 'fig12_joint_travel.png',
+           'fig14_step_vs_speed.png',
            'fig15_optimal_swing.png', 'fig16_curved_vs_straight.png', 'fig17_families.png',
            'fig18_step_heights.png', 'fig19_overall.png', 'fig20_perturbations.png',
            'fig21_zmp_vs_value_iteration.png')
