@@ -18,12 +18,13 @@
 - Fig. 21: the ZMP crawl against the value-table crawl over joint velocity limits.
 
 The step size of a swing is its x travel; the thesis sets the goal's x "to be different" for each
-step (IV.B.3) without saying where: here every swing is centred on the nominal foot position of
-the robot YAML (start ``x0 - s/2``, goal ``x0 + s/2``), and the best over every goal of the grid
-is printed too. The thesis gives no step period for its ZMP gait: Figs. 8 and 10 use
-:data:`ZMP_STEP_PERIODS_S` (both drawn, the first printed). The one-step costs of the value
-iteration are cached in ``$XDG_CACHE_HOME/gait_nodes/thesis/`` (they take a minute per family on
-the default grid).
+step (IV.B.3) without saying where: here every swing is centred on the middle of the thesis' x
+range, 0.5 m (start ``0.5 - s/2``, goal ``0.5 + s/2``: every step up to 0.6 m fits), and the best
+over every goal of the grid is printed too. The ZMP gaits plan with the thesis' step range as
+the robot's reach (:func:`thesis_description`). The thesis gives no step period for its ZMP
+gait: Figs. 8 and 10 use :data:`ZMP_STEP_PERIODS_S` (both drawn, the first printed). The
+one-step costs of the value iteration are cached in ``$XDG_CACHE_HOME/gait_nodes/thesis/`` (a
+minute per family on the default grid).
 
 Exit status: 0 on success, 2 on bad input (one line on stderr).
 """
@@ -47,6 +48,10 @@ PROG = 'python -m gait_nodes.thesis'
 ZMP_STEP_PERIODS_S = (1.0, 2.0)
 #: The thesis' IK families compared (its 3rd and 8th; ours count from 0).
 FAMILIES = (2, 7)
+#: The longest step the thesis' x range (0.2-0.8 m) holds [m].
+THESIS_LONGEST_STEP_M = 0.6
+#: Strides of the ZMP crawl of Fig. 21 [m] (the thesis' range; the crossover module's periods).
+ZMP_CROSSOVER_STEPS_M = (0.05, 0.1, 0.15, 0.2, 0.25, 0.3, 0.35, 0.4, 0.45, 0.5)
 #: The foot's radius: the thesis' bound on a useful ZMP error (IV.A.1) [m].
 FOOT_RADIUS_M = 0.055
 
@@ -140,17 +145,34 @@ class ZmpErrors:
     corrected_m: float
 
 
+def thesis_description(robot):
+    """The robot's description with the thesis' step range as its reach.
+
+    The thesis studies steps up to 0.6 m (its x range); the walker's ``reach`` in the robot
+    YAML is what the footstep planner allows, not what the limbs can do, so the ZMP gaits of
+    Figs. 8, 10 and 21 plan with a reach of :data:`THESIS_LONGEST_STEP_M` and meet the limbs'
+    real limits in the IK (an unreachable walk is infeasible there).
+    """
+    from dataclasses import replace
+
+    description = robot.description
+    reach = replace(description.reach, max_step_length_m=max(
+        THESIS_LONGEST_STEP_M, description.reach.max_step_length_m))
+    return replace(description, reach=reach)
+
+
 def zmp_crawl_plan(robot, step_m: float, step_period_s: float, cycles: int):
     """(planner, params) of a straight ZMP crawl at ``step_m`` per swing."""
     from gait_nodes.planning.footsteps import Twist2D, plan_walk
     from gait_nodes.planning.gait_params import GaitParameters
     from gait_nodes.swing.crossover import DUTY_FACTORS
 
+    description = thesis_description(robot)
     params = GaitParameters.for_robot(
-        robot.description, gait='crawl', step_length_m=step_m, step_period_s=step_period_s,
+        description, gait='crawl', step_length_m=step_m, step_period_s=step_period_s,
         duty_factor=DUTY_FACTORS['crawl'], max_vx_m_s=10.0)
     speed = step_m / params.cycle_s
-    planner = plan_walk(robot.description, params, [(0.0, Twist2D(speed, 0.0, 0.0))],
+    planner = plan_walk(description, params, [(0.0, Twist2D(speed, 0.0, 0.0))],
                         (cycles + 1) * params.cycle_s)
     return planner, params
 
@@ -334,7 +356,7 @@ class Results:
 
 def run(robot, settings: Settings, log) -> Results:
     """Compute every figure's data (see the module docstring)."""
-    from gait_nodes.swing.crossover import zmp_gait_joint_speed, zmp_gait_table
+    from gait_nodes.swing.crossover import zmp_gait_joint_speed, zmp_gait_table_for
     from gait_nodes.swing.policy import SwingPolicy
     from gait_nodes.swing.sweep import centred, envelope, perturbation_test
 
@@ -344,12 +366,13 @@ def run(robot, settings: Settings, log) -> Results:
         for step in settings.zmp_steps_m:
             results.zmp_errors[period, step] = zmp_model_errors(robot, step, period)
             results.zmp_joint_speeds[period, step] = zmp_gait_joint_speed(
-                robot, 'crawl', step, period, FAMILIES[0], stance_only=True)
+                robot, 'crawl', step, period, FAMILIES[0], stance_only=True,
+                description=thesis_description(robot))
     results.seconds['zmp'] = time.perf_counter() - started
     log(f'Figs. 8 and 10 in {results.seconds["zmp"]:.1f} s')
 
     started = time.perf_counter()
-    results.centre_x_m = front_right_nominal_x(robot)
+    results.centre_x_m = float(np.mean(settings.grid_spec().x_range_m[:2]))
     results.tables = tables = build_tables(robot, settings, results.centre_x_m, log)
     for family in FAMILIES:
         for height in settings.step_heights_m:
@@ -380,7 +403,9 @@ def run(robot, settings: Settings, log) -> Results:
 
     started = time.perf_counter()
     per_limit = _best_speed(best) / robot.description.joint_velocity_limit_rad_s
-    stance, every = (zmp_gait_table(robot.name, 'crawl', FAMILIES[0], 0.1, stance_only)
+    stance, every = (zmp_gait_table_for(robot, 'crawl', FAMILIES[0], 0.1,
+                                        ZMP_CROSSOVER_STEPS_M, stance_only=stance_only,
+                                        description=thesis_description(robot))
                      for stance_only in (True, False))
     for limit in settings.limits_rad_s:
         fastest = [table.fastest(limit) for table in (stance, every)]
@@ -388,11 +413,6 @@ def run(robot, settings: Settings, log) -> Results:
                                   *(f[0] if f else 0.0 for f in fastest)))
     results.seconds['crossover'] = time.perf_counter() - started
     return results
-
-
-def front_right_nominal_x(robot) -> float:
-    """The x of the front-right foot's nominal position in the base frame [m]."""
-    return float(max(abs(f.nominal_position_in_base[0]) for f in robot.description.feet))
 
 
 def _best_speed(curve) -> float:

@@ -152,10 +152,10 @@ def centred(curves: list[SpeedCurve], centre_x_m: float, tolerance_m: float = 1e
             ) -> SpeedCurve:
     """Per step, the swing centred on ``centre_x_m``: start ``c - s/2``, goal ``c + s/2``.
 
-    The thesis sets the goal's x differently for each step size (IV.B.3); centring every swing
-    on the nominal foot position is our reading of where: the foot's stroke relative to the body
-    is then the same each cycle and symmetric about the stance. Curves of several goals give one
-    point each (where their start is the mirror of their goal about the centre).
+    The thesis sets the goal's x differently for each step size (IV.B.3) without saying where;
+    centring every swing on one x (e.g. the middle of the grid's x range) is our reading.
+    Curves of several goals give one point each (where their start is the mirror of their goal
+    about the centre).
     """
     picked = [c for c in curves if len(c.steps_m)]
     steps = np.concatenate([c.steps_m for c in picked])
