@@ -641,7 +641,7 @@ def write_figures(results: Results, out_dir: Path) -> list[Path]:
                  title=title)
         axes.set_ylim(bottom=0)
         axes.grid(alpha=0.3)
-        axes.legend(fontsize=8, title='solid: centred on the stance; dotted: any goal',
+        axes.legend(fontsize=8, title='solid: centred at x 0.5 m; dotted: any goal',
                     title_fontsize=7)
         save(figure, name)
 
