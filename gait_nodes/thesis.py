@@ -474,6 +474,8 @@ def _optimum_text(curve) -> str:
 
 def rows(results: Results) -> list[tuple[str, str, str, str]]:
     """``(figure, quantity, ours, thesis)`` rows of the printed table."""
+    from gait_nodes.swing.sweep import FT_PER_MIN
+
     s = results.settings
     period = ZMP_STEP_PERIODS_S[0]
     out = []
@@ -532,10 +534,13 @@ def rows(results: Results) -> list[tuple[str, str, str, str]]:
     out.append(('Fig. 5', 'families 2 and 7 at (0.6, -0.54, -0.6): joints differing > 0.01 rad',
                 f'{int(np.sum(np.abs(q2 - q7) > 0.01))} of 6 (largest '
                 f'{np.abs(q2 - q7).max():.2f} rad)', THESIS['fig5_families_differ']))
+    family, height = results.perturbations_of
+    curve = results.centred[family, height]
+    path_text = f'family {family}, {height:g} m, {curve.steps_m[curve.best]:.2f} m step'
     for result in results.perturbations:
-        out.append(('IV.B.7', f'perturbed in {result.mode} (+-{s.amplitude_m:g} m, '
-                    f'{len(result.speeds_m_s)} copies)',
-                    f'{-result.mean_loss_m_s * 60 / 0.3048:+.3f} ft/min, '
+        out.append(('IV.B.7', f'optimal swing ({path_text}) perturbed in {result.mode} '
+                    f'(+-{s.amplitude_m:g} m, {len(result.speeds_m_s)} copies): mean change',
+                    f'{-result.mean_loss_m_s * FT_PER_MIN:+.3f} ft/min, '
                     f'{100 * result.slower_fraction:.0f} % slower',
                     THESIS[f'perturb_{result.mode}']))
     for column, limbs in ((2, 'stance limbs'), (3, 'every limb')):
