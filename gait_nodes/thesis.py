@@ -41,6 +41,7 @@ import numpy as np
 
 from gait_nodes.cli import ArgumentParser, fail
 from gait_nodes.errors import GaitNodesError
+from gait_nodes.swing.value_iteration import THESIS_STEP_HEIGHTS_M
 
 PROG = 'python -m gait_nodes.thesis'
 
@@ -104,7 +105,7 @@ class Settings:
     limits_rad_s: tuple[float, ...] = tuple(np.round(np.arange(1.0, 3.01, 0.1), 2))
     trials: int = 40
     amplitude_m: float = 0.02
-    step_heights_m: tuple[float, ...] = (0.1, 0.06)
+    step_heights_m: tuple[float, ...] = THESIS_STEP_HEIGHTS_M
 
     @classmethod
     def quick(cls) -> Settings:
