@@ -122,3 +122,52 @@ def test_build_refuses_bad_settings():
         build_table(robot(), 8, 0.1, 1.0, TINY_GRID, TINY_ACTIONS)
     with pytest.raises(SwingTableError, match='radii'):
         SwingActions(radii_m=(0.0, 0.1))
+
+
+def small_thesis_table(step_height_m=0.1):
+    """The thesis' setting (planes, goal, lift) on a coarse mesh: 7 x 6 x 2 x 3 nodes."""
+    from gait_nodes.swing.value_iteration import GridSpec, thesis_goal
+
+    spec = GridSpec.thesis(x_count=7, y_count=6, yaw_count=3)
+    goal = thesis_goal(0.6)
+    return build_table(robot(), 2, step_height_m, 1.0, spec, TINY_ACTIONS, goal,
+                       ground_z_m=goal[2] - step_height_m)
+
+
+def test_thesis_setting_satisfies_bellman_equation_at_convergence():
+    from gait_nodes.swing.value_iteration import THESIS_Z_PLANES_M
+
+    table, report = small_thesis_table()
+    assert table.converged
+    np.testing.assert_array_equal(table.grid.z_m, THESIS_Z_PLANES_M)
+    assert table.grid.x_m[[0, -1]].tolist() == [0.2, 0.8]
+    assert table.grid.y_m[[0, -1]].tolist() == [-0.65, -0.4]
+    # The goal's y and z are the start's (thesis IV.B.3): y -0.5 m on the upper plane.
+    assert table.goal.tolist() == [0.6, -0.5, -0.6, 0.0]
+    goal = table.grid.nearest_node(table.goal)
+    assert table.values_s[goal] == 0.0
+    timing = LimbTiming(robot(), table.family, table.joint_velocity_limit_rad_s,
+                        table.ground_z_m)
+    backup = independent_backup(table, timing)
+    finite = table.values_s < FEASIBLE_BELOW_S
+    finite[goal] = False
+    assert finite.sum() > 0.3 * table.grid.size
+    assert np.abs(backup - table.values_s)[finite].max() < 2e-4
+
+
+def test_thesis_step_heights_share_the_value_and_lift_from_below_the_plane():
+    from gait_nodes.swing.value_iteration import with_step_height
+
+    tall, _ = small_thesis_table(0.1)
+    low = with_step_height(tall, robot(), 0.06, tall.goal[2] - 0.06)
+    np.testing.assert_array_equal(low.values_s, tall.values_s)
+    assert low.ground_z_m == pytest.approx(-0.66) and tall.ground_z_m == pytest.approx(-0.7)
+    timing = LimbTiming(robot(), 2, 1.0, -0.66)
+    times, feasible = timing.path_times(timing.vertical_path(low.goal))
+    assert feasible and low.lower_s == pytest.approx(times.sum())
+    # Lifting 0.06 m is quicker than 0.1 m wherever both are possible; the lower plane
+    # (0.7 m below the body) lies below the 0.06 m step's ground: no lift-off there.
+    both = (low.lift_s < FEASIBLE_BELOW_S) & (tall.lift_s < FEASIBLE_BELOW_S)
+    assert both[:, :, 1].any()
+    assert np.all(low.lift_s[both & (tall.lift_s > 0)] < tall.lift_s[both & (tall.lift_s > 0)])
+    assert np.all(low.lift_s[:, :, 0] == INFEASIBLE_S)

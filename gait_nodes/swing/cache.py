@@ -23,6 +23,14 @@ def cache_dir() -> Path:
     return Path(base) / 'gait_nodes'
 
 
+def robot_digest(robot) -> str:
+    """12 hex digits naming the robot's URDF, YAML and the limb IK's family numbering."""
+    identity = hashlib.sha256(Path(robot.description.urdf_path).read_bytes())
+    identity.update(Path(robot.description.path).read_bytes())
+    identity.update(FAMILY_NUMBERING.encode())
+    return identity.hexdigest()[:12]
+
+
 def default_table_path(robot, family: int, step_height_m: float,
                        joint_velocity_limit_rad_s: float) -> Path:
     """The cache file of a table for these settings (the robot's hash is in the name).
@@ -30,10 +38,7 @@ def default_table_path(robot, family: int, step_height_m: float,
     The hash covers the URDF, the robot YAML (ground height, stance) and the limb IK's family
     numbering, so a table of another robot, stance or family is never taken for this one.
     """
-    identity = hashlib.sha256(Path(robot.description.urdf_path).read_bytes())
-    identity.update(Path(robot.description.path).read_bytes())
-    identity.update(FAMILY_NUMBERING.encode())
-    digest = identity.hexdigest()[:12]
+    digest = robot_digest(robot)
     return cache_dir() / (f'swing_{robot.name}_{digest}_f{family}_h{step_height_m:g}'
                           f'_w{joint_velocity_limit_rad_s:g}.npz')
 

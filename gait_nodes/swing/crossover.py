@@ -43,7 +43,8 @@ SAMPLE_S = 0.01
 
 
 def zmp_gait_joint_speed(robot, gait: str, step_length_m: float, step_period_s: float,
-                         family: int, step_height_m: float = 0.1, cycles: int = 4) -> float:
+                         family: int, step_height_m: float = 0.1, cycles: int = 4,
+                         stance_only: bool = False, description=None) -> float:
     """Largest joint speed [rad/s] of a ZMP gait in steady walking (inf if out of reach).
 
     Args:
@@ -54,8 +55,12 @@ def zmp_gait_joint_speed(robot, gait: str, step_length_m: float, step_period_s: 
         family: IK family of every limb.
         step_height_m: Swing height of the polynomial swing [m].
         cycles: Gait cycles walked; the joint speed is taken over the last half of them.
+        stance_only: Only the stance limbs' joints count (thesis IV.A.2, Fig. 10: the joint
+            speed that carrying the body on the ZMP plan needs), not the swinging limb's.
+        description: The robot description to plan with (default ``robot.description``), e.g.
+            one with a longer ``reach`` to evaluate steps the walker does not take.
     """
-    description = robot.description
+    description = description or robot.description
     try:
         params = GaitParameters.for_robot(
             description, gait=gait, step_length_m=step_length_m, step_period_s=step_period_s,
@@ -74,14 +79,17 @@ def zmp_gait_joint_speed(robot, gait: str, step_length_m: float, step_period_s: 
     timing = LimbTiming(robot, family, 1.0)
     ik = timing.ik
     feet = np.empty((len(times), len(plan.foot_names), 3))
+    swinging = np.zeros((len(times), len(plan.foot_names)), dtype=bool)
     for k, t in enumerate(times):
         feet[k] = plan.stance_positions_at(t)
     for swing in plan.swings():
+        # Samples touching the swing (lift-off and touch-down included) for stance_only.
+        f = plan.foot_names.index(swing.foot)
+        swinging[(times >= swing.lift_off_s) & (times <= swing.touch_down_s), f] = True
         inside = (times > swing.lift_off_s) & (times < swing.touch_down_s)
         if not inside.any():
             continue
         _, coefficients = polynomial_swing(swing, 0, step_height_m)
-        f = plan.foot_names.index(swing.foot)
         feet[inside, f] = evaluate(coefficients, times[inside] - swing.lift_off_s)[:, :3]
     body = np.column_stack([com.positions_in_world,
                             np.full(len(times), description.body_height_m)])
@@ -91,7 +99,11 @@ def zmp_gait_joint_speed(robot, gait: str, step_length_m: float, step_period_s: 
         q, feasible = ik.solve(targets, np.zeros(len(targets)), family, foot)
         if not feasible.all():
             return float('inf')
-        worst = max(worst, float(np.abs(np.diff(q[:, :6], axis=0)).max() / SAMPLE_S))
+        speeds = np.abs(np.diff(q[:, :6], axis=0)).max(axis=1) / SAMPLE_S
+        if stance_only:
+            stance = ~swinging[window, f]
+            speeds = speeds[stance[:-1] & stance[1:]]
+        worst = max(worst, float(speeds.max(initial=0.0)))
     return worst
 
 
@@ -121,19 +133,32 @@ class ZmpGaitTable:
         return float(speeds[i, j]), float(self.step_lengths_m[i]), float(self.step_periods_s[j])
 
 
+def zmp_gait_table_for(robot, gait: str, family: int, step_height_m: float, step_lengths_m,
+                       step_periods_s=STEP_PERIODS_S, stance_only: bool = False,
+                       description=None) -> ZmpGaitTable:
+    """:class:`ZmpGaitTable` over given strides and periods (see :func:`zmp_gait_joint_speed`).
+
+    ``stance_only``: only the stance limbs' joint speed limits the gait (the thesis' Figs. 10
+    and 21), as if the swing leg were free; otherwise every limb's.
+    """
+    lengths = np.array(step_lengths_m, dtype=float)
+    periods = np.array(step_periods_s, dtype=float)
+    speeds = np.array([[zmp_gait_joint_speed(robot, gait, s, t, family, step_height_m,
+                                              stance_only=stance_only, description=description)
+                        for t in periods] for s in lengths])
+    return ZmpGaitTable(gait, lengths, periods, speeds)
+
+
 @functools.lru_cache(maxsize=8)
 def zmp_gait_table(robot_name: str, gait: str, family: int, step_height_m: float
                    ) -> ZmpGaitTable:
-    """:class:`ZmpGaitTable` of a robot (cached per process)."""
+    """:class:`ZmpGaitTable` of a robot within its reach (cached per process)."""
     from gait_nodes.robot.model import load_robot_model
 
     robot = load_robot_model(robot_name)
     reach = robot.description.reach.max_step_length_m
-    lengths = np.array(STEP_FRACTIONS) * reach
-    periods = np.array(STEP_PERIODS_S)
-    speeds = np.array([[zmp_gait_joint_speed(robot, gait, s, t, family, step_height_m)
-                        for t in periods] for s in lengths])
-    return ZmpGaitTable(gait, lengths, periods, speeds)
+    return zmp_gait_table_for(robot, gait, family, step_height_m,
+                              np.array(STEP_FRACTIONS) * reach)
 
 
 @dataclass(frozen=True)

@@ -162,7 +162,8 @@ class SwingGrid:
 
 
 def make_grid(x_range_m, y_range_m, z_levels: int, z_spacing_m: float, yaw_range_rad,
-              swing_height_z_m: float, goal: np.ndarray | None = None) -> SwingGrid:
+              swing_height_z_m: float, goal: np.ndarray | None = None,
+              z_planes_m=None) -> SwingGrid:
     """A mesh from ranges, with the swing plane as its lowest z level.
 
     Args:
@@ -174,6 +175,9 @@ def make_grid(x_range_m, y_range_m, z_levels: int, z_spacing_m: float, yaw_range
         swing_height_z_m: Height of the swing plane in the base frame [m] (ground + step height).
         goal: Optional (4,) state; the node nearest to it on each axis is moved onto it so that
             the goal is a node (the value iteration holds its value at zero).
+        z_planes_m: Explicit z levels in the base frame [m] (strictly increasing), instead of
+            ``z_levels`` from the swing plane up (the thesis' planes 0.7 and 0.6 m below the
+            centre of body); None: ``z_levels`` and ``z_spacing_m``.
 
     Raises:
         SwingTableError: A range is empty or reversed, a count below 1, or the goal outside.
@@ -188,7 +192,10 @@ def make_grid(x_range_m, y_range_m, z_levels: int, z_spacing_m: float, yaw_range
     if int(z_levels) != z_levels or z_levels < 1 or not z_spacing_m > 0:
         raise SwingTableError(f'z levels must be >= 1 with a spacing > 0 m, got {z_levels} '
                               f'levels at {z_spacing_m} m')
-    z = swing_height_z_m + z_spacing_m * np.arange(int(z_levels))
+    if z_planes_m is None:
+        z = swing_height_z_m + z_spacing_m * np.arange(int(z_levels))
+    else:
+        z = np.array(_axis(z_planes_m, 'z_m'))
     x, y, yaw = axes
     if goal is not None:
         goal = np.asarray(goal, dtype=float)

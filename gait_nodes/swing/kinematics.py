@@ -38,12 +38,15 @@ class LimbTiming:
             (``extra.limb_ik``).
         family: IK family 0..7 (the thesis' k-th family is ``k - 1``).
         joint_velocity_limit_rad_s: The limit ``W`` every joint saturates at [rad/s].
+        ground_z_m: Ground height in the base frame [m] (where lifts start and lowerings
+            end); None: ``-body_height_m`` of the robot YAML.
 
     Raises:
         SwingTableError: The robot has no closed-form limb IK, or a bad family or limit.
     """
 
-    def __init__(self, robot, family: int, joint_velocity_limit_rad_s: float):
+    def __init__(self, robot, family: int, joint_velocity_limit_rad_s: float,
+                 ground_z_m: float | None = None):
         from gait_nodes.robot.whole_body_ik import robosimian_limb_ik
 
         try:
@@ -66,7 +69,13 @@ class LimbTiming:
         self.robot = robot
         self.family = int(family)
         self.joint_velocity_limit_rad_s = float(joint_velocity_limit_rad_s)
-        self.ground_z_m = -float(robot.description.body_height_m)
+        if ground_z_m is None:
+            ground_z_m = -float(robot.description.body_height_m)
+        if not (isinstance(ground_z_m, (int, float)) and math.isfinite(ground_z_m)
+                and ground_z_m < 0):
+            raise SwingTableError(f'ground height must be finite and < 0 m (below the body), '
+                                  f'got {ground_z_m!r}')
+        self.ground_z_m = float(ground_z_m)
 
     def joints(self, states: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(N, 6) walking joints [rad] and (N,) feasibility of (N, 4) front-right states."""
@@ -98,12 +107,12 @@ class LimbTiming:
     def vertical_times(self, states: np.ndarray) -> np.ndarray:
         """(N,) time [s] to move each state's foot straight down to the ground (or up from it).
 
-        Infeasible anywhere on the way: :data:`INFEASIBLE_S`.
+        Infeasible anywhere on the way, or below the ground: :data:`INFEASIBLE_S`.
         """
         states = np.atleast_2d(np.asarray(states, dtype=float))
-        result = np.empty(len(states))
+        result = np.full(len(states), INFEASIBLE_S)
         heights = np.round(states[:, 2], 12)
-        for height in np.unique(heights):
+        for height in np.unique(heights[heights >= self.ground_z_m - 1e-9]):
             rows = np.flatnonzero(heights == height)
             template = self.vertical_path(states[rows[0]])
             paths = np.repeat(template[None], len(rows), axis=0)

@@ -93,7 +93,8 @@ class SwingPolicy:
     def __init__(self, table: ValueTable, robot, exact_lookahead: bool = False):
         table.check_for(robot)
         self.table = table
-        self.timing = LimbTiming(robot, table.family, table.joint_velocity_limit_rad_s)
+        self.timing = LimbTiming(robot, table.family, table.joint_velocity_limit_rad_s,
+                                 table.ground_z_m)
         self.displacements = table.actions.displacements()
         self.exact_lookahead = exact_lookahead
         q_nodes, _ = self.timing.joints(table.grid.points())

@@ -146,3 +146,22 @@ def perturbation_test(policy: SwingPolicy, path: SwingPath, trials: int = 50,
             speeds.append(path_speed_m_s(policy, copy))
         results.append(PerturbationResult(mode, optimal, np.array(speeds)))
     return results
+
+
+def centred(curves: list[SpeedCurve], centre_x_m: float, tolerance_m: float = 1e-6
+            ) -> SpeedCurve:
+    """Per step, the swing centred on ``centre_x_m``: start ``c - s/2``, goal ``c + s/2``.
+
+    The thesis sets the goal's x differently for each step size (IV.B.3) without saying where;
+    centring every swing on one x (e.g. the middle of the grid's x range) is our reading.
+    Curves of several goals give one point each (where their start is the mirror of their goal
+    about the centre).
+    """
+    picked = [c for c in curves if len(c.steps_m)]
+    steps = np.concatenate([c.steps_m for c in picked])
+    starts = np.vstack([c.starts for c in picked])
+    speeds = np.concatenate([c.speeds_m_s for c in picked])
+    swing = np.concatenate([c.swing_s for c in picked])
+    rows = np.flatnonzero(np.abs(starts[:, 0] + 0.5 * steps - centre_x_m) < tolerance_m)
+    rows = rows[np.argsort(steps[rows])]
+    return SpeedCurve(steps[rows], speeds[rows], swing[rows], starts[rows])

@@ -24,7 +24,7 @@ reach the goal then keep that value instead of growing without bound, and the sw
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -35,6 +35,30 @@ from gait_nodes.swing.table import ValueTable
 
 #: Stop when no value changes by more than this in a sweep [s] (thesis Appendix A).
 TOLERANCE_S = 1e-4
+#: The thesis' swing planes: 0.7 and 0.6 m below the centre of body [m] (000, IV.B.1).
+THESIS_Z_PLANES_M = (-0.7, -0.6)
+#: The thesis' goal of the front-right foot: y and z of the swing's start (000, IV.B.3) [m].
+THESIS_GOAL_Y_M = -0.5
+THESIS_GOAL_Z_M = -0.6
+#: The thesis' step heights: the lift and the lowering, straight along z [m] (000, IV.B.5).
+THESIS_STEP_HEIGHTS_M = (0.1, 0.06)
+
+
+def thesis_actions() -> SwingActions:
+    """The thesis' actions: points on spheres of several radii with a yaw change (III.C.1).
+
+    Several radii, from half a node spacing to a few, so that small moves near the goal exist
+    (thesis IV.B.2, Fig. 13); 16 azimuths; elevations 0 and +-0.5 rad (a move between the two
+    swing planes, 0.1 m apart, lands between them and is interpolated); yaw changes of one yaw
+    node. The thesis does not give its counts: these are ours.
+    """
+    return SwingActions(radii_m=(0.025, 0.05, 0.1, 0.2), azimuth_count=16,
+                        elevations_rad=(-0.5, 0.0, 0.5), yaw_steps_rad=(-0.15, 0.0, 0.15))
+
+
+def thesis_goal(goal_x_m: float) -> np.ndarray:
+    """(4,) goal of the thesis' sweep: x given, y -0.5 m, z -0.6 m, yaw 0 (000, IV.B.3)."""
+    return np.array([float(goal_x_m), THESIS_GOAL_Y_M, THESIS_GOAL_Z_M, 0.0])
 
 
 @dataclass(frozen=True)
@@ -51,6 +75,9 @@ class GridSpec:
         z_levels: z levels from the swing plane (ground + step height) up.
         z_spacing_m: Their spacing [m].
         yaw_range_rad: ``(min, max, count)`` [rad].
+        z_planes_m: Explicit z levels in the base frame [m], overriding ``z_levels`` and
+            ``z_spacing_m`` (the thesis' two planes, :data:`THESIS_Z_PLANES_M`); None: levels
+            from the swing plane up.
     """
 
     x_range_m: tuple[float, float, int] = (0.2, 0.8, 13)
@@ -58,6 +85,26 @@ class GridSpec:
     z_levels: int = 3
     z_spacing_m: float = 0.05
     yaw_range_rad: tuple[float, float, int] = (-0.3, 0.3, 5)
+    z_planes_m: tuple[float, ...] | None = None
+
+    @classmethod
+    def thesis(cls, x_count: int = 31, y_count: int = 11, yaw_count: int = 7) -> GridSpec:
+        """The thesis' value-iteration mesh for RoboSimian's front-right limb (000, IV.B.1).
+
+        x 0.2-0.8 m and y -0.65 to -0.4 m in the body frame, the two swing planes 0.6 and
+        0.7 m below the centre of body (the swing, and the body's move, which is a swing 0.1 m
+        lower: thesis IV.B.1), yaw +-0.45 rad. The thesis gives the ranges, not the node
+        counts; the defaults put nodes 0.02 m apart in x, 0.025 m in y (so that the goal's
+        y = -0.5 m is a node) and 0.15 rad in yaw (one action yaw step).
+
+        Args:
+            x_count: Nodes along x.
+            y_count: Nodes along y (11 and 6 put a node at the goal's -0.5 m; other counts
+                have the nearest node moved onto it by :func:`make_grid`).
+            yaw_count: Nodes along yaw.
+        """
+        return cls(x_range_m=(0.2, 0.8, x_count), y_range_m=(-0.65, -0.4, y_count),
+                   yaw_range_rad=(-0.45, 0.45, yaw_count), z_planes_m=THESIS_Z_PLANES_M)
 
 
 def default_goal(robot, step_height_m: float, step_length_m: float = 0.3) -> np.ndarray:
@@ -161,9 +208,21 @@ class BuildReport:
 
 def value_iteration(timing: LimbTiming, grid: SwingGrid, actions: SwingActions,
                     goal_index: tuple[int, int, int, int], tolerance_s: float = TOLERANCE_S,
-                    max_iterations: int = 5000, progress: bool = False
+                    max_iterations: int = 5000, progress: bool = False,
+                    costs: tuple[np.ndarray, np.ndarray] | None = None
                     ) -> tuple[np.ndarray, BuildReport]:
     """Converged cost-to-go ``V`` on the grid (see the module docstring).
+
+    Args:
+        timing: IK and move times of one family at a limit.
+        grid: The state mesh.
+        actions: The action set.
+        goal_index: The goal's node (its value held at 0).
+        tolerance_s: Stop when no value changes by more than this in a sweep [s].
+        max_iterations: Most sweeps.
+        progress: Show a tqdm progress bar.
+        costs: ``(costs, feasible)`` of :func:`one_step_costs` for this timing, grid and
+            actions, when already computed (they do not depend on the goal); None: computed.
 
     Returns:
         ``(values, report)``: grid-shaped V [s] and the build figures.
@@ -175,7 +234,12 @@ def value_iteration(timing: LimbTiming, grid: SwingGrid, actions: SwingActions,
 
     started = time.perf_counter()
     displacements = actions.displacements()
-    costs, feasible = one_step_costs(timing, grid, displacements, progress)
+    if costs is None:
+        costs = one_step_costs(timing, grid, displacements, progress)
+    costs, feasible = costs
+    if costs.shape != (len(displacements), grid.size):
+        raise SwingTableError(f'one-step costs of shape {costs.shape} do not match '
+                              f'{len(displacements)} actions x {grid.size} states')
     feasible = feasible.reshape(grid.shape)
     if not feasible[goal_index]:
         raise SwingTableError(f'the goal {grid.points().reshape(*grid.shape, 4)[goal_index]} '
@@ -214,7 +278,9 @@ def value_iteration(timing: LimbTiming, grid: SwingGrid, actions: SwingActions,
 def build_table(robot, family: int, step_height_m: float, joint_velocity_limit_rad_s: float,
                 grid_spec: GridSpec | None = None, actions: SwingActions | None = None,
                 goal: np.ndarray | None = None, tolerance_s: float = TOLERANCE_S,
-                progress: bool = False) -> tuple[ValueTable, BuildReport]:
+                progress: bool = False, ground_z_m: float | None = None,
+                costs: tuple[np.ndarray, np.ndarray] | None = None
+                ) -> tuple[ValueTable, BuildReport]:
     """Build a swing-leg value table for a robot, IK family, step height and limit.
 
     Args:
@@ -228,34 +294,81 @@ def build_table(robot, family: int, step_height_m: float, joint_velocity_limit_r
             :func:`default_goal`. Its z must be on the swing plane or a level above it.
         tolerance_s: Convergence threshold [s].
         progress: Show tqdm progress bars.
+        ground_z_m: Ground height in the base frame [m], where the lift starts and the
+            lowering ends; None: ``-body_height_m`` of the robot YAML. The thesis lifts the
+            foot by the step height below the swing plane (``goal z - step height``).
+        costs: Precomputed one-step costs for this family, limit, grid and actions
+            (:func:`one_step_costs`); they do not depend on the goal.
 
     Raises:
         SwingTableError: Bad settings, an unreachable goal, or no convergence.
     """
     if not (isinstance(step_height_m, (int, float)) and 0 < step_height_m < 1.0):
         raise SwingTableError(f'step height must be in (0, 1) m, got {step_height_m!r}')
-    timing = LimbTiming(robot, family, joint_velocity_limit_rad_s)
-    grid_spec = grid_spec or GridSpec()
-    actions = actions or SwingActions()
-    swing_z = timing.ground_z_m + step_height_m
-    goal = default_goal(robot, step_height_m) if goal is None else np.array(goal, dtype=float)
-    if goal.shape != (4,) or not np.all(np.isfinite(goal)):
-        raise SwingTableError(f'goal must be 4 finite numbers (x, y, z, yaw), got {goal}')
-    grid = make_grid(grid_spec.x_range_m, grid_spec.y_range_m, grid_spec.z_levels,
-                     grid_spec.z_spacing_m, grid_spec.yaw_range_rad, swing_z, goal)
+    timing = LimbTiming(robot, family, joint_velocity_limit_rad_s, ground_z_m)
+    grid = table_grid(robot, step_height_m, grid_spec, goal, timing.ground_z_m)
+    goal = grid_goal(robot, step_height_m, grid, goal)
     goal_index = grid.nearest_node(goal)
-    goal = np.array([a[i] for a, i in zip(grid.axes, goal_index, strict=True)])
+    actions = actions or SwingActions()
     values, report = value_iteration(timing, grid, actions, goal_index, tolerance_s,
-                                     progress=progress)
-    lift = timing.vertical_times(grid.points()).reshape(grid.shape)
-    lower = float(timing.vertical_times(goal[None])[0])
-    if lower >= INFEASIBLE_S:
-        raise SwingTableError(f'the foot cannot be lowered from the goal {goal.round(4)} to '
-                              f'the ground in IK family {family}')
+                                     progress=progress, costs=costs)
     table = ValueTable(
         robot_name=robot.name, urdf_sha256=urdf_sha256(robot.description.urdf_path),
         family=int(family), joint_velocity_limit_rad_s=float(joint_velocity_limit_rad_s),
         step_height_m=float(step_height_m), ground_z_m=timing.ground_z_m, grid=grid,
-        actions=actions, goal=goal, values_s=values, lift_s=lift, lower_s=lower,
-        iterations=report.iterations, max_change_s=report.max_change_s)
-    return table, report
+        actions=actions, goal=goal, values_s=values, lift_s=np.zeros(grid.shape),
+        lower_s=0.0, iterations=report.iterations, max_change_s=report.max_change_s)
+    return with_step_height(table, robot, step_height_m, timing.ground_z_m), report
+
+
+def table_grid(robot, step_height_m: float, grid_spec: GridSpec | None = None,
+               goal: np.ndarray | None = None, ground_z_m: float | None = None) -> SwingGrid:
+    """The grid :func:`build_table` lays out (the goal a node), e.g. to share one-step costs.
+
+    Args as :func:`build_table`; ``ground_z_m`` None is ``-body_height_m``.
+    """
+    grid_spec = grid_spec or GridSpec()
+    ground = -float(robot.description.body_height_m) if ground_z_m is None else ground_z_m
+    goal = default_goal(robot, step_height_m) if goal is None else np.array(goal, dtype=float)
+    if goal.shape != (4,) or not np.all(np.isfinite(goal)):
+        raise SwingTableError(f'goal must be 4 finite numbers (x, y, z, yaw), got {goal}')
+    return make_grid(grid_spec.x_range_m, grid_spec.y_range_m, grid_spec.z_levels,
+                     grid_spec.z_spacing_m, grid_spec.yaw_range_rad, ground + step_height_m,
+                     goal, z_planes_m=grid_spec.z_planes_m)
+
+
+def grid_goal(robot, step_height_m: float, grid: SwingGrid, goal: np.ndarray | None = None
+              ) -> np.ndarray:
+    """(4,) the goal as the grid's node (default :func:`default_goal`)."""
+    goal = default_goal(robot, step_height_m) if goal is None else np.array(goal, dtype=float)
+    index = grid.nearest_node(goal)
+    return np.array([a[i] for a, i in zip(grid.axes, index, strict=True)])
+
+
+def with_step_height(table: ValueTable, robot, step_height_m: float,
+                     ground_z_m: float | None = None) -> ValueTable:
+    """The table with the lift and lowering of another step height (same cost-to-go).
+
+    The cost-to-go does not depend on the step height; the lift (from the ground straight up
+    to each state) and the lowering (from the goal straight down) do (thesis III.C.1: they are
+    added once V has converged). States below the ground cannot be lift-off states
+    (:data:`INFEASIBLE_S`).
+
+    Args:
+        table: A converged table.
+        robot: Its robot.
+        step_height_m: The step height [m].
+        ground_z_m: The ground in the base frame [m]; None: ``-body_height_m``.
+
+    Raises:
+        SwingTableError: The foot cannot be lowered from the goal to the ground.
+    """
+    timing = LimbTiming(robot, table.family, table.joint_velocity_limit_rad_s, ground_z_m)
+    lift = timing.vertical_times(table.grid.points()).reshape(table.grid.shape)
+    lower = float(timing.vertical_times(table.goal[None])[0])
+    if lower >= INFEASIBLE_S:
+        raise SwingTableError(f'the foot cannot be lowered from the goal '
+                              f'{table.goal.round(4)} to the ground ({timing.ground_z_m:.3f} m) '
+                              f'in IK family {table.family}')
+    return replace(table, step_height_m=float(step_height_m), ground_z_m=timing.ground_z_m,
+                   lift_s=lift, lower_s=lower, _total=None)
