@@ -35,11 +35,12 @@ PARAMS = {'robot': 'robosimian', 'gait': 'crawl', 'swing': 'polynomial',
           'com_method': 'preview', 'step_period_s': 4.0, 'cmd_vel_timeout_s': 2.0}
 VELOCITY_M_S = 0.04
 START_TIMEOUT_S = 60.0
-#: Walking observed after a restart [s]: two crawl steps.
-RECOVERY_S = 15.0
-#: "It walks on": at least this far in RECOVERY_S after a restart [m]. The crawl asked 0.04
-#: m/s walks about 0.012 (RoboSimian's joint limit), in bursts, and restarts from standstill
-#: (weight shift and a 1.8 s transfer); a robot that does not walk on makes < 1 cm.
+#: Walking observed after a restart [s]: three crawl steps.
+RECOVERY_S = 20.0
+#: "It walks on": the COM at least this far in RECOVERY_S after a restart [m]. The crawl asked
+#: 0.04 m/s walks about 0.012 (RoboSimian's joint limit), its COM moving in the transfers, and
+#: restarts from standstill (weight shift and a 1.8 s transfer); a robot that does not walk on
+#: makes < 1 cm. (The base is no measure: it sways several cm back and forth in every step.)
 WALKS_ON_M = 0.05
 
 
@@ -240,7 +241,7 @@ def _kill_and_restart(graph: Graph, name: str, consumer: str | None, topic: str,
         warned = graph.spin_until(lambda: graph.statuses(name_of_status, killed, WARN, topic),
                                   10.0, f'{consumer} to report {topic} stale')
     graph.spin(1.0)  # stale for a while: the consumer holds
-    x_held = graph.base_x()
+    x_held, com_held = graph.base_x(), graph.com_x()
     graph.start(name)
     graph.wait_ready(name)
     restarted = time.monotonic()
@@ -262,6 +263,7 @@ def _kill_and_restart(graph: Graph, name: str, consumer: str | None, topic: str,
     end = time.monotonic()
     return {'warn_after_s': warned - killed, 'ok_after_s': ok - restarted,
             'x_before': x_before, 'x_held': x_held, 'x_after': graph.base_x(),
+            'com_held': com_held, 'com_restart': com_restart, 'com_after': graph.com_x(),
             'killed': killed, 'restarted': restarted, 'end': end,
             'min_x_after': min(x for t, _, x, _ in graph.base if t >= restarted - 1.0),
             'base_back_after_restart_m': x_restart - min(x for t, _, x, _ in graph.base
@@ -325,7 +327,7 @@ def test_each_node_killed_and_restarted_in_turn_the_walk_goes_on(graph):
         # Held while the producer was away: the base did not run off.
         assert abs(result['x_held'] - result['x_before']) < 0.05
         # The robot walks on.
-        assert result['x_after'] > result['x_held'] + WALKS_ON_M
+        assert result['com_after'] > result['com_held'] + WALKS_ON_M
         # The planner paused while the robot was held and planned again from where it stood:
         # no catching up with a plan that ran on (the base swung back 4-10 cm before): the COM
         # does not swing back.
@@ -341,7 +343,7 @@ def test_each_node_killed_and_restarted_in_turn_the_walk_goes_on(graph):
     # the origin) and the other nodes drive it on from there, in its new place.
     simulator = _kill_and_restart(graph, 'kinematic_simulator', None, '/tf')
     print({'simulator': _short(simulator)})
-    assert simulator['x_after'] > simulator['x_restart'] + WALKS_ON_M
+    assert simulator['com_after'] > simulator['com_restart'] + WALKS_ON_M
     # No node fell back on its fault guard in any of this.
     assert not [r['faults'] for r in (ik, com, planner, swing, simulator) if r['faults']]
 
@@ -366,7 +368,7 @@ def _assert_walks_on(result: dict, back_m: float) -> None:
     # trajectory).
     assert result['warn_after_s'] < 5.0
     # The walk goes on after the restart.
-    assert result['x_after'] > result['x_held'] + WALKS_ON_M
+    assert result['com_after'] > result['com_held'] + WALKS_ON_M
     # No swinging back to catch up: the COM does not go back (the base sways with the limbs).
     # ZMP ERROR samples are printed, not asserted: on two shared cores the monitor's finite
     # differences count a few with any load.
