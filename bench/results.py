@@ -1,26 +1,25 @@
-"""The README's results table: every scenario walked and inspected, and the thesis' step sweep.
+"""The README's results table: every scenario walked and inspected (the thesis: gait_nodes.thesis).
 
 Runs, with the project's own commands and nothing else:
 
 - ``python -m gait_nodes run --runtime inproc --scenario NAME --record DIR --no-plot --json``
   for each scenario, and reads the gait summary of the bag it recorded (the numbers
-  ``python -m gait_nodes.inspect DIR`` prints; definitions in gait_nodes/bag/analysis.py);
-- ``python -m gait_nodes.swing_table sweep --quiet`` (thesis IV.B, Fig. 14: crawl speed against
-  step size for value tables built at the robot's joint limit) and keeps its optimum.
+  ``python -m gait_nodes.inspect DIR`` prints; definitions in gait_nodes/bag/analysis.py).
+
+The thesis' figures, its step-size sweep among them, come from ``python -m gait_nodes.thesis``.
 
 It prints a Markdown table (also written to ``--out``). Speeds are net speeds, displacement of
 base_link in odom over a time, so a crawl's sideways sway does not count as progress: over the
 whole run (start-up and stop included), and while stepping (from the first executed lift-off
 to the last touch-down); the commanded speed is the scenario's first /cmd_vel.
 
-    python bench/results.py [--scenarios a,b] [--no-sweep] [--out results.md]
+    python bench/results.py [--scenarios a,b] [--out results.md] [--json rows.json]
 """
 
 from __future__ import annotations
 
 import argparse
 import json
-import re
 import subprocess
 import sys
 import tempfile
@@ -30,7 +29,6 @@ from pathlib import Path
 import numpy as np
 
 from gait_nodes.scenarios import SCENARIOS
-from gait_nodes.swing.sweep import FT_PER_MIN
 
 
 def stepping_speed(bag: Path) -> float | None:
@@ -93,29 +91,12 @@ def scenario_row(name: str, summary: dict) -> dict:
     }
 
 
-def run_sweep() -> dict:
-    """The step-size sweep's optimum (``swing_table sweep``), with the command's wall time."""
-    command = [sys.executable, '-m', 'gait_nodes.swing_table', 'sweep', '--quiet']
-    started = time.perf_counter()
-    result = subprocess.run(command, capture_output=True, text=True, check=False)
-    if result.returncode != 0:
-        raise SystemExit(f'{" ".join(command)} failed ({result.returncode}):\n{result.stderr}')
-    found = re.search(r'optimal overall: family (\d+), step height ([\d.]+) m, step ([\d.]+) m, '
-                      r'([\d.]+) ft/min', result.stdout)
-    if not found:
-        raise SystemExit(f'no optimum in the sweep output:\n{result.stdout}')
-    family, height, step, speed = found.groups()
-    return {'family': int(family), 'step_height_m': float(height), 'step_m': float(step),
-            'speed_ft_min': float(speed), 'speed_m_s': float(speed) / FT_PER_MIN,
-            'wall_s': time.perf_counter() - started, 'output': result.stdout}
-
-
 def _number(value, digits: int) -> str:
     return '-' if value is None else f'{value:.{digits}f}'
 
 
-def markdown(rows: list[dict], sweep: dict | None) -> str:
-    """The results as Markdown tables."""
+def markdown(rows: list[dict]) -> str:
+    """The results as a Markdown table."""
     lines = ['| scenario | robot | gait | swing | COM | commanded [m/s] | speed: run / '
              'stepping [m/s] | steps (mean [m]) | ZMP margin min / mean [mm] | outside [s] '
              '| joint vel. peak / limit | ERROR / WARN | real-time factor |',
@@ -129,25 +110,16 @@ def markdown(rows: list[dict], sweep: dict | None) -> str:
             f'| {_number(r["margin_min_mm"], 1)} / {_number(r["margin_mean_mm"], 1)} '
             f'| {_number(r["outside_s"], 3)} | {_number(r["joint_peak_ratio"], 2)} '
             f'| {r["errors"]} / {r["warnings"]} | {_number(r["real_time_factor"], 1)}x |')
-    if sweep:
-        lines += ['', '| step-size sweep (robosimian, value tables at the joint limit) | ours '
-                  '| thesis |', '| --- | --- | --- |',
-                  f'| optimal step [m] | {sweep["step_m"]:.3f} | 0.34 |',
-                  f'| crawl speed at the optimum [ft/min] | {sweep["speed_ft_min"]:.2f} '
-                  f'| 8.54 |',
-                  f'| IK family (0-based), step height [m] | {sweep["family"]}, '
-                  f'{sweep["step_height_m"]:g} | 3rd / 8th, - |']
     return '\n'.join(lines)
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Run the scenarios and the sweep; print (and write) the tables."""
+    """Run the scenarios; print (and write) the table."""
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     parser.add_argument('--scenarios', default=','.join(SCENARIOS),
                         help='comma-separated scenario names (default: all)')
-    parser.add_argument('--no-sweep', action='store_true', help='skip the step-size sweep')
     parser.add_argument('--out', default=None, help='also write the Markdown to this file')
-    parser.add_argument('--json', default=None, help='write the raw rows and sweep as JSON')
+    parser.add_argument('--json', default=None, help='write the raw rows as JSON')
     options = parser.parse_args(argv)
     names = [n.strip() for n in options.scenarios.split(',') if n.strip()]
     unknown = [n for n in names if n not in SCENARIOS]
@@ -159,13 +131,12 @@ def main(argv: list[str] | None = None) -> int:
             summary = run_scenario(name, Path(tmp))
             rows.append(scenario_row(name, summary))
             print(f'{name}: ran in {summary["command_wall_s"]:.1f} s', file=sys.stderr)
-    sweep = None if options.no_sweep else run_sweep()
-    text = markdown(rows, sweep)
+    text = markdown(rows)
     print(text)
     if options.out:
         Path(options.out).write_text(text + '\n')
     if options.json:
-        Path(options.json).write_text(json.dumps({'scenarios': rows, 'sweep': sweep}, indent=1))
+        Path(options.json).write_text(json.dumps({'scenarios': rows}, indent=1))
     return 0
 
 

@@ -45,7 +45,7 @@ def test_the_default_walk_over_dds_keeps_the_zmp_inside_and_the_feet_where_plann
     assert margin['min_m'] > -0.3, margin  # a late sample costs centimetres, not metres
     assert report['diagnostics']['by_level'].get('ERROR', 0) <= 3, \
         report['diagnostics']['first_error']
-    # 0.04 m/s asked, clamped to about 0.012 (RoboSimian's joint limit), in bursts after a
+    # 0.043 m/s asked, clamped to about 0.012 (RoboSimian's joint limit), in bursts after a
     # 3 s start: 4.5 cm measured; a robot that does not walk makes < 1 cm.
     assert report['base']['displacement_m'] > 0.03
     consistency = report['consistency']

@@ -124,7 +124,7 @@ def _applied_speed(diagnostics) -> float:
 def test_walks_the_commanded_or_the_fastest_feasible_speed(bags, name):
     path, inspection = bags(name)
     diagnostics = _diagnostic_values(path)
-    commanded = 0.04
+    commanded = 0.043
     applied = _applied_speed(diagnostics)
     velocity = [d for d in diagnostics if d[1] == 'footstep_planner: velocity'][-1]
     if applied < commanded - 1e-9:
