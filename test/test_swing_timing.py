@@ -174,6 +174,23 @@ def test_too_fast_a_command_walks_the_fastest_feasible_speed_and_says_so():
     assert slower.vx_m_s == pytest.approx(0.5 * applied.vx_m_s) and not notes
 
 
+def test_every_too_fast_command_in_a_direction_walks_the_same_fastest_twist():
+    # The fastest feasible twist is searched along the command's direction, once: a joystick
+    # streaming ever new too-fast forward speeds does not make the planner search again (1-3 s
+    # each for RoboSimian), and the answer does not depend on which command came first.
+    params = _joint_limit_params()
+    first = GaitPlanner(robot().description, params, swing_timing=polynomial_timing())
+    fast, _ = first.set_velocity(Twist2D(0.08), 0.0)
+    faster, notes = first.set_velocity(Twist2D(0.1), 0.0)
+    assert faster == fast and 'fastest rhythm' in notes[-1]
+    other = GaitPlanner(robot().description, params, swing_timing=polynomial_timing())
+    assert other.set_velocity(Twist2D(0.1), 0.0)[0] == fast
+    # Another direction has its own fastest twist, in that direction.
+    turning, _ = other.set_velocity(Twist2D(0.08, 0.0, 0.05), 0.0)
+    assert turning.vx_m_s / turning.wz_rad_s == pytest.approx(0.08 / 0.05)
+    assert turning.vx_m_s < fast.vx_m_s
+
+
 def test_probe_where_the_swing_happens_agrees_with_the_nominal_model():
     # A swing from half a step behind to half a step ahead of the nominal foot, the other feet
     # and the COM at the nominal stance: the per-step probe and the planner's lattice model

@@ -129,7 +129,8 @@ def wrap_angle(angle: np.ndarray) -> np.ndarray:
 
 
 def clamp_velocity(twist: Twist2D, params: GaitParameters, robot: RobotDescription,
-                   layout: FootLayout, cycle_of=None) -> tuple[Twist2D, list[str]]:
+                   layout: FootLayout, cycle_of=None, fastest: dict | None = None
+                   ) -> tuple[Twist2D, list[str]]:
     """The twist the planner walks for a commanded ``twist``, and why it was reduced.
 
     Each component is clamped to its configured maximum; then the whole twist is scaled down so
@@ -145,6 +146,9 @@ def clamp_velocity(twist: Twist2D, params: GaitParameters, robot: RobotDescripti
         cycle_of: Gait cycle [s] of a twist when the rhythm depends on it (``timing:
             joint_limit``); raises GaitParameterError for a twist the joints cannot walk.
             None: ``params.cycle_s``.
+        fastest: A dict kept between calls: the fastest feasible twist is searched along the
+            command's direction (the twist scaled until a component reaches its maximum), so
+            every command in that direction (a forward one, whatever its speed) reuses it.
     """
     notes = []
     values = list(twist.as_tuple())
@@ -173,12 +177,22 @@ def clamp_velocity(twist: Twist2D, params: GaitParameters, robot: RobotDescripti
                     and np.all(np.abs(moved[:, 1]) <= robot.reach.max_step_width_m + 1e-12))
 
     if not fits(result):
-        low, high = 0.0, 1.0
-        # Each test of a joint-limit rhythm solves its fixed point: stop at 1e-7 of the twist.
-        for _ in range(50 if cycle_of is None else 24):
-            middle = 0.5 * (low + high)
-            low, high = (middle, high) if fits(result.scaled(middle)) else (low, middle)
-        reduced = result.scaled(low)
+        size = max(abs(value) / limit for value, limit in zip(values, limits, strict=True)
+                   if value != 0.0)
+        direction = result.scaled(1.0 / size)
+        fastest = {} if fastest is None else fastest
+        if (direction, params) not in fastest:
+            if len(fastest) > 256:
+                fastest.clear()
+            low, high = 0.0, 1.0
+            # Each test of a joint-limit rhythm solves its fixed point: stop at 3e-9 of the
+            # component limits.
+            for _ in range(50 if cycle_of is None else 28):
+                middle = 0.5 * (low + high)
+                low, high = (middle, high) if fits(direction.scaled(middle)) else (low, middle)
+            fastest[direction, params] = low
+        reduced = direction.scaled(fastest[direction, params])
+        low = fastest[direction, params] / size
         cycle = params.cycle_s if cycle_of is None else cycle_of(reduced)
         rhythm = ('' if cycle_of is None else
                   ' at the fastest rhythm the joint velocity limit allows')
@@ -353,6 +367,7 @@ class GaitPlanner:
         self._rhythms: dict = {}
         self._sways: dict = {}  # the steady crawl's sway (rhythm.transfer_move)
         self._clamped: dict = {}
+        self._fastest: dict = {}  # the fastest feasible twist by direction (clamp_velocity)
         self._requested = Twist2D()
         self._twist = Twist2D()
         pose = np.array(base_pose, dtype=float)
@@ -404,6 +419,7 @@ class GaitPlanner:
         self._timing = swing_timing
         self._rhythms.clear()
         self._clamped.clear()
+        self._fastest.clear()
         self._twist, _ = self._clamp(self._requested, self._params)
         self._replan(now_s)
 
@@ -451,7 +467,7 @@ class GaitPlanner:
                 def cycle_of(candidate):
                     return self.rhythm(params, candidate).cycle_s
             self._clamped[key] = clamp_velocity(twist, params, self.robot, self.layout,
-                                                cycle_of)
+                                                cycle_of, self._fastest)
         return self._clamped[key]
 
     def set_parameters(self, params: GaitParameters, now_s: float) -> None:
