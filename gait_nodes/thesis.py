@@ -726,6 +726,10 @@ def main(args: list[str] | None = None) -> int:
     out_dir = Path(options.out).expanduser()
     if out_dir.exists() and not out_dir.is_dir():
         parser.error(f'--out {out_dir} exists and is not a directory')
+    try:  # before the minutes of work, not after
+        out_dir.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        parser.error(f'--out {out_dir}: cannot create the directory ({exc.strerror})')
 
     def log(message: str) -> None:
         print(f'{PROG}: {message}', file=sys.stderr, flush=True)

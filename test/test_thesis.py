@@ -111,3 +111,14 @@ def test_an_out_path_that_is_a_file_exits_2(tmp_path, capsys):
         thesis.main(['--quick', '--out', str(path)])
     assert exit_info.value.code == 2
     assert capsys.readouterr().err.count('\n') == 1
+
+
+def test_an_out_directory_that_cannot_be_made_exits_2_before_any_work(tmp_path, capsys):
+    # Under a file: no directory can be made there; refused before the minutes of work.
+    parent = tmp_path / 'file'
+    parent.write_text('')
+    with pytest.raises(SystemExit) as exit_info:
+        thesis.main(['--quick', '--out', str(parent / 'figures')])
+    assert exit_info.value.code == 2
+    error = capsys.readouterr().err
+    assert error.count('\n') == 1 and 'cannot create the directory' in error
