@@ -19,6 +19,7 @@ from __future__ import annotations
 import functools
 import traceback
 
+from gait_nodes import callback_times
 from gait_nodes.diagnostics import ERROR, OK
 from gait_nodes.runtime import Node
 
@@ -67,10 +68,10 @@ class FaultGuard:
                 self.failed(name, exc)
                 return None
             if self._since_ns is not None:
-                self._succeeded(name)
+                self.succeeded(name)
             return result
 
-        return guarded
+        return callback_times.timed(self._node.get_name(), name, guarded)
 
     def failed(self, name: str, exc: BaseException) -> None:
         """``name`` raised ``exc``: hold, and report it (again at most every REPORT_PERIOD_S)."""
@@ -97,7 +98,8 @@ class FaultGuard:
                 'callback': name, 'exception': type(exc).__name__, 'where': where,
                 'failing_s': (now_ns - self._since_ns) * 1e-9, 'failures': self.failures})
 
-    def _succeeded(self, name: str) -> None:
+    def succeeded(self, name: str) -> None:
+        """``name`` (a callback, or work the node does apart) ran cleanly again."""
         self._failing.discard(name)
         if self._failing or (self._recovered is not None and not self._recovered()):
             return
