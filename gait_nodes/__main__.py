@@ -311,11 +311,13 @@ def print_summary(summary: dict, as_json: bool) -> None:
         print('  no messages on the contract topics')
     statuses = summary.get('commands') or []
     if statuses:
-        rejected = [s for s in statuses if s.get('accepted') is False]
-        print(f'  gait commands: {len(statuses) - len(rejected)} accepted, {len(rejected)} '
-              f'rejected')
-        for status in rejected:
-            print(f'    rejected: {status.get("reason")}')
+        from gait_nodes.bag.analysis import command_answers
+
+        answers = command_answers(statuses)
+        print(f'  gait commands: {answers["accepted"]} accepted ({answers["applied"]} applied), '
+              f'{answers["rejected"]} rejected, {answers["superseded"]} superseded')
+        for reason in answers['rejections']:
+            print(f'    rejected: {reason}')
     for name, code in summary['exit_codes'].items():
         if code != 0:
             print(f'  node {name} exited with status {code}')

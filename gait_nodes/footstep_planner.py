@@ -335,7 +335,7 @@ class FootstepPlanner(GuardedNode):
         self._swings_pruned_ns = -NS_PER_S
         self.swing_inputs = InputWatchdog([], 1.0, self.origin_ns, events=[SWING_TOPIC],
                                           holding='the whole-body IK follows its fallback swing')
-        self._last_now_s = 0.0
+        self._last_now_ns: int | None = None  # ROS time of the last tick [ns]
         self._pending: tuple[dict, dict, Staircase | None] | None = None
         self._mirroring = False  # setting the declared parameters to what the plan walks
         self._requested_twist = Twist2D()
@@ -465,9 +465,10 @@ class FootstepPlanner(GuardedNode):
 
     def _clock_jumped(self, now_ns: int, now_s: float) -> bool:
         """A clock jump restarts the plan from standstill (True: the restart is under way)."""
-        if 0.0 <= now_s - self._last_now_s <= CLOCK_JUMP_S:
+        last_ns, self._last_now_ns = self._last_now_ns, now_ns
+        if last_ns is None or 0 <= now_ns - last_ns <= CLOCK_JUMP_S * NS_PER_S:
             return False
-        jump_s = now_s - self._last_now_s
+        jump_s = (now_ns - last_ns) * 1e-9
         self.diagnostics.report('clock', WARN, f'the clock jumped by {jump_s:.3f} s; the plan '
                                 f'restarts from standstill')
         planner = self.planner
@@ -482,7 +483,6 @@ class FootstepPlanner(GuardedNode):
             return fresh, at_ns
 
         self._replace(restart, 'clock')
-        self._last_now_s = 0.0
         return True
 
     def _replace(self, make, token) -> None:
@@ -929,7 +929,6 @@ class FootstepPlanner(GuardedNode):
             return
         token, self._replacing = event.token[0], None
         now_ns = self.get_clock().now().nanoseconds
-        self._last_now_s = (now_ns - self.origin_ns) * 1e-9
         self._last_plan = None
         if event.error is not None:
             if token == 'resume' and self._pause is not None:
@@ -1016,8 +1015,8 @@ class FootstepPlanner(GuardedNode):
 
     def tick(self) -> None:
         """Publish the worker's newest plan: the footsteps if they changed, the ZMP reference."""
-        now_ns, now_s = self.now_s()
         self._handle_events()
+        now_ns, now_s = self.now_s()
         if not self._joined:
             if not self._join(now_ns):
                 return
@@ -1025,7 +1024,6 @@ class FootstepPlanner(GuardedNode):
         if self._replacing is not None and self._replacing[0] != 'resume' \
                 or self._clock_jumped(now_ns, now_s):
             return  # a plan from scratch is under way
-        self._last_now_s = now_s
         self._check_cmd_vel(now_ns, now_s)
         origin_ns, pause = self.origin_ns, self._pause
         if self._paused(now_ns, now_s):

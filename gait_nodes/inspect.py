@@ -66,8 +66,11 @@ def format_gait(gait: dict | None) -> list[str]:
         lines.append(text)
     commands = gait.get('commands')
     if commands:
-        lines.append(f'  commands:    {commands["answered"]} answered, {commands["accepted"]}'
-                     f' accepted, {commands["rejected"]} rejected')
+        lines.append(f'  commands:    {commands["answered"]} answered: {commands["accepted"]}'
+                     f' accepted ({commands["applied"]} applied), {commands["rejected"]} '
+                     f'rejected, {commands["superseded"]} superseded; most decisions on one '
+                     f'command {commands["most_decisions"]}, most applied '
+                     f'{commands["most_applied"]}')
         lines.extend(f'    rejected: {reason}' for reason in commands['rejections'])
     diagnostics = gait.get('diagnostics')
     if diagnostics:

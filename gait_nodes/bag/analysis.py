@@ -20,7 +20,8 @@ independent reader of the bag can check it:
   ``hardware_id`` of the bag's diagnostics). ``/joint_commands`` (JointTrajectory) counts as
   the trajectory a joint_trajectory_controller follows: every point of each message until the
   next message's first point replaces the rest (points at header stamp + time_from_start).
-- ``commands``: ``/gait/command_status`` answers, accepted and rejected with their reasons.
+- ``commands``: ``/gait/command_status`` answers per command: decisions (accepted, rejected with
+  their reasons, superseded), 'applied' answers, repeats (:func:`command_answers`).
 - ``diagnostics``: statuses on ``/diagnostics`` counted by level and by name.
 - ``consistency``: the nodes' outputs checked against each other with the robot's full model
   (COM reached vs asked, ZMP by inverse dynamics vs the monitor's, feet vs footsteps, stance
@@ -363,13 +364,43 @@ def joint_metrics(series: GaitSeries, limit_of: Callable[[str], float | None]) -
 
 
 def command_metrics(series: GaitSeries) -> dict | None:
-    """Accepted and rejected gait commands with the rejection reasons."""
+    """The gait commands' answers (see :func:`command_answers`)."""
     if not series.statuses:
         return None
-    rejected = [s for s in series.statuses if s.get('accepted') is False]
-    return {'answered': len(series.statuses),
-            'accepted': sum(1 for s in series.statuses if s.get('accepted') is True),
+    return command_answers(series.statuses)
+
+
+def command_answers(statuses: list[dict]) -> dict:
+    """What /gait/command_status said, per command (its ``id``).
+
+    ``answered``: commands answered (distinct ids; a status without an id, from an older bag,
+    counts alone); ``accepted``, ``rejected``, ``superseded``: their decisions; ``applied``:
+    accepted commands that said they took effect; ``repeated``: answers to a repeated id;
+    ``most_decisions`` and ``most_applied``: the most decisions (and 'applied' answers) one
+    command got, 1 when every command was decided (applied) once; ``rejections``: the
+    rejected commands' reasons.
+    """
+    decisions: dict[object, list[dict]] = {}
+    applied: dict[object, int] = {}
+    repeated = 0
+    for k, status in enumerate(statuses):
+        key = status.get('id', ('no id', k))
+        state = status.get('state') or ('accepted' if status.get('accepted') else 'rejected')
+        if status.get('repeated'):
+            repeated += 1
+        elif state == 'applied':
+            applied[key] = applied.get(key, 0) + 1
+        else:
+            decisions.setdefault(key, []).append({**status, 'state': state})
+    first = [answers[0] for answers in decisions.values()]
+    rejected = [s for s in first if s['state'] == 'rejected']
+    return {'answered': len(decisions),
+            'accepted': sum(1 for s in first if s['state'] == 'accepted'),
             'rejected': len(rejected),
+            'superseded': sum(1 for s in first if s['state'] == 'superseded'),
+            'applied': len(applied), 'repeated': repeated,
+            'most_decisions': max((len(a) for a in decisions.values()), default=0),
+            'most_applied': max(applied.values(), default=0),
             'rejections': [str(s.get('reason', '')) for s in rejected]}
 
 

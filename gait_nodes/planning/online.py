@@ -190,6 +190,7 @@ class OnlinePlanner:
         self._lock = threading.Lock()
         self._jobs: collections.deque[_Job] = collections.deque()
         self._events: list = []
+        self._outbox: list = []  # the worker's events, out once the plan they speak of is
         self._decided: collections.OrderedDict[str, Answer] = collections.OrderedDict()
         self._pending: set[str] = set()  # ids submitted, not decided yet
         self._to_apply: list[Answer] = []  # accepted, not taken effect yet
@@ -327,6 +328,12 @@ class OnlinePlanner:
             self._publish()
         if self._extend():
             self._publish()
+        if self._outbox:
+            with self._lock:
+                self._events.extend(self._outbox)
+                self._to_apply.extend(event for event in self._outbox
+                                      if isinstance(event, Answer) and event.state == ACCEPTED)
+            self._outbox = []
 
     def _submit(self, job: _Job, replaces) -> None:
         with self._lock:
@@ -399,7 +406,7 @@ class OnlinePlanner:
     def _refuse(self, job: _Job, reason: str) -> None:
         if job.kind == 'command':
             with self._lock:
-                self._decide(job, REJECTED, reason)
+                self._outbox.append(self._decide(job, REJECTED, reason, publish=False))
         elif job.kind == 'velocity':
             # A twist is checked (finite) before it is submitted: what fails here is planning.
             self._emit(Failure(GaitNodesError(reason), f'the velocity {job.payload.as_tuple()}'))
@@ -411,24 +418,25 @@ class OnlinePlanner:
             with self._lock:
                 answer = self._decide(job, ACCEPTED, f'accepted: takes effect at the step '
                                       f'boundary at {takes_effect_ns * 1e-9:.3f} s',
-                                      takes_effect_ns)
-                self._to_apply.append(answer)
+                                      takes_effect_ns, publish=False)
+            self._outbox.append(answer)
         elif job.kind == 'velocity':
             applied, notes = result
             self._emit(VelocityApplied(job.payload, applied, notes, takes_effect_ns))
         else:
             self._emit(Changed(result, takes_effect_ns))
 
-    def _decide(self, job: _Job, state: str, reason: str,
-                takes_effect_ns: int | None = None) -> Answer:
-        """Record and emit the decision on ``job`` (the lock held)."""
+    def _decide(self, job: _Job, state: str, reason: str, takes_effect_ns: int | None = None,
+                publish: bool = True) -> Answer:
+        """Record the decision on ``job`` and emit it unless told not to (the lock held)."""
         answer = Answer(job.command_id, state, reason, job.text, self._live.params.to_dict(),
                         takes_effect_ns)
         self._pending.discard(job.command_id)
         self._decided[job.command_id] = answer
         while len(self._decided) > REMEMBERED_IDS:
             self._decided.popitem(last=False)
-        self._events.append(answer)
+        if publish:
+            self._events.append(answer)
         return answer
 
     def _check_applied(self) -> None:
@@ -443,8 +451,8 @@ class OnlinePlanner:
             self._events.append(applied)
 
     def _emit(self, event) -> None:
-        with self._lock:
-            self._events.append(event)
+        """Keep a worker's event until its plan is published (see :meth:`_work`)."""
+        self._outbox.append(event)
 
     def _extend(self) -> bool:
         """Plan the live plan ``cover_s`` ahead and forget what is past; True if it changed."""
