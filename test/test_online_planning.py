@@ -38,9 +38,11 @@ class FakeClock:
         self.now_ns = 0
 
     def __call__(self):
+        """ROS time now [ns]."""
         return self.now_ns
 
     def advance(self, seconds):
+        """Move the clock ``seconds`` on."""
         self.now_ns += int(round(seconds * NS))
 
 
