@@ -3,7 +3,7 @@
 ``python -m gait_nodes.inspect BAG [--json] [--plot DIR] [--robot NAME]``
 
 Prints topics, types, counts, rates and duration for any ROS 2 MCAP bag; for gait bags also the
-distance walked, mean speed, step lengths, ZMP stability margin (min, mean, time outside the
+distance walked, net speed, step lengths, ZMP stability margin (min, mean, time outside the
 support polygon), peak joint velocity against the limit, rejected commands and diagnostics by
 level (definitions in :mod:`gait_nodes.bag.analysis`). A truncated or damaged bag is read up to
 the damage, and what was lost is said. ``--json`` prints one JSON object instead; ``--plot DIR``
@@ -37,11 +37,12 @@ def format_gait(gait: dict | None) -> list[str]:
     lines.append('gait:' + (f' ({gait["robot"]})' if 'robot' in gait else ''))
     base = gait.get('base')
     if base:
-        speed = base['mean_speed_m_s']
-        speed_text = (f', mean speed {speed:.4f} m/s ({speed * 60 * FEET_PER_METRE:.2f} '
+        speed = base['net_speed_m_s']
+        speed_text = (f', net speed {speed:.4f} m/s ({speed * 60 * FEET_PER_METRE:.2f} '
                       f'ft/min)' if speed is not None else '')
-        lines.append(f'  walked:      {base["distance_m"]:.3f} m in {base["time_s"]:.2f} s '
-                     f'(net {base["displacement_m"]:.3f} m){speed_text}')
+        lines.append(f'  walked:      {base["displacement_m"]:.3f} m net (base start to end) '
+                     f'in {base["time_s"]:.2f} s{speed_text}; path {base["distance_m"]:.3f} m '
+                     f'(sway included)')
         if base.get('rise_m') is not None and abs(base['rise_m']) >= 0.005:
             lines.append(f'  climbed:     {base["rise_m"]:+.3f} m (base height, last minus first)')
     steps = gait.get('steps')

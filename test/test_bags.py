@@ -127,7 +127,8 @@ def test_inspect_numbers_agree_with_the_construction(gait_bag_dir):
     samples = gait_bag.SECONDS * gait_bag.RATE_HZ
     times = np.arange(samples) / gait_bag.RATE_HZ
     assert gait['base']['distance_m'] == pytest.approx(0.1 * times[-1], abs=1e-9)
-    assert gait['base']['mean_speed_m_s'] == pytest.approx(0.1, abs=1e-9)
+    assert gait['base']['net_speed_m_s'] == pytest.approx(0.1, abs=1e-9)
+    assert gait['base']['path_speed_m_s'] == pytest.approx(0.1, abs=1e-9)
     margins = np.array([gait_bag.expected_margin(0.1 * t, gait_bag.zmp_y(t)) for t in times])
     assert gait['zmp_margin']['min_m'] == pytest.approx(margins.min(), abs=1e-6)
     assert gait['zmp_margin']['mean_m'] == pytest.approx(margins.mean(), abs=1e-6)
@@ -145,6 +146,28 @@ def test_inspect_numbers_agree_with_the_construction(gait_bag_dir):
     assert gait['commands']['rejected'] == 1
     assert 'step_length_m' in gait['commands']['rejections'][0]
     assert gait['diagnostics']['by_level'] == {'OK': 8, 'WARN': 1, 'ERROR': 1}
+
+
+def test_speed_is_the_net_advance_of_the_base_and_says_so():
+    """A crawl sways: 6.6 mm/s forward is reported, not the 17 mm/s of its path (issue 25)."""
+    from gait_nodes.bag.analysis import GaitSeries, base_metrics
+    from gait_nodes.inspect import format_gait
+
+    times = np.arange(0, 20.0, 0.01)
+    x = 0.0066 * times
+    y = 0.02 * np.sin(2 * np.pi * times / 4.0)  # sway, 20 mm each side, a 4 s cycle
+    series = GaitSeries(base=[(int(t * 1e9), xi, yi, 0.5, 0.0) for t, xi, yi in
+                              zip(times, x, y, strict=True)])
+    base = base_metrics(series)
+    elapsed = times[-1] - times[0]
+    net = np.hypot(x[-1] - x[0], y[-1] - y[0]) / elapsed
+    path = np.sum(np.hypot(np.diff(x), np.diff(y))) / elapsed
+    assert base['net_speed_m_s'] == pytest.approx(net, abs=1e-6)
+    assert base['path_speed_m_s'] == pytest.approx(path, abs=1e-6) and path > 2 * net
+    [line] = format_gait({'base': base})[1:]
+    assert f'net speed {net:.4f} m/s' in line, line
+    assert f'path {base["distance_m"]:.3f} m (sway included)' in line, line
+    assert f'{path:.4f}' not in line  # no other speed to be mistaken for it
 
 
 def test_inspect_cli_json_text_and_plots(gait_bag_dir, tmp_path, capsys):
