@@ -32,6 +32,7 @@ from gait_nodes.cli import (
     split_args,
 )
 from gait_nodes.errors import ArgumentError, GaitNodesError, os_error_text
+from gait_nodes.node_parameters import RECORDER, check_overrides
 from gait_nodes.runtime.args import parse_ros_args
 from gait_nodes.scenarios import DEFAULT_SCENARIO, SCENARIOS, CommandDriver, get_scenario
 
@@ -410,7 +411,7 @@ def main(args: list[str] | None = None) -> int:
 
         scenario = get_scenario(options.scenario)
         options.duration = _positive_float(options.duration or str(scenario.duration_s))
-        parse_ros_args(ros[1:])  # refuse a bad --params-file or -p before starting anything
+        ros_args = parse_ros_args(ros[1:])  # a bad --params-file or -p: before anything starts
         if options.fast:
             if options.runtime not in (None, 'inproc'):
                 raise ArgumentError(f'--fast runs the inproc runtime; it cannot be combined '
@@ -418,6 +419,11 @@ def main(args: list[str] | None = None) -> int:
             options.runtime = 'inproc'
         runtime_name = select_runtime(options.runtime)
         names = _selected_nodes(options)
+        # Each node would refuse a parameter it does not declare, after its start-up work.
+        checked = names + ([RECORDER] if options.record is not None and
+                           runtime_name == 'inproc' else [])
+        for name in checked:
+            check_overrides(name, ros_args, runtime_name)
         if options.record == '':
             options.record = time.strftime('bags/gait_%Y_%m_%d-%H_%M_%S')
         if (options.plot or options.no_plot) and options.record is None:

@@ -28,6 +28,12 @@ LATCHED_TOPICS = ('/gait/footsteps',)
 FAILURE_REPORT_PERIOD_S = 1.0
 
 
+def parameter_defaults(output: str | None = None) -> dict[str, object]:
+    """The recorder's parameters and their defaults (``output``: bags/gait_<date-time>)."""
+    return {'output': output or time.strftime('bags/gait_%Y_%m_%d-%H_%M_%S'),
+            'flush_period_s': 0.5}
+
+
 def parse_topics(specs: list[str]) -> dict[str, str]:
     """``['/a', '/b:pkg/msg/T']`` -> ``{topic: type}``; contract topics need no type."""
     topics = {}
@@ -56,13 +62,14 @@ class Recorder(Node):
     def __init__(self, output: str | None = None, topics: dict[str, str] | None = None,
                  open_file=None):
         super().__init__('recorder')
-        default_output = time.strftime('bags/gait_%Y_%m_%d-%H_%M_%S')
-        output = self.declare_parameter('output', output or default_output).value
-        flush_period_s = self.declare_parameter('flush_period_s', 0.5).value
+        self.writer = None  # destroy_node after a refusal has no bag to close
+        values = {name: self.declare_parameter(name, default).value
+                  for name, default in parameter_defaults(output).items()}
+        self.check_parameter_overrides()  # before a bag directory is made
+        output, flush_period_s = values['output'], values['flush_period_s']
         if not 0 < flush_period_s <= 1.0:
             raise ArgumentError(f'flush_period_s must be in (0, 1] s, got {flush_period_s}')
         topics = topics or dict(graph.TOPICS)
-        self.writer = None  # destroy_node after a refused output has no bag to close
         # Made at start, so that subscribers have matched it when a failure is reported.
         self.diagnostics = DiagnosticsReporter(self)
         self._failure_reported_ns: int | None = None
