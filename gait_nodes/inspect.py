@@ -17,7 +17,7 @@ import json
 import sys
 
 from gait_nodes.cli import ArgumentParser, fail
-from gait_nodes.errors import GaitNodesError
+from gait_nodes.errors import GaitNodesError, os_error_text
 
 PROG = 'python -m gait_nodes.inspect'
 #: Show progress on a non-terminal too above this size [bytes].
@@ -172,7 +172,12 @@ def main(args: list[str] | None = None) -> int:
             from gait_nodes.bag.plots import write_plots
 
             robot = options.robot or report.get('gait', {}).get('robot')
-            written = write_plots(inspection.series, options.plot, robot_limits(robot)[1])
+            try:
+                written = write_plots(inspection.series, options.plot, robot_limits(robot)[1])
+            except OSError as error:  # the bag was read: the plots' place is the problem
+                return fail(PROG, GaitNodesError(
+                    f'--plot {options.plot}: cannot write {error.filename or "the plots"}: '
+                    f'{os_error_text(error)}'))
             report['plots'] = [str(p) for p in written]
     except GaitNodesError as error:
         return fail(PROG, error)

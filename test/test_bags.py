@@ -187,6 +187,16 @@ def test_inspect_cli_json_text_and_plots(gait_bag_dir, tmp_path, capsys):
     assert 'metadata.yaml matches' in text and 'rejected: step_length_m' in text
 
 
+def test_inspect_names_the_plot_directory_it_cannot_write(gait_bag_dir, tmp_path, capsys):
+    from gait_nodes.inspect import main
+
+    (tmp_path / 'a_file').write_text('not a directory\n')
+    assert main([str(gait_bag_dir), '--plot', str(tmp_path / 'a_file' / 'plots')]) == 2
+    [line] = capsys.readouterr().err.splitlines()
+    assert f'--plot {tmp_path / "a_file" / "plots"}: cannot write' in line
+    assert 'Not a directory' in line and str(gait_bag_dir) not in line
+
+
 @pytest.mark.parametrize('make', ['text file', 'empty dir', 'missing', 'sqlite bag', 'bad yaml'])
 def test_inspect_refuses_what_is_not_a_bag(tmp_path, capsys, make):
     from gait_nodes.inspect import main
