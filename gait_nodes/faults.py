@@ -120,6 +120,16 @@ class GuardedNode(Node):
 
     faults: FaultGuard | None = None
 
+    def __init__(self, node_name: str, **kwargs):
+        super().__init__(node_name, **kwargs)
+        # A misspelt parameter is refused now, not after the node's start-up work (its robot
+        # model, a value table: seconds to minutes).
+        from gait_nodes.node_parameters import parameter_names
+
+        accepted = parameter_names(node_name)
+        if accepted is not None:
+            self.check_parameter_overrides(accepted)
+
     def _guarded(self, callback):
         # Before the guard exists only the runtime subscribes for the node (/clock, when
         # use_sim_time is given at start): its own callback, not the node's core.

@@ -7,7 +7,9 @@ independent reader of the bag can check it:
   ``(count - 1) / (last - first log time)`` of that topic.
 - ``distance_m``: path length of ``odom -> base_link`` (from ``/tf``) in the ground plane;
   ``displacement_m``: straight-line distance from its first to its last position;
-  ``mean_speed_m_s``: ``distance_m`` over the time between those two samples (header stamps);
+  ``net_speed_m_s``: ``displacement_m`` over the time between those two samples (header
+  stamps; :func:`net_speed`), the speed at which the robot advanced, sway excluded;
+  ``path_speed_m_s``: ``distance_m`` over the same time (sway included);
   ``rise_m``: height of the last base position above the first (stairs climbed).
 - ``steps``: each swing executed by the time the bag ends (the latest /gait/footsteps version of
   it, see :class:`gait_nodes.contract.FootstepPlan`); a step's length is the horizontal distance
@@ -227,8 +229,33 @@ def _round(value: float, digits: int = 6):
     return None if value is None or not math.isfinite(value) else round(float(value), digits)
 
 
+def net_speed(base: np.ndarray, start_ns: float | None = None,
+              end_ns: float | None = None) -> float | None:
+    """Net speed of the base [m/s]: its horizontal displacement over the time it took.
+
+    Sway and back-and-forth motion do not count, only where the base got to.
+
+    Args:
+        base: Base positions by time, rows ``(stamp [ns], x, y, z)`` sorted by stamp (as
+            :attr:`GaitSeries.base`).
+        start_ns: Start of the interval [ns] (default: the first sample); positions between
+            samples are interpolated linearly.
+        end_ns: End of the interval [ns] (default: the last sample).
+
+    Returns:
+        The speed, or None when the interval is empty.
+    """
+    start = base[0, 0] if start_ns is None else start_ns
+    end = base[-1, 0] if end_ns is None else end_ns
+    if len(base) < 2 or end <= start:
+        return None
+    x0, x1 = np.interp([start, end], base[:, 0], base[:, 1])
+    y0, y1 = np.interp([start, end], base[:, 0], base[:, 2])
+    return float(np.hypot(x1 - x0, y1 - y0) / ((end - start) * 1e-9))
+
+
 def base_metrics(series: GaitSeries) -> dict | None:
-    """Distance, displacement and mean speed of the base from /tf."""
+    """Distance, displacement and speeds (net and along the path) of the base from /tf."""
     if len(series.base) < 2:
         return None
     base = np.array(sorted(series.base))
@@ -239,7 +266,8 @@ def base_metrics(series: GaitSeries) -> dict | None:
             'distance_m': _round(distance),
             'displacement_m': _round(float(np.linalg.norm(xy[-1] - xy[0]))),
             'time_s': _round(elapsed),
-            'mean_speed_m_s': _round(distance / elapsed) if elapsed > 0 else None,
+            'net_speed_m_s': _round(net_speed(base)),
+            'path_speed_m_s': _round(distance / elapsed) if elapsed > 0 else None,
             'rise_m': _round(float(base[-1, 3] - base[0, 3]))}
 
 
