@@ -386,12 +386,14 @@ class FootstepPlanner(GuardedNode):
         # Planning runs in the worker, the tick publishes its finished plans (module docstring).
         self.worker = OnlinePlanner(
             planner, self.origin_ns, lambda: self.get_clock().now().nanoseconds,
-            cover_s=self._cover_s(params), threaded=self.context.runtime != 'inproc',
+            cover_s=self._cover_s(params), lead_s=self.settings['zmp_horizon_s'],
+            threaded=self.context.runtime != 'inproc',
             describe=self._describe_plan,
             failure_hold_s=lambda p: (self.settings['zmp_horizon_s'] + p.params.step_period_s
                                       + RETRY_AFTER_S),
             job_done=lambda kind, seconds: callback_times.record(self.get_name(),
-                                                                 f'worker {kind}', seconds))
+                                                                 f'worker {kind}', seconds),
+            check=self._check_joint_speeds)
         self.worker.start()
 
     @property
@@ -437,6 +439,40 @@ class FootstepPlanner(GuardedNode):
             return known  # still the stand-in: keep the same one
         self._timings[key] = (model, reason, final)
         return model, reason, final
+
+    def _check_joint_speeds(self, fork: GaitPlanner, from_s: float) -> None:
+        """Worker: refuse a plan with fixed timing whose swings the joints cannot follow.
+
+        A plan timed at the joint limit (``timing: joint_limit`` with a model) is re-timed by
+        its probes already; any other is probed here, with the swing timing model of its
+        swing (closed-form limb IK) or the polynomial swing through the whole-body IK.
+        """
+        params = fork.params
+        if params.timing == 'joint_limit' and fork.swing_timing is not None:
+            return
+        probe = self._probe(params)
+        if probe is not None:
+            fork.check_joint_speeds(probe, from_s)
+
+    def _probe(self, params: GaitParameters):
+        """Worker: the joint-speed probe of ``params``' swings (None: no robot model)."""
+        if self.robot.extra.get('limb_ik') is not None:
+            return self._swing_timing(params.replace(timing='joint_limit'))[0]
+        key = ('probe', params.step_height_m)
+        if key not in self._timings:
+            from gait_nodes.robot.model import load_robot_model
+            from gait_nodes.swing.timing import PolynomialSwingTiming
+
+            try:
+                if self._robot_model is None:
+                    self._robot_model = load_robot_model(str(self.robot.path))
+                self._timings[key] = PolynomialSwingTiming(
+                    self._robot_model, None, self.robot.joint_velocity_limit_rad_s,
+                    params.step_height_m)
+            except GaitNodesError as exc:
+                self.get_logger().warning(f'no joint-speed check of gait commands: {exc}')
+                self._timings[key] = None
+        return self._timings[key]
 
     def _retime(self, fork: GaitPlanner, at_s: float):
         """Worker: time ``fork`` with the table once it exists (UNCHANGED while it does not)."""
@@ -908,6 +944,13 @@ class FootstepPlanner(GuardedNode):
             elif isinstance(event, Changed):
                 kind, reason, final = event.info
                 self._report_timing(reason, final)
+            elif isinstance(event, ChangeRefused) and event.key == 'velocity':
+                self._requested_twist = self.planner.requested_twist
+                self.diagnostics.report(
+                    'velocity', WARN, f'velocity {event.payload.as_tuple()} refused: '
+                    f'{event.reason}; walking {self.planner.twist.as_tuple()} on',
+                    {'requested_twist': event.payload.as_tuple(),
+                     'applied_twist': self.planner.twist.as_tuple()})
             elif isinstance(event, ChangeRefused):
                 self.diagnostics.report('timing', WARN, f'{self._timing_reason}; a change '
                                         f'({event.key}) could not be planned: {event.reason}')
@@ -1009,6 +1052,7 @@ class FootstepPlanner(GuardedNode):
             self.timer = self.create_timer(1.0 / settings['rate_hz'], self.tick)
         self.settings = settings
         self.worker.cover_s = self._cover_s(self.planner.params)
+        self.worker.lead_s = settings['zmp_horizon_s']
         self.worker.run_pending()
 
     # --- outputs -------------------------------------------------------------------------------

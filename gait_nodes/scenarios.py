@@ -104,6 +104,79 @@ SCENARIOS: dict[str, Scenario] = {s.name: s for s in (
               _vel(16.0, 0.0)), 20.0),
 )}
 
+
+
+def _every_3_s(first: TimedCommand, *commands) -> tuple[TimedCommand, ...]:
+    """``first`` at 0 s, then each of ``commands`` 3 s after the one before.
+
+    Each is a dict (a /gait/command) or a tuple (a /cmd_vel twist).
+    """
+    timed = [first]
+    for k, command in enumerate(commands, start=1):
+        timed.append(_vel(3.0 * k, *command) if isinstance(command, tuple)
+                     else _cmd(3.0 * k, command))
+    return tuple(timed)
+
+
+# Gait commands while walking, one every 3 s from 0 to 84 s (issue 25, bench/commands.py): every
+# kind a user sends (step height, length, period, duty factor, gait and swing, speed and
+# direction, stop and go), each one the robot can walk: every one must be accepted, walked from a
+# step boundary and applied once. The walk lasts until the last has taken effect (RoboSimian's
+# steps take up to 8 s). The planner's refusals are tested apart (test_online_commands).
+COMMAND_SCENARIOS = (
+    Scenario('robosimian_commands',
+             'RoboSimian crawl commanded every 3 s: height, length, period, duty factor, swing, '
+             'speed, direction, stop and go; a trot it cannot reach refused',
+             'robosimian', {'gait': 'crawl', 'swing': 'value_table', 'com_method': 'preview',
+                            'timing': 'joint_limit'},
+             _every_3_s(_vel(0.0, 0.043),
+                        {'step_height_m': 0.08}, {'step_length_m': 0.16}, (0.02,),
+                        {'swing': 'polynomial'}, {'step_height_m': 0.1}, (0.0, 0.01),
+                        {'swing': 'value_table'}, (0.02, 0.0, 0.02), {'step_length_m': 0.2},
+                        (0.0,), (0.043,), {'zmp_margin_m': 0.02}, {'step_period_s': 3.0},
+                        {'duty_factor': 0.9}, (-0.01,), {'step_length_m': 0.12},
+                        (0.03, 0.0, -0.02), {'swing': 'polynomial', 'step_height_m': 0.08},
+                        (0.0,), (0.043,), {'swing': 'value_table', 'step_height_m': 0.1},
+                        {'zmp_margin_m': 0.01}, {'step_length_m': 0.2}, (0.03, 0.005),
+                        {'step_period_s': 2.0, 'duty_factor': 0.85}, (0.043,),
+                        {'step_height_m': 0.08}, {'gait': 'crawl', 'step_height_m': 0.1}),
+             105.0),
+    Scenario('biped_commands',
+             'small humanoid commanded every 3 s: step period, duty factor, height, length, '
+             'speed, direction, turn, stop and go',
+             'biped', {'gait': 'biped', 'swing': 'polynomial', 'com_method': 'preview',
+                       'step_height_m': 0.1, 'step_period_s': 1.5, 'duty_factor': 0.72},
+             _every_3_s(_vel(0.0, 0.1),
+                        {'step_period_s': 1.7}, {'step_height_m': 0.08}, (0.15,),
+                        {'duty_factor': 0.8}, {'step_length_m': 0.2}, (0.05, 0.0, 0.1),
+                        {'step_period_s': 1.8}, (0.1, 0.02), {'step_height_m': 0.1},
+                        (0.0,), (0.1,), {'zmp_margin_m': 0.02}, {'step_length_m': 0.24},
+                        (-0.05,), {'step_period_s': 2.0}, (0.1, -0.03),
+                        {'zmp_margin_m': 0.01}, (0.0, 0.0, 0.1), {'step_height_m': 0.09},
+                        (0.12,), {'duty_factor': 0.75}, (0.0,), (0.1,),
+                        {'step_period_s': 1.5}, (0.08, 0.0, -0.1), {'step_length_m': 0.25},
+                        (0.1,), {'step_height_m': 0.08, 'duty_factor': 0.72}),
+             90.0),
+    Scenario('go2_commands',
+             'Unitree Go2 trot commanded every 3 s: period, duty factor, height, length, gait '
+             '(trot and crawl), speed, direction, stop and go',
+             'go2', {'gait': 'trot', 'swing': 'polynomial', 'com_method': 'sway',
+                     'step_length_m': 0.2, 'step_period_s': 0.5, 'duty_factor': 0.6},
+             _every_3_s(_vel(0.0, 0.1),
+                        {'step_period_s': 0.6}, {'step_height_m': 0.06}, (0.15,),
+                        {'duty_factor': 0.65}, {'step_length_m': 0.15}, (0.05, 0.03),
+                        {'gait': 'crawl', 'duty_factor': 0.8, 'step_period_s': 0.8},
+                        (0.05,), (0.05, 0.0, 0.2), (0.0,), (0.05,),
+                        {'gait': 'trot', 'duty_factor': 0.6, 'step_period_s': 0.5},
+                        (0.1,), {'step_height_m': 0.08}, (0.1, -0.03), (-0.05,),
+                        {'step_period_s': 0.45}, (0.0, 0.0, 0.3), {'step_length_m': 0.2},
+                        (0.12,), {'duty_factor': 0.6}, (0.0,), (0.1,),
+                        {'zmp_margin_m': 0.01}, (0.08, 0.0, -0.2),
+                        {'step_period_s': 0.5}, (0.1,), {'step_height_m': 0.06}),
+             90.0),
+)
+SCENARIOS.update({s.name: s for s in COMMAND_SCENARIOS})
+
 DEFAULT_SCENARIO = 'robosimian_crawl'
 
 

@@ -853,16 +853,62 @@ class GaitPlanner:
         return Step(gait, kind, t0, t_end, state.positions, state.yaws, tuple(slots), times,
                     points, kept, params, twist, after_state)
 
+    def check_joint_speeds(self, probe, from_s: float) -> None:
+        """Raise unless the joints can walk every step from ``from_s`` on in its planned time.
+
+        Each step's swings and transfer are probed as :meth:`_next_step` probes them to re-time
+        a walk at the joint limit (``probe``: a :class:`gait_nodes.swing.timing.SwingTiming`),
+        here to check a plan whose times are fixed (``timing: fixed``), or any plan, against
+        the joints' velocity and acceleration limits.
+
+        Raises:
+            GaitParameterError: The first step whose swing or transfer needs more time than
+                planned: which, how much, and what gives it more.
+        """
+        for step in self._steps:
+            if step.start_s < from_s - 1e-9 or not step.slots:
+                continue
+            before = _State(time_s=step.start_s, positions=step.positions_start,
+                            yaws=step.yaws_start, zmp=step.zmp_points[0], mode='walking',
+                            next_group=0, rest_pose=np.zeros(3), last_anchor=np.zeros(3))
+            points = step.zmp_points[-3:] if len(step.zmp_points) > 3 else step.zmp_points
+            swing_s = min(slot.touch_down_s - slot.lift_off_s for slot in step.slots)
+            needed = self._needed_swing_s(step.gait, before, step.slots, points,
+                                          step.params.com_height_m, probe, True)
+            transfer_s = step.slots[0].lift_off_s - step.start_s
+            needed_transfer = self._needed_transfer_s(before, points, step.params.com_height_m,
+                                                      probe, True)
+            names = [self.layout.names[f] for f in step.slots[0].feet]
+            params = step.params
+            timing = (f'(step_period_s {params.step_period_s:g} s, duty_factor '
+                      f'{params.duty_factor:g}: ')
+            if needed > swing_s * (1.0 + 1e-9):
+                raise GaitParameterError(
+                    f'the joints cannot follow the swing of {names} at '
+                    f'{step.slots[0].lift_off_s:.2f} s: it needs {needed:.3f} s at the joint '
+                    f'velocity and acceleration limits, the plan gives {swing_s:.3f} s {timing}'
+                    f'a longer period or a lower duty factor gives the swings more time, a '
+                    f'shorter stride needs less)')
+            if needed_transfer > transfer_s * (1.0 + 1e-9):
+                raise GaitParameterError(
+                    f'the joints cannot follow the body\'s move before the swing of {names} '
+                    f'at {step.start_s:.2f} s: it needs {needed_transfer:.3f} s at the joint '
+                    f'velocity and acceleration limits, the plan gives {transfer_s:.3f} s '
+                    f'{timing}a longer period or a higher duty factor gives the body more time)')
+
     def _needed_swing_s(self, gait: str, state: _State, slots: Sequence[SwingSlot],
-                        zmp_points: np.ndarray, com_height_m: float) -> float:
+                        zmp_points: np.ndarray, com_height_m: float, probe=None,
+                        with_acceleration: bool = False) -> float:
         """Longest time [s] the swings of ``slots`` need at the joint limit (0: no model).
 
         Each swing is probed where it happens (:meth:`gait_nodes.swing.timing.SwingTiming.
         step_s`): the other feet where they stand, the COM over the ZMP reference of the swing
         (held at the step's knot in a crawl or biped step, moving along the diagonal in a trot).
         """
-        if self._params.timing != 'joint_limit' or self._timing is None or not slots:
+        if probe is None and (self._params.timing != 'joint_limit' or self._timing is None) \
+                or not slots:
             return 0.0
+        probe = probe or self._timing
         from gait_nodes.contract import Swing
 
         centre = zmp_points[1] if gait != 'trot' else 0.5 * (zmp_points[1] + zmp_points[2])
@@ -877,27 +923,31 @@ class GaitPlanner:
                                   feet[foot], landing[foot],
                                   float(yaws[foot]), float(slot.yaws_after[foot]))
                       for foot in slot.feet}
-            needed = max(needed, self._timing.step_s(swings, feet, yaws, body_yaw, com))
+            needed = max(needed, probe.step_s(swings, feet, yaws, body_yaw, com,
+                                              with_acceleration))
             positions, yaws = slot.positions_after, slot.yaws_after
         return needed
 
     def _needed_transfer_s(self, state: _State, zmp_points: np.ndarray,
-                           com_height_m: float) -> float:
+                           com_height_m: float, probe=None,
+                           with_acceleration: bool = False) -> float:
         """Least time [s] of the step's transfer, the COM following the ZMP's move (0: none).
 
         :meth:`gait_nodes.swing.timing.SwingTiming.transfer_s` with the feet where they stand
         and the COM moved from the first ZMP knot to the second (the end of the transfer).
         """
-        if self._params.timing != 'joint_limit' or self._timing is None \
+        if probe is None and (self._params.timing != 'joint_limit' or self._timing is None) \
                 or len(zmp_points) < 3:
             return 0.0
+        probe = probe or self._timing
         feet = self._with_heights(state.positions)
         height = com_height_m + feet[:, 2].min()
         com_from, com_to = (np.array([*point, height]) for point in zmp_points[:2])
         if np.linalg.norm(com_to - com_from) < ALREADY_THERE:
             return 0.0
         body_yaw = float(np.angle(np.exp(1j * state.yaws).sum()))
-        return self._timing.transfer_s(feet, state.yaws, body_yaw, com_from, com_to)
+        return probe.transfer_s(feet, state.yaws, body_yaw, com_from, com_to,
+                                with_acceleration)
 
     @staticmethod
     def _first_cycle_path_s(state: _State, groups, group_index: int, offsets: np.ndarray,

@@ -9,17 +9,18 @@ changed, a worker (a thread, or the caller itself in the deterministic ``inproc`
 plans it on a copy of the live plan, and the control path only reads whole, finished plans
 (:attr:`OnlinePlanner.snapshot`), which the worker keeps planned ``cover_s`` ahead.
 
-A change joins the motion under way. Submitted at ``now``, it is planned from ``at_s = now +
-lead`` on: every step that has started by then is kept as it is, and the change starts at the
-first step boundary after ``at_s`` (all feet down, the ZMP reference, the COM, the footholds and
-the swings continuous there; a standstill ends at ``at_s``). The lead covers the worker's own
-time (measured) and :data:`LEAD_S`, the time the new plan needs to reach the swing-leg policy
-and the whole-body IK before it changes anything. The candidate is planned
-:data:`CHECK_CYCLES` gait cycles past the join, through every check the planner makes (reach,
-the joint-limit timing of every swing and transfer); a failure rejects the command and the live
-plan goes on unchanged. At the handover the join must still be :data:`MIN_LEAD_S` ahead of the
-clock; a worker that was too slow plans it again from a later ``at_s``, up to
-:data:`MAX_ATTEMPTS` times, then rejects the command as busy.
+A change joins the motion under way and never alters what the robot was already promised.
+The control path publishes the plan ``lead_s`` ahead (the footstep planner's ZMP horizon, which
+the COM controller previews). Submitted at ``now``, a change is planned from ``at_s = now +
+lead_s + LEAD_MARGIN_S + the worker's own time (measured)`` on: every step that has started by
+then is kept as it is, and the change starts at the first step boundary after ``at_s`` (all feet
+down; the ZMP reference, the COM, the footholds and the swings continuous there; a standstill
+ends at ``at_s``). The candidate is planned :data:`CHECK_CYCLES` gait cycles past the join,
+through every check the planner makes (reach, the joint speeds of every swing and transfer); a
+failure rejects the command and the live plan goes on unchanged. At the handover ``at_s`` must
+still be ``lead_s`` ahead of the clock, so that nothing already published changes; a worker
+that was too slow plans it again from a later ``at_s``, up to :data:`MAX_ATTEMPTS` times, then
+rejects the command as busy.
 
 Gait commands carry an id. Each gets exactly one decision (accepted, rejected, or superseded:
 a newer command arrived before the worker started on it) and, once accepted, a second answer
@@ -40,11 +41,8 @@ from gait_nodes.errors import GaitNodesError
 from gait_nodes.planning.footsteps import GaitPlanner, Twist2D
 
 NS_PER_S = 1_000_000_000
-#: Least time from a plan's handover to the first change it makes [s]: the swing-leg policy and
-#: the whole-body IK get the new footsteps and references before anything differs.
-LEAD_S = 0.5
-#: A candidate is handed over only while its join is at least this far ahead [s].
-MIN_LEAD_S = 0.3
+#: Time added to the lead for the new plan to reach the nodes that follow it [s].
+LEAD_MARGIN_S = 0.3
 #: Plans of one command tried before it is rejected as busy (the worker too slow each time).
 MAX_ATTEMPTS = 3
 #: A candidate plan is checked over this many gait cycles after its join.
@@ -119,6 +117,7 @@ class ChangeRefused:
 
     key: str
     reason: str
+    payload: object = None
 
 
 @dataclasses.dataclass(frozen=True)
@@ -166,23 +165,30 @@ class OnlinePlanner:
         clock_ns: The node's clock: ROS time now [ns].
         cover_s: The worker keeps the plan this far ahead of the clock [s] (the control path's
             horizon, a step and the time of a slow candidate).
+        lead_s: How far ahead of the clock the control path has published the plan [s]: no
+            change starts earlier.
         threaded: Plan in a background thread (``start``/``stop``); False: :meth:`run_pending`
             does the work when the caller asks (the deterministic ``inproc`` runtime).
         describe: ``describe(planner) -> dict``: the report kept with each snapshot.
         failure_hold_s: ``failure_hold_s(planner) -> float``: how long a failed plan holds its
             safe stand before walking again [s].
         job_done: ``job_done(kind, seconds)`` after each job of the worker (for benchmarks).
+        check: ``check(fork, from_s)``: raises :class:`GaitNodesError` if the candidate plan
+            ``fork`` cannot be walked from ``from_s`` on (beyond the planner's own checks,
+            e.g. the joint speeds of a plan with fixed timing).
     """
 
     def __init__(self, planner: GaitPlanner, origin_ns: int, clock_ns: Callable[[], int], *,
-                 cover_s: float, threaded: bool = False,
+                 cover_s: float, lead_s: float = 0.0, threaded: bool = False,
                  describe: Callable[[GaitPlanner], dict] | None = None,
                  failure_hold_s: Callable[[GaitPlanner], float] | None = None,
-                 job_done: Callable[[str, float], None] | None = None):
+                 job_done: Callable[[str, float], None] | None = None,
+                 check: Callable[[GaitPlanner, float], None] | None = None):
         self._live = planner
         self._origin_ns = int(origin_ns)
         self._clock_ns = clock_ns
         self.cover_s = float(cover_s)
+        self.lead_s = float(lead_s)
         self._threaded = threaded
         self._describe = describe or (lambda planner: {})
         self._failure_hold_s = failure_hold_s or (lambda planner: 1.0)
@@ -200,6 +206,7 @@ class OnlinePlanner:
         self._thread: threading.Thread | None = None
         self._busy_since: float | None = None
         self._job_done = job_done or (lambda kind, seconds: None)
+        self._check = check or (lambda fork, from_s: None)
         self._extend()
         self._publish()
 
@@ -365,7 +372,7 @@ class OnlinePlanner:
 
     def _plan_change(self, job: _Job) -> None:
         """Plan a command, a velocity or a change on a fork; hand it over if it joins in time."""
-        lead_s = LEAD_S + self._work_s
+        lead_s = self.lead_s + LEAD_MARGIN_S + self._work_s
         for _ in range(MAX_ATTEMPTS):
             started = time.monotonic()
             at_s = self._now_s() + lead_s
@@ -378,20 +385,22 @@ class OnlinePlanner:
                 rhythm = fork.rhythm()
                 if rhythm is not None:
                     cycle_s = rhythm.cycle_s
-                fork.advance(fork.next_boundary_s(at_s) + CHECK_CYCLES * cycle_s)
+                join_s = fork.next_boundary_s(at_s)
+                fork.advance(join_s + CHECK_CYCLES * cycle_s)
+                self._check(fork, join_s)
             except Exception as exc:  # noqa: BLE001 (any failure of the candidate refuses it)
                 self._work_s = time.monotonic() - started
                 self._refuse(job, str(exc) if isinstance(exc, GaitNodesError)
                              else f'{type(exc).__name__}: {exc}')
                 return
             self._work_s = time.monotonic() - started
-            if at_s - self._now_s() >= MIN_LEAD_S or not self._threaded:
+            if at_s - self._now_s() >= self.lead_s or not self._threaded:
                 takes_effect_ns = self._origin_ns + int(round(
                     fork.next_boundary_s(at_s) * NS_PER_S))
                 self._live = fork
                 self._handed_over(job, result, takes_effect_ns)
                 return
-            lead_s = LEAD_S + 2.0 * self._work_s
+            lead_s = self.lead_s + LEAD_MARGIN_S + 2.0 * self._work_s
         self._refuse(job, f'busy: the planner could not plan it ahead of the motion '
                           f'({MAX_ATTEMPTS} tries, the last {self._work_s:.2f} s); send it again')
 
@@ -408,8 +417,7 @@ class OnlinePlanner:
             with self._lock:
                 self._outbox.append(self._decide(job, REJECTED, reason, publish=False))
         elif job.kind == 'velocity':
-            # A twist is checked (finite) before it is submitted: what fails here is planning.
-            self._emit(Failure(GaitNodesError(reason), f'the velocity {job.payload.as_tuple()}'))
+            self._emit(ChangeRefused('velocity', reason, job.payload))
         else:
             self._emit(ChangeRefused(job.command_id, reason))
 

@@ -62,6 +62,8 @@ TRANSFER_PROBE_SAMPLES = 21
 #: Peak over mean speed of the COM's move in a transfer (a minimum-jerk move's 15/8): the probe
 #: moves it at constant speed.
 TRANSFER_PEAK_FACTOR = 1.875
+#: Peak acceleration of a minimum-jerk move of length 1 in time 1 (10 / sqrt(3)).
+MIN_JERK_PEAK_ACCELERATION = 10.0 / math.sqrt(3.0)
 #: Relative extra transfer time over the probe at the nominal stance (see steady_transfer_s).
 #: Measured on RoboSimian's crawl at its fastest rhythm: the planner's probe of each transfer
 #: (the feet staggered by the stride) needs 1.13-1.14 times the time probed at the nominal
@@ -140,14 +142,20 @@ class SwingTiming:
     displacement for RoboSimian), and every joint of every limb counts. The
     swing then lasts ``max_j max_u |dq_j / du| / W`` times ``1 + BODY_MOTION_MARGIN``.
 
+    A robot without closed-form limb IK (``family`` None) has a model that probes planned
+    swings and transfers only (:meth:`step_s`, :meth:`transfer_s`: a plan's check), not the
+    rhythm of a steady walk (:meth:`swing_s` needs the limb's own IK).
+
     Args:
-        robot: The :class:`gait_nodes.robot.model.RobotModel` (with ``extra.limb_ik``).
-        family: IK family 0..7.
+        robot: The :class:`gait_nodes.robot.model.RobotModel` (with ``extra.limb_ik``, or
+            any robot when ``family`` is None).
+        family: IK family 0..7, or None.
         joint_velocity_limit_rad_s: The limit [rad/s].
         name: What the times come from (for messages).
     """
 
-    def __init__(self, robot, family: int, joint_velocity_limit_rad_s: float, name: str):
+    def __init__(self, robot, family: int | None, joint_velocity_limit_rad_s: float,
+                 name: str):
         from gait_nodes.robot.whole_body_ik import (
             IkSettings,
             WholeBodyIkSolver,
@@ -156,14 +164,19 @@ class SwingTiming:
         from gait_nodes.swing.kinematics import LimbTiming
 
         self.robot = robot
-        self.timing = LimbTiming(robot, family, joint_velocity_limit_rad_s)
+        self.family = family
+        self.timing = (LimbTiming(robot, family, joint_velocity_limit_rad_s)
+                       if family is not None else None)
         self.name = name
         #: Factor on every time (> 1 for a model standing in for slower swings).
         self.factor = 1.0
-        ik = self.timing.ik
         feet = robot.description.feet
-        self._mirrors = [np.asarray(ik.mirrors[ik.foot_index[foot.name]], dtype=float)
-                         for foot in feet]
+        if self.timing is not None:
+            ik = self.timing.ik
+            self._mirrors = [np.asarray(ik.mirrors[ik.foot_index[foot.name]], dtype=float)
+                             for foot in feet]
+        else:
+            self._mirrors = [np.ones(2) for _ in feet]
         self._reference = next(k for k, m in enumerate(self._mirrors) if (m == 1).all())
         self._mirror_floats = [(float(m[0]), float(m[1])) for m in self._mirrors]
         self._swing_s: dict[tuple[float, float, float], float] = {}  # see swing_s
@@ -196,11 +209,19 @@ class SwingTiming:
         yaws[:, self._reference] = states[:, 3]
         return self._time_through_ik(u, feet, yaws, 0.0, self._com, self._q_nominal)
 
-    def _time_through_ik(self, u, feet, yaws, body_yaw_rad, com, q_start) -> float:
-        """``max |dq/du| / W`` over every joint, the feet following ``feet`` (N, F, 3).
+    def _time_through_ik(self, u, feet, yaws, body_yaw_rad, com, q_start,
+                         acceleration: str | None = None, velocity_factor: float = 1.0
+                         ) -> float:
+        """``velocity_factor max |dq/du| / W`` over every joint, the feet along ``feet``.
+
+        ``feet`` (N, F, 3) are the feet's places at ``u`` (N,).
 
         The full-model COM follows ``com`` ((3,): held; (N, 3): a path) and the body is level
-        at ``body_yaw_rad``.
+        at ``body_yaw_rad``. With ``acceleration`` the time is also long enough for the
+        joints' acceleration limits A: ``sqrt(max |d2q/du2| / A)`` when ``u`` is the motion's
+        own time law (``'path'``), ``sqrt(MIN_JERK_PEAK_ACCELERATION max |dq/du| / A)`` when
+        ``u`` is the distance along a path the motion follows in a minimum-jerk time law
+        (``'min_jerk'``).
         """
         # What IkTargets would check at every sample, checked once for all of them.
         feet = np.asarray(feet, dtype=float)
@@ -226,9 +247,18 @@ class SwingTiming:
                                        f'the reach of the limbs')
             solutions.append(result.q)
             joints.append(self.robot.joint_positions(result.q))
-        rates = np.abs(np.diff(np.array(joints), axis=0)) / np.diff(u)[:, None]
+        joints = np.array(joints)
+        rates = np.abs(np.diff(joints, axis=0)) / np.diff(u)[:, None]
         limits = np.asarray(self.robot.velocity_limits_rad_s, dtype=float)
-        return float((rates / limits).max())
+        time_s = velocity_factor * float((rates / limits).max())
+        if acceleration is None:
+            return time_s
+        accelerations = np.asarray(self.robot.acceleration_limits_rad_s2, dtype=float)
+        if acceleration == 'path':
+            curvature = np.abs(np.gradient(np.gradient(joints, u, axis=0), u, axis=0))
+        else:
+            curvature = MIN_JERK_PEAK_ACCELERATION * rates
+        return max(time_s, math.sqrt(float((curvature / accelerations).max())))
 
     def world_shape(self, swing: Swing, body_yaw_rad: float) -> tuple[np.ndarray, np.ndarray]:
         """The swing published for a planned ``swing``, as ``(u, states)``.
@@ -239,8 +269,8 @@ class SwingTiming:
         raise NotImplementedError
 
     def step_s(self, swings: dict[int, Swing], feet_in_world: np.ndarray,
-               foot_yaws_rad: np.ndarray, body_yaw_rad: float, com_in_world: np.ndarray
-               ) -> float:
+               foot_yaws_rad: np.ndarray, body_yaw_rad: float, com_in_world: np.ndarray,
+               with_acceleration: bool = False) -> float:
         """Least time [s] of planned swings made together, probed where they happen.
 
         The whole-body IK follows the swings (as :meth:`world_shape` makes them, each stretched
@@ -255,6 +285,7 @@ class SwingTiming:
             foot_yaws_rad: (F,) their yaws [rad].
             body_yaw_rad: Body yaw [rad].
             com_in_world: (3,) COM position held during the swings [m].
+            with_acceleration: Long enough for the joints' acceleration limits too.
         """
         from gait_nodes.robot.whole_body_ik import IkTargets, seed_configuration
 
@@ -268,13 +299,15 @@ class SwingTiming:
                                              for i in range(3)])
             yaws[:, foot] = np.interp(u, own_u, states[:, 3])
         first = IkTargets(feet[0], yaws[0], body_yaw_rad, com_in_world=np.asarray(com_in_world))
-        q = seed_configuration(self.robot, first, self.timing.family)
+        q = seed_configuration(self.robot, first, self.family)
         q = self._seed_solver.solve(first, q).q
         return (1.0 + STEP_MARGIN) * self.factor * self._time_through_ik(
-            u, feet, yaws, body_yaw_rad, com_in_world, q)
+            u, feet, yaws, body_yaw_rad, com_in_world, q,
+            'path' if with_acceleration else None)
 
     def transfer_s(self, feet_in_world: np.ndarray, foot_yaws_rad: np.ndarray,
-                   body_yaw_rad: float, com_from: np.ndarray, com_to: np.ndarray) -> float:
+                   body_yaw_rad: float, com_from: np.ndarray, com_to: np.ndarray,
+                   with_acceleration: bool = False) -> float:
         """Least time [s] of a transfer: the COM moved from ``com_from`` to ``com_to``.
 
         Every foot stays down at ``feet_in_world`` ((F, 3), yaws ``foot_yaws_rad``); the
@@ -291,10 +324,11 @@ class SwingTiming:
         yaws = np.repeat(np.asarray(foot_yaws_rad, dtype=float)[None], len(u), axis=0)
         first = IkTargets(feet[0], yaws[0], body_yaw_rad, com_in_world=com_from)
         q = self._seed_solver.solve(first, seed_configuration(self.robot, first,
-                                                              self.timing.family)).q
+                                                              self.family)).q
         coms = com_from + u[:, None] * (com_to - com_from)
-        return TRANSFER_PEAK_FACTOR * self.factor * self._time_through_ik(
-            u, feet, yaws, body_yaw_rad, coms, q)
+        return self.factor * self._time_through_ik(
+            u, feet, yaws, body_yaw_rad, coms, q, 'min_jerk' if with_acceleration else None,
+            TRANSFER_PEAK_FACTOR)
 
     def _lattice_s(self, step_in_base: np.ndarray, turn_rad: float) -> float:
         """:meth:`raw_s` interpolated on :data:`LATTICE` (cached; the planner asks often)."""
@@ -440,13 +474,13 @@ class PolynomialSwingTiming(SwingTiming):
 
     Args:
         robot: The RobotModel.
-        family: IK family.
+        family: IK family (None: a robot without closed-form limb IK, probes only).
         joint_velocity_limit_rad_s: The limit [rad/s].
         step_height_m: Via-point height above the ground [m].
         factor: Factor on the times (> 1 when they stand in for slower swings).
     """
 
-    def __init__(self, robot, family: int, joint_velocity_limit_rad_s: float,
+    def __init__(self, robot, family: int | None, joint_velocity_limit_rad_s: float,
                  step_height_m: float, factor: float = 1.0):
         super().__init__(robot, family, joint_velocity_limit_rad_s, 'the polynomial swing')
         self.factor = float(factor)
