@@ -164,6 +164,12 @@ ECHO_CHARACTERS = 500
 WORKER_COVER_S = 4.0
 #: Ids of the changes made with ``ros2 param set`` (and set_parameters) start with this.
 PARAMETER_ID = 'parameters-'
+#: A change joins a standing robot's plan this far ahead [s]: the COM controller commits its
+#: states 0.5 s ahead (horizon_s) and publishes them every 0.1 s; nothing of a standing robot's
+#: committed COM moves, and the walk's start holds the ZMP while the COM counter-moves
+#: (planning.footsteps.START_HOLD_FRACTION). A walking robot's change joins beyond the whole ZMP
+#: horizon (zmp_horizon_s), whose every part the COM controller has previewed.
+STANDING_LEAD_S = 0.6
 #: Depth of the /gait/command subscription: a burst of commands is answered, not dropped.
 COMMAND_DEPTH = 1000
 
@@ -387,6 +393,7 @@ class FootstepPlanner(GuardedNode):
         self.worker = OnlinePlanner(
             planner, self.origin_ns, lambda: self.get_clock().now().nanoseconds,
             cover_s=self._cover_s(params), lead_s=self.settings['zmp_horizon_s'],
+            standing_lead_s=STANDING_LEAD_S,
             threaded=self.context.runtime != 'inproc',
             describe=self._describe_plan,
             failure_hold_s=lambda p: (self.settings['zmp_horizon_s'] + p.params.step_period_s

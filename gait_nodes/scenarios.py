@@ -101,7 +101,7 @@ SCENARIOS: dict[str, Scenario] = {s.name: s for s in (
               _cmd(7.0, {'gait': 'biped'}),                  # not a quadruped's gait
               _vel(8.0, 0.08, 0.0, 0.05),
               _cmd(12.0, {'gait': 'trot', 'duty_factor': 0.6}),
-              _vel(16.0, 0.0)), 20.0),
+              _vel(16.0, 0.0)), 30.0),
 )}
 
 

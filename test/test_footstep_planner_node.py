@@ -185,17 +185,17 @@ def test_a_command_waits_for_the_step_boundary_and_keeps_the_zmp_continuous(quad
     values = {v.key: v.value for v in quadruped.statuses('command')[-1].values}
     boundary_s = float(values['takes_effect_s'])
     boundary_ns = quadruped.planner.origin_ns + int(round(boundary_s * NS))
+    assert boundary_ns == status['takes_effect_ns']
+    # The change joins beyond what was published (the ZMP horizon): that stays as it was.
+    assert boundary_ns >= before.stamps_ns[-1]
     common = np.intersect1d(before.stamps_ns, after.stamps_ns)
-    a, b = before.sample(common), after.sample(common)
-    early = common < boundary_ns
-    assert early.any() and (~early).any()
-    np.testing.assert_allclose(a[early], b[early], atol=1e-12)
-    # Shorter steps: the reference moves less far, never by more than the step change.
-    assert np.max(np.linalg.norm(a - b, axis=1)) <= 0.3 - 0.15 + 1e-9
-    quadruped.spin(4.0)
+    assert len(common) > 1
+    np.testing.assert_allclose(before.sample(common), after.sample(common), atol=1e-12)
+    quadruped.spin(8.0)
     plan = merged_plan(quadruped.plans())
     late = [s for s in plan.swings() if s.lift_off_s * NS + plan.start_ns > boundary_ns + 2 * NS]
     assert late and max(s.end_in_world[0] - s.start_in_world[0] for s in late) <= 0.15 + 1e-9
+    check_zmp_inside(quadruped, 0.055, 0.01, plan)
 
 
 BAD_COMMANDS = {

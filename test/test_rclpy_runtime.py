@@ -246,12 +246,20 @@ def test_rclpy_and_dds_nodes_share_one_graph(ros, started):
         assert footsteps[0].joint_names and footsteps[0].points
         spin_until(executor, lambda: command.get_subscription_count() > 0, 20,
                    'the dds planner to subscribe to /gait/command')
-        command.publish(String(data=json.dumps({'step_height_m': 0.07})))
-        command.publish(String(data=json.dumps({'step_height_m': 'high'})))
-        spin_until(executor, lambda: len(statuses) >= 2, 20, 'two command statuses')
-        answers = [json.loads(status.data) for status in statuses]
-        assert answers[0]['accepted'] and answers[0]['params']['step_height_m'] == 0.07
-        assert not answers[1]['accepted'] and answers[1]['params']['step_height_m'] == 0.07
+        command.publish(String(data=json.dumps({'id': 'ok', 'step_height_m': 0.07})))
+        command.publish(String(data=json.dumps({'id': 'bad', 'step_height_m': 'high'})))
+
+        def decisions():
+            return {a['id']: a for a in (json.loads(s.data) for s in statuses)
+                    if a['state'] != 'applied'}
+
+        spin_until(executor, lambda: {'ok', 'bad'} <= set(decisions()), 20,
+                   'a decision on each command')
+        answers = decisions()
+        assert answers['ok']['state'] == 'accepted'
+        assert answers['ok']['params']['step_height_m'] == 0.07
+        assert answers['bad']['state'] == 'rejected' and not answers['bad']['accepted']
+        assert 'step_height_m' in answers['bad']['reason']
         spin_until(executor, lambda: diagnostics, 20, '/diagnostics from the dds planner')
         assert diagnostics[0].status[0].name.startswith('footstep_planner')
     finally:

@@ -254,8 +254,8 @@ def test_every_transfer_has_the_time_its_body_move_needs():
     probed = []
     transfer_s = timing.transfer_s
 
-    def spy(feet, yaws, body_yaw, com_from, com_to):
-        needed = transfer_s(feet, yaws, body_yaw, com_from, com_to)
+    def spy(feet, yaws, body_yaw, com_from, com_to, *rest):
+        needed = transfer_s(feet, yaws, body_yaw, com_from, com_to, *rest)
         probed.append((tuple(com_from[:2]), needed))
         return needed
 

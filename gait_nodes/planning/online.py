@@ -45,6 +45,11 @@ NS_PER_S = 1_000_000_000
 LEAD_MARGIN_S = 0.3
 #: Plans of one command tried before it is rejected as busy (the worker too slow each time).
 MAX_ATTEMPTS = 3
+#: Step boundaries a change is tried from before it is refused (the first it can join, and the
+#: next ones: a change may be walkable only from where a later step leaves the feet).
+JOIN_BOUNDARIES = 3
+#: A change tried from a later boundary is planned from just after it [s].
+BOUNDARY_EPSILON_S = 1e-6
 #: A candidate plan is checked over this many gait cycles after its join.
 CHECK_CYCLES = 1.0
 #: Decisions remembered for repeated ids.
@@ -166,7 +171,10 @@ class OnlinePlanner:
         cover_s: The worker keeps the plan this far ahead of the clock [s] (the control path's
             horizon, a step and the time of a slow candidate).
         lead_s: How far ahead of the clock the control path has published the plan [s]: no
-            change starts earlier.
+            change starts earlier while the robot walks.
+        standing_lead_s: The lead while the robot stands (no swing under way or planned): the
+            COM's consumers have committed no motion, the lead need only cover the states
+            they have committed (default ``lead_s``).
         threaded: Plan in a background thread (``start``/``stop``); False: :meth:`run_pending`
             does the work when the caller asks (the deterministic ``inproc`` runtime).
         describe: ``describe(planner) -> dict``: the report kept with each snapshot.
@@ -179,7 +187,8 @@ class OnlinePlanner:
     """
 
     def __init__(self, planner: GaitPlanner, origin_ns: int, clock_ns: Callable[[], int], *,
-                 cover_s: float, lead_s: float = 0.0, threaded: bool = False,
+                 cover_s: float, lead_s: float = 0.0, standing_lead_s: float | None = None,
+                 threaded: bool = False,
                  describe: Callable[[GaitPlanner], dict] | None = None,
                  failure_hold_s: Callable[[GaitPlanner], float] | None = None,
                  job_done: Callable[[str, float], None] | None = None,
@@ -189,6 +198,7 @@ class OnlinePlanner:
         self._clock_ns = clock_ns
         self.cover_s = float(cover_s)
         self.lead_s = float(lead_s)
+        self.standing_lead_s = self.lead_s if standing_lead_s is None else float(standing_lead_s)
         self._threaded = threaded
         self._describe = describe or (lambda planner: {})
         self._failure_hold_s = failure_hold_s or (lambda planner: 1.0)
@@ -371,38 +381,62 @@ class OnlinePlanner:
             self._plan_change(job)
 
     def _plan_change(self, job: _Job) -> None:
-        """Plan a command, a velocity or a change on a fork; hand it over if it joins in time."""
-        lead_s = self.lead_s + LEAD_MARGIN_S + self._work_s
+        """Plan a command, a velocity or a change on a fork; hand it over if it joins in time.
+
+        A change that cannot be walked from the first boundary it can join (the feet where that
+        step leaves them) is tried from the next ones, up to :data:`JOIN_BOUNDARIES`.
+        """
+        least_s = self._least_lead_s()
+        lead_s = least_s + LEAD_MARGIN_S + self._work_s
         for _ in range(MAX_ATTEMPTS):
             started = time.monotonic()
             at_s = self._now_s() + lead_s
-            fork = self._live.fork()
-            try:
-                result = self._apply(job, fork, at_s)
-                if result is UNCHANGED and job.kind != 'command':
-                    return
-                cycle_s = fork.params.cycle_s
-                rhythm = fork.rhythm()
-                if rhythm is not None:
-                    cycle_s = rhythm.cycle_s
-                join_s = fork.next_boundary_s(at_s)
-                fork.advance(join_s + CHECK_CYCLES * cycle_s)
-                self._check(fork, join_s)
-            except Exception as exc:  # noqa: BLE001 (any failure of the candidate refuses it)
-                self._work_s = time.monotonic() - started
-                self._refuse(job, str(exc) if isinstance(exc, GaitNodesError)
-                             else f'{type(exc).__name__}: {exc}')
-                return
+            for _ in range(JOIN_BOUNDARIES):
+                fork = self._live.fork()
+                try:
+                    result = self._candidate(job, fork, at_s)
+                    error = None
+                    break
+                except Exception as exc:  # noqa: BLE001 (any failure refuses the candidate)
+                    error = exc
+                    later_s = self._live.next_boundary_s(at_s)
+                    if not later_s > at_s:
+                        break
+                    at_s = later_s + BOUNDARY_EPSILON_S  # the step from there is kept too
             self._work_s = time.monotonic() - started
-            if at_s - self._now_s() >= self.lead_s or not self._threaded:
+            if error is not None:
+                self._refuse(job, str(error) if isinstance(error, GaitNodesError)
+                             else f'{type(error).__name__}: {error}')
+                return
+            if result is UNCHANGED:
+                return
+            if at_s - self._now_s() >= least_s or not self._threaded:
                 takes_effect_ns = self._origin_ns + int(round(
                     fork.next_boundary_s(at_s) * NS_PER_S))
                 self._live = fork
                 self._handed_over(job, result, takes_effect_ns)
                 return
-            lead_s = self.lead_s + LEAD_MARGIN_S + 2.0 * self._work_s
+            lead_s = least_s + LEAD_MARGIN_S + 2.0 * self._work_s
         self._refuse(job, f'busy: the planner could not plan it ahead of the motion '
                           f'({MAX_ATTEMPTS} tries, the last {self._work_s:.2f} s); send it again')
+
+    def _candidate(self, job: _Job, fork: GaitPlanner, at_s: float):
+        """``job`` applied to ``fork`` from ``at_s``, planned and checked past its join."""
+        result = self._apply(job, fork, at_s)
+        if result is UNCHANGED and job.kind != 'command':
+            return UNCHANGED
+        rhythm = fork.rhythm()
+        cycle_s = rhythm.cycle_s if rhythm is not None else fork.params.cycle_s
+        join_s = fork.next_boundary_s(at_s)
+        fork.advance(join_s + CHECK_CYCLES * cycle_s)
+        self._check(fork, join_s)
+        return result
+
+    def _least_lead_s(self) -> float:
+        """The least lead of a change now [s]: ``standing_lead_s`` if nothing swings."""
+        now_s = self._now_s()
+        moving = any(step.slots and step.end_s > now_s for step in self._live.steps)
+        return self.lead_s if moving else min(self.lead_s, self.standing_lead_s)
 
     def _apply(self, job: _Job, fork: GaitPlanner, at_s: float):
         if job.kind == 'velocity':
