@@ -100,8 +100,8 @@ SCENARIOS: dict[str, Scenario] = {s.name: s for s in (
               _cmd(6.5, {'duty_factor': 0.5}),               # below a crawl's 0.75
               _cmd(7.0, {'gait': 'biped'}),                  # not a quadruped's gait
               _vel(8.0, 0.08, 0.0, 0.05),
-              _cmd(12.0, {'gait': 'trot', 'duty_factor': 0.6}),
-              _vel(16.0, 0.0)), 30.0),
+              _cmd(18.0, {'gait': 'trot', 'duty_factor': 0.6}),
+              _vel(28.0, 0.0)), 38.0),
 )}
 
 

@@ -51,7 +51,7 @@ JOIN_BOUNDARIES = 3
 #: A change tried from a later boundary is planned from just after it [s].
 BOUNDARY_EPSILON_S = 1e-6
 #: A candidate plan is checked over this many gait cycles after its join.
-CHECK_CYCLES = 1.0
+CHECK_CYCLES = 2.0
 #: Decisions remembered for repeated ids.
 REMEMBERED_IDS = 1000
 
