@@ -67,6 +67,7 @@ from gait_nodes.com.support_height import SupportHeight
 from gait_nodes.diagnostics import ERROR, OK, WARN, DiagnosticsReporter
 from gait_nodes.errors import ComPlanningError, GaitNodesError
 from gait_nodes.faults import FaultGuard, GuardedNode
+from gait_nodes.graph import node_topic_name
 from gait_nodes.interfaces import get_message
 from gait_nodes.paths import node_defaults as shipped_node_defaults
 from gait_nodes.robot.description import load_robot_description
@@ -162,16 +163,18 @@ class ComPreviewController(GuardedNode):
         self._measured_com: deque = deque(maxlen=50)  # (received [ns], stamp [ns], (x, y))
         self._started_ns = self.get_clock().now().nanoseconds
         self._publisher = self.create_publisher(
-            get_message('trajectory_msgs/msg/MultiDOFJointTrajectory'), COM_TOPIC, 10)
-        self.create_subscription(get_message('nav_msgs/msg/Path'), ZMP_TOPIC,
+            get_message('trajectory_msgs/msg/MultiDOFJointTrajectory'), node_topic_name(COM_TOPIC),
+            10)
+        self.create_subscription(get_message('nav_msgs/msg/Path'), node_topic_name(ZMP_TOPIC),
                                  self._on_zmp_reference, 10)
         self.create_subscription(
-            get_message('trajectory_msgs/msg/MultiDOFJointTrajectory'), FOOTSTEPS_TOPIC,
+            get_message('trajectory_msgs/msg/MultiDOFJointTrajectory'),
+            node_topic_name(FOOTSTEPS_TOPIC),
             self._on_footsteps, QoSProfile(depth=1,
                                            durability=DurabilityPolicy.TRANSIENT_LOCAL))
         # Only where the generator starts: dropped once it runs (see _tick).
         self._measured_com_subscription = self.create_subscription(
-            get_message('geometry_msgs/msg/PointStamped'), MEASURED_COM_TOPIC,
+            get_message('geometry_msgs/msg/PointStamped'), node_topic_name(MEASURED_COM_TOPIC),
             self._on_measured_com, 10)
         # The incremental reader relies on poses shared by identity between the planner's
         # successive messages, which holds within one process (inproc) only. Over DDS the

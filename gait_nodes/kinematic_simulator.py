@@ -274,21 +274,21 @@ class KinematicSimulator(GuardedNode):
         self._marker_parts_cache = self._marker_parts()
         joint_state = self._msg['JointState']
         point = self._msg['PointStamped']
-        self._joint_states = self.create_publisher(joint_state, '/joint_states', 10)
+        self._joint_states = self.create_publisher(joint_state, 'joint_states', 10)
         self._tf = self.create_publisher(get_message('tf2_msgs/msg/TFMessage'), '/tf', 100)
-        self._zmp = self.create_publisher(point, '/gait/zmp', 10)
-        self._com = self.create_publisher(point, '/gait/com', 10)
+        self._zmp = self.create_publisher(point, 'gait/zmp', 10)
+        self._com = self.create_publisher(point, 'gait/com', 10)
         self._polygon = self.create_publisher(get_message('geometry_msgs/msg/PolygonStamped'),
-                                              '/gait/support_polygon', 10)
+                                              'gait/support_polygon', 10)
         self._markers = self.create_publisher(get_message('visualization_msgs/msg/MarkerArray'),
-                                              '/gait/markers', 10)
+                                              'gait/markers', 10)
         self._clock_publisher = (
             self.create_publisher(get_message('rosgraph_msgs/msg/Clock'), '/clock', 10)
             if self.params.publish_clock else None)
         self.create_subscription(get_message('trajectory_msgs/msg/JointTrajectory'),
-                                 '/joint_commands', self._on_joint_commands, 10)
+                                 'joint_commands', self._on_joint_commands, 10)
         self.create_subscription(get_message('trajectory_msgs/msg/MultiDOFJointTrajectory'),
-                                 '/gait/footsteps', self._on_footsteps,
+                                 'gait/footsteps', self._on_footsteps,
                                  QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL))
         self.timer = self._make_timer(self.params.rate_hz)
         self.add_on_set_parameters_callback(self._on_set_parameters)

@@ -228,15 +228,15 @@ class WholeBodyIk(GuardedNode):
         # Shared by every /joint_commands message (published messages are read-only).
         self._joint_names = list(self.robot.joint_names)
         self.publisher = self.create_publisher(
-            get_message('trajectory_msgs/msg/JointTrajectory'), '/joint_commands', 10)
+            get_message('trajectory_msgs/msg/JointTrajectory'), 'joint_commands', 10)
         trajectory = get_message('trajectory_msgs/msg/MultiDOFJointTrajectory')
-        self.create_subscription(trajectory, '/gait/com_reference', self._on_com_reference, 10)
-        self.create_subscription(trajectory, '/gait/footsteps', self._on_footsteps,
+        self.create_subscription(trajectory, 'gait/com_reference', self._on_com_reference, 10)
+        self.create_subscription(trajectory, 'gait/footsteps', self._on_footsteps,
                                  QoSProfile(depth=1, durability=qos_profile_latched.durability))
-        self.create_subscription(trajectory, '/gait/swing_trajectory', self._on_swing, 10)
+        self.create_subscription(trajectory, 'gait/swing_trajectory', self._on_swing, 10)
         # Heard only until motion starts (see _stop_listening_to_the_robot).
         self._robot_subscriptions = [
-            self.create_subscription(get_message('sensor_msgs/msg/JointState'), '/joint_states',
+            self.create_subscription(get_message('sensor_msgs/msg/JointState'), 'joint_states',
                                      self._on_joint_states, 10),
             self.create_subscription(get_message('tf2_msgs/msg/TFMessage'), '/tf', self._on_tf,
                                      100)]
