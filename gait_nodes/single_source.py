@@ -83,7 +83,11 @@ class SingleSource:
         return changed
 
     def _describe(self, name: str, count: int, own: int) -> str:
-        """``2 publishers on /joint_commands (/whole_body_ik, an unknown node)``."""
+        """``2 publishers on /joint_commands (/whole_body_ik, an unknown node)``.
+
+        The nodes are named where the graph knows them (rclpy; this process under ``dds``):
+        none known, none listed.
+        """
         me = self._node.get_fully_qualified_name()
         nodes = []
         for info in self._node.get_publishers_info_by_topic(name):
@@ -91,5 +95,8 @@ class SingleSource:
             if node == me and own:
                 own -= 1
                 continue
-            nodes.append(node or 'an unknown node')
-        return f'{count} publishers on {name}' + (f' ({", ".join(nodes)})' if nodes else '')
+            nodes.append(node)
+        described = f'{count} publishers on {name}'
+        if any(nodes):
+            described += f' ({", ".join(node or "an unknown node" for node in nodes)})'
+        return described
