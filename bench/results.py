@@ -33,7 +33,7 @@ from gait_nodes.scenarios import SCENARIOS
 
 def stepping_speed(bag: Path) -> float | None:
     """Base displacement from the first executed lift-off to the last touch-down, per second."""
-    from gait_nodes.bag.analysis import executed_swings, inspect_bag
+    from gait_nodes.bag.analysis import executed_swings, inspect_bag, net_speed
 
     series = inspect_bag(bag).series
     base = np.array(sorted(series.base))
@@ -42,10 +42,8 @@ def stepping_speed(bag: Path) -> float | None:
     swings = executed_swings(series.plans, int(base[-1, 0]))
     if not swings:
         return None
-    start = min(s['lift_off_ns'] for s in swings)
-    end = max(s['touch_down_ns'] for s in swings)
-    xy = np.array([np.interp(t, base[:, 0], base[:, k]) for t in (start, end) for k in (1, 2)])
-    return float(np.hypot(xy[2] - xy[0], xy[3] - xy[1]) / ((end - start) * 1e-9))
+    return net_speed(base, min(s['lift_off_ns'] for s in swings),
+                     max(s['touch_down_ns'] for s in swings))
 
 
 def run_scenario(name: str, folder: Path) -> dict:
@@ -72,14 +70,12 @@ def scenario_row(name: str, summary: dict) -> dict:
     joints = (gait.get('joint_velocity') or {}).get('/joint_states') or {}
     levels = (gait.get('diagnostics') or {}).get('by_level') or {}
     commanded = next((c.velocity[0] for c in scenario.commands if c.velocity), None)
-    time_s = base.get('time_s') or 0.0
-    net = base.get('displacement_m', 0.0) / time_s if time_s else None
     return {
         'scenario': name, 'robot': scenario.robot,
         'gait': scenario.settings.get('gait', 'auto'),
         'swing': scenario.settings.get('swing', '-'),
         'com': scenario.settings.get('com_method', '-'),
-        'commanded_m_s': commanded, 'net_speed_m_s': net,
+        'commanded_m_s': commanded, 'net_speed_m_s': base.get('net_speed_m_s'),
         'stepping_speed_m_s': summary.get('stepping_speed_m_s'),
         'steps': steps.get('count', 0), 'mean_step_m': steps.get('mean_length_m'),
         'margin_min_mm': None if margin.get('min_m') is None else 1000 * margin['min_m'],

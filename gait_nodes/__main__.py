@@ -31,7 +31,8 @@ from gait_nodes.cli import (
     node_environment,
     split_args,
 )
-from gait_nodes.errors import ArgumentError, GaitNodesError
+from gait_nodes.errors import ArgumentError, GaitNodesError, os_error_text
+from gait_nodes.node_parameters import RECORDER, check_overrides
 from gait_nodes.runtime.args import parse_ros_args
 from gait_nodes.scenarios import DEFAULT_SCENARIO, SCENARIOS, CommandDriver, get_scenario
 
@@ -164,6 +165,27 @@ def _monitor(options, runtime):
                         cli_args=['--ros-args', *namespace] if namespace else None)
 
 
+def _check_bag_directory(path: str) -> None:
+    """Refuse at once a bag directory that exists or cannot be created (nothing is made).
+
+    The test is the real thing: a directory is created, and removed, in the nearest existing
+    ancestor, so that a read-only file system, missing permissions or a full disk all show.
+    """
+    if os.path.lexists(path):
+        raise ArgumentError(f'--record {path}: exists already; choose a new directory (a bag '
+                            f'is never overwritten)')
+    ancestor = Path(os.path.abspath(path)).parent
+    while not ancestor.exists():
+        ancestor = ancestor.parent
+    if not ancestor.is_dir():
+        raise ArgumentError(f'--record {path}: {ancestor} is not a directory')
+    try:
+        os.rmdir(tempfile.mkdtemp(prefix='.gait_nodes_probe_', dir=ancestor))
+    except OSError as exc:
+        raise ArgumentError(f'--record {path}: cannot create a directory in {ancestor}: '
+                            f'{os_error_text(exc)}') from None
+
+
 def run_inproc(options, names: list[str], ros: list[str]) -> dict:
     """All nodes in this process under one lockstep executor."""
     from gait_nodes import runtime
@@ -173,9 +195,10 @@ def run_inproc(options, names: list[str], ros: list[str]) -> dict:
         executor = runtime.SingleThreadedExecutor()
         for name in names:
             executor.add_node(graph.load_class(graph.NODES[name])())
+        recorder = None
         if options.record:
-            recorder_class = graph.load_class(graph.RECORDER)
-            executor.add_node(recorder_class(output=options.record))
+            recorder = graph.load_class(graph.RECORDER)(output=options.record)
+            executor.add_node(recorder)
         # The monitor is ours, not the user's: the graph's -p/-r do not address it (as in
         # run_processes, where it never sees them).
         monitor = _monitor(options, runtime)
@@ -188,12 +211,15 @@ def run_inproc(options, names: list[str], ros: list[str]) -> dict:
         wall = time.perf_counter() - start
         sim = runtime.default_context().transport.now_ns / 1e9
     finally:
-        runtime.shutdown()
-    return {
+        runtime.shutdown()  # the recorder closes its bag
+    summary = {
         'runtime': 'inproc', 'nodes': names, 'simulated_s': sim, 'wall_s': round(wall, 3),
         'real_time_factor': round(sim / wall, 1) if wall > 0 else None,
         'topics': counter.table(), 'exit_codes': {}, 'commands': driver.statuses,
     }
+    if recorder is not None and recorder.failure:
+        summary['recording_error'] = recorder.failure
+    return summary
 
 
 def run_processes(options, names: list[str], ros: list[str], runtime_name: str) -> dict:
@@ -326,16 +352,20 @@ def print_summary(summary: dict, as_json: bool) -> None:
         print('  no messages on the contract topics')
     statuses = summary.get('commands') or []
     if statuses:
-        rejected = [s for s in statuses if s.get('accepted') is False]
-        print(f'  gait commands: {len(statuses) - len(rejected)} accepted, {len(rejected)} '
-              f'rejected')
-        for status in rejected:
-            print(f'    rejected: {status.get("reason")}')
+        from gait_nodes.bag.analysis import command_answers
+
+        answers = command_answers(statuses)
+        print(f'  gait commands: {answers["accepted"]} accepted ({answers["applied"]} applied), '
+              f'{answers["rejected"]} rejected, {answers["superseded"]} superseded')
+        for reason in answers['rejections']:
+            print(f'    rejected: {reason}')
     for name, code in summary['exit_codes'].items():
         if code != 0:
             print(f'  node {name} exited with status {code}')
     if summary.get('bag'):
         print(f'  recorded: {summary["bag"]}')
+        if summary.get('recording_error'):
+            print(f'  RECORDING STOPPED EARLY: {summary["recording_error"]}')
         report = summary.get('inspect') or {}
         if 'error' in report:
             print(f'  the bag cannot be read: {report["error"]}')
@@ -383,8 +413,13 @@ def _inspect_recording(bag: str, plot_dir: str | None, namespace: str = '/') -> 
         from gait_nodes.bag.plots import write_plots
 
         robot = report.get('gait', {}).get('robot')
-        written = write_plots(inspection.series, plot_dir, robot_limits(robot)[1])
-        kept['plots'] = [os.path.abspath(p) for p in written]
+        try:
+            written = write_plots(inspection.series, plot_dir, robot_limits(robot)[1])
+        except OSError as exc:
+            kept['plot_error'] = (f'cannot write the plots to {exc.filename or plot_dir}: '
+                                  f'{os_error_text(exc)}')
+        else:
+            kept['plots'] = [os.path.abspath(p) for p in written]
     return kept
 
 
@@ -397,7 +432,7 @@ def main(args: list[str] | None = None) -> int:
 
         scenario = get_scenario(options.scenario)
         options.duration = _positive_float(options.duration or str(scenario.duration_s))
-        parse_ros_args(ros[1:])  # refuse a bad --params-file or -p before starting anything
+        ros_args = parse_ros_args(ros[1:])  # a bad --params-file or -p: before anything starts
         if options.fast:
             if options.runtime not in (None, 'inproc'):
                 raise ArgumentError(f'--fast runs the inproc runtime; it cannot be combined '
@@ -406,18 +441,22 @@ def main(args: list[str] | None = None) -> int:
         runtime_name = select_runtime(options.runtime)
         names = _selected_nodes(options)
         options.namespace_args = graph.namespace_arguments(options.namespace)
+        # Each node would refuse a parameter it does not declare, after its start-up work.
+        checked = names + ([RECORDER] if options.record is not None and
+                           runtime_name == 'inproc' else [])
+        for name in checked:
+            check_overrides(name, ros_args, runtime_name)
         if options.record == '':
             options.record = time.strftime('bags/gait_%Y_%m_%d-%H_%M_%S')
         if (options.plot or options.no_plot) and options.record is None:
             raise ArgumentError('--plot and --no-plot apply to a recording: add --record')
         if options.plot and options.no_plot:
             raise ArgumentError('--plot DIR and --no-plot contradict each other: choose one')
-        if options.record and os.path.exists(options.record):
-            raise ArgumentError(f'--record {options.record}: exists already; choose a new '
-                                f'directory (a bag is never overwritten)')
         if options.record and not graph.module_exists(graph.RECORDER):
             raise ArgumentError('--record needs the recorder node, not installed in this '
                                 'version')
+        if options.record:
+            _check_bag_directory(options.record)
         with tempfile.TemporaryDirectory(prefix='gait_nodes_run_') as tmp:
             params_file = Path(tmp) / 'graph_params.yaml'
             params_file.write_text(yaml.safe_dump(_graph_params(options)))
@@ -441,9 +480,12 @@ def main(args: list[str] | None = None) -> int:
                                                 summary['namespace'])
         if not summary['topics']:
             summary['topics'] = summary['inspect'].get('topics', {})
+        if 'plot_error' in summary['inspect']:
+            print(f'{PROG}: error: {summary["inspect"]["plot_error"]}', file=sys.stderr)
     print_summary(summary, options.json)
     failed = [name for name, code in summary['exit_codes'].items() if code != 0]
-    return 1 if failed else 0
+    incomplete = summary.get('recording_error') or 'plot_error' in summary.get('inspect', {})
+    return 1 if failed or incomplete else 0
 
 
 if __name__ == '__main__':

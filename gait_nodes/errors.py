@@ -74,3 +74,10 @@ class TerrainError(ParameterError):
     Out of range, too short a tread for the foot and its swing, a swing method or COM method
     that cannot walk it, or ground moved under the feet; the message says which and the range.
     """
+
+
+def os_error_text(error: OSError) -> str:
+    """An OSError on one line without the file name: ``[Errno 28] No space left on device``."""
+    if error.errno is not None and error.strerror:
+        return f'[Errno {error.errno}] {error.strerror}'
+    return str(error) or type(error).__name__

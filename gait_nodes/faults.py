@@ -19,6 +19,7 @@ from __future__ import annotations
 import functools
 import traceback
 
+from gait_nodes import callback_times
 from gait_nodes.diagnostics import ERROR, OK
 from gait_nodes.runtime import Node
 
@@ -67,10 +68,10 @@ class FaultGuard:
                 self.failed(name, exc)
                 return None
             if self._since_ns is not None:
-                self._succeeded(name)
+                self.succeeded(name)
             return result
 
-        return guarded
+        return callback_times.timed(self._node.get_name(), name, guarded)
 
     def failed(self, name: str, exc: BaseException) -> None:
         """``name`` raised ``exc``: hold, and report it (again at most every REPORT_PERIOD_S)."""
@@ -97,7 +98,8 @@ class FaultGuard:
                 'callback': name, 'exception': type(exc).__name__, 'where': where,
                 'failing_s': (now_ns - self._since_ns) * 1e-9, 'failures': self.failures})
 
-    def _succeeded(self, name: str) -> None:
+    def succeeded(self, name: str) -> None:
+        """``name`` (a callback, or work the node does apart) ran cleanly again."""
         self._failing.discard(name)
         if self._failing or (self._recovered is not None and not self._recovered()):
             return
@@ -117,6 +119,16 @@ class GuardedNode(Node):
     """
 
     faults: FaultGuard | None = None
+
+    def __init__(self, node_name: str, **kwargs):
+        super().__init__(node_name, **kwargs)
+        # A misspelt parameter is refused now, not after the node's start-up work (its robot
+        # model, a value table: seconds to minutes).
+        from gait_nodes.node_parameters import parameter_names
+
+        accepted = parameter_names(node_name)
+        if accepted is not None:
+            self.check_parameter_overrides(accepted)
 
     def _guarded(self, callback):
         # Before the guard exists only the runtime subscribes for the node (/clock, when

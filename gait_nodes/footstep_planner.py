@@ -67,6 +67,7 @@ WARN on the 'velocity' diagnostic.
 from __future__ import annotations
 
 import bisect
+import functools
 import itertools
 import json
 import math
@@ -74,6 +75,7 @@ import sys
 
 import numpy as np
 
+from gait_nodes import callback_times
 from gait_nodes.cli import run_node
 from gait_nodes.contract import (
     WORLD_FRAME,
@@ -99,8 +101,21 @@ from gait_nodes.planning.footsteps import (
 from gait_nodes.planning.gait_params import (
     NUMERIC_RANGES,
     GaitParameters,
+    command_id_of,
     parameters_from_mapping,
-    parse_command,
+    parse_gait_command,
+)
+from gait_nodes.planning.online import (
+    ACCEPTED,
+    REJECTED,
+    UNCHANGED,
+    Answer,
+    Changed,
+    ChangeRefused,
+    Failure,
+    OnlinePlanner,
+    Replaced,
+    VelocityApplied,
 )
 from gait_nodes.planning.terrain import STAIRS_DEFAULTS, Staircase, check_walkable
 from gait_nodes.robot.description import load_robot_description
@@ -144,6 +159,13 @@ SWING_TOPIC = '/gait/swing_trajectory'
 RETRY_AFTER_S = 1.0
 #: Characters of a /gait/command (and of the reason it was refused) echoed in the answer.
 ECHO_CHARACTERS = 500
+#: The planning worker keeps the plan this much further ahead than the ZMP horizon and a step
+#: [s]: the time a slow change may take while the walk goes on.
+WORKER_COVER_S = 4.0
+#: Ids of the changes made with ``ros2 param set`` (and set_parameters) start with this.
+PARAMETER_ID = 'parameters-'
+#: Depth of the /gait/command subscription: a burst of commands is answered, not dropped.
+COMMAND_DEPTH = 1000
 
 
 def shipped_defaults() -> dict[str, object]:
@@ -288,10 +310,11 @@ class FootstepPlanner(GuardedNode):
         self.faults = FaultGuard(self, self.diagnostics, hold=self._hold,
                                  recovered=self._recovered)
         self._robot_model = None
-        self._timing_key, self._timing_model, self._timing_final = None, None, True
-        self._timing_reason = 'fixed timing'
-        self.planner = GaitPlanner(self.robot, params, swing_timing=self._swing_timing(params),
-                                   terrain=terrain)
+        self._timings: dict = {}  # (swing, step height) -> (model, reason, final): the worker's
+        timing, self._timing_reason, self._timing_final = self._swing_timing(params)
+        planner = GaitPlanner(self.robot, params, swing_timing=timing, terrain=terrain)
+        self.diagnostics.report('timing', OK if self._timing_final else WARN,
+                                self._timing_reason)
         self.inputs = InputWatchdog(['/cmd_vel'], self.settings['cmd_vel_timeout_s'] or 1.0,
                                     self.origin_ns, holding='stopping (zero velocity from the '
                                     'next step boundary)')
@@ -312,8 +335,14 @@ class FootstepPlanner(GuardedNode):
         self._swings_pruned_ns = -NS_PER_S
         self.swing_inputs = InputWatchdog([], 1.0, self.origin_ns, events=[SWING_TOPIC],
                                           holding='the whole-body IK follows its fallback swing')
-        self._last_now_s = 0.0
-        self._pending: tuple[GaitParameters, dict, Staircase] | None = None
+        self._last_now_ns: int | None = None  # ROS time of the last tick [ns]
+        self._pending: tuple[dict, dict, Staircase | None] | None = None
+        self._mirroring = False  # setting the declared parameters to what the plan walks
+        self._requested_twist = Twist2D()
+        self._stale_stop = False  # walking a zero twist because /cmd_vel went stale
+        self._replacing: object = None  # token of the plan from scratch the worker makes
+        self._commands = itertools.count(1)
+        self._late = False
         self._last_plan = None
         self._within = _HorizonCut()
         self._swing_lifts: tuple = (None, [])  # (plan, [(foot, lift-off [ns])])
@@ -329,7 +358,7 @@ class FootstepPlanner(GuardedNode):
         self.create_subscription(get_message('geometry_msgs/msg/Twist'), '/cmd_vel',
                                  self.on_cmd_vel, 10)
         self.create_subscription(get_message('std_msgs/msg/String'), '/gait/command',
-                                 self.on_command, 10)
+                                 self.on_command, COMMAND_DEPTH)
         self.create_subscription(get_message('trajectory_msgs/msg/MultiDOFJointTrajectory'),
                                  SWING_TOPIC, self.on_swing, 10)
         if self.context.runtime != 'inproc':
@@ -341,11 +370,11 @@ class FootstepPlanner(GuardedNode):
         self.add_post_set_parameters_callback(self.on_parameters_set)
         self.timer = self.create_timer(1.0 / self.settings['rate_hz'], self.tick)
         self.create_timer(1.0, self.report_state)
-        if self.planner.swing_timing is not None:
-            # Time the fastest forward walk now, so that a first /cmd_vel is answered at once.
-            fastest, _ = self.planner.set_velocity(Twist2D(params.max_vx_m_s), 0.0)
-            self.planner.set_velocity(Twist2D(), 0.0)
-            rhythm = self.planner.rhythm(params, fastest)
+        if planner.swing_timing is not None:
+            # Time the fastest forward walk now, so that a first /cmd_vel walks at once.
+            fastest, _ = planner.set_velocity(Twist2D(params.max_vx_m_s), 0.0)
+            planner.set_velocity(Twist2D(), 0.0)
+            rhythm = planner.rhythm(params, fastest)
             timing = (f'timing from the joint limit ({self._timing_reason}): fastest '
                       f'{fastest.vx_m_s:.4g} m/s, swing {rhythm.swing_s:.3f} s, step period '
                       f'{rhythm.step_period_s:.3f} s')
@@ -354,68 +383,114 @@ class FootstepPlanner(GuardedNode):
                       f'factor {params.duty_factor:g}')
         self.get_logger().info(f'{self.robot.name}: gait {params.gait} '
                                f'({params.resolved_gait(self.robot)}), {timing}')
+        # Planning runs in the worker, the tick publishes its finished plans (module docstring).
+        self.worker = OnlinePlanner(
+            planner, self.origin_ns, lambda: self.get_clock().now().nanoseconds,
+            cover_s=self._cover_s(params), threaded=self.context.runtime != 'inproc',
+            describe=self._describe_plan,
+            failure_hold_s=lambda p: (self.settings['zmp_horizon_s'] + p.params.step_period_s
+                                      + RETRY_AFTER_S),
+            job_done=lambda kind, seconds: callback_times.record(self.get_name(),
+                                                                 f'worker {kind}', seconds))
+        self.worker.start()
+
+    @property
+    def planner(self) -> GaitPlanner:
+        """The newest finished plan (read it only: the worker changes the plan)."""
+        return self.worker.snapshot.planner
+
+    def _cover_s(self, params: GaitParameters) -> float:
+        return self.settings['zmp_horizon_s'] + params.step_period_s + WORKER_COVER_S
+
+    def destroy_node(self):
+        """Stop the planning worker, then the node."""
+        worker = getattr(self, 'worker', None)
+        if worker is not None:
+            worker.stop()
+        return super().destroy_node()
 
     # --- swing timing --------------------------------------------------------------------------
 
-    def _swing_timing(self, params: GaitParameters):
-        """The swing timing model for ``params`` (None: fixed timing); kept while it fits.
+    def _swing_timing(self, params: GaitParameters) -> tuple[object, str, bool]:
+        """(model, reason, final): the swing timing model for ``params`` (None: fixed timing).
 
-        With ``swing: value_table`` and the table not built yet (swing_leg_policy builds it on
-        first use), the polynomial swing's longer times stand in and the table is looked for
-        again once a second (:meth:`report_state`).
+        Runs in the planning worker (and at start). With ``swing: value_table`` and the table
+        not built yet (swing_leg_policy builds it on first use), the polynomial swing's longer
+        times stand in (final False) and the table is looked for again once a second
+        (:meth:`report_state`).
         """
         if params.timing != 'joint_limit' or self.robot.extra.get('limb_ik') is None:
-            key, model, final = None, None, True
-            reason = ('fixed timing' if params.timing == 'fixed' else
-                      f'{self.robot.name} has no closed-form limb IK: fixed timing')
-        else:
-            key = (params.swing, params.step_height_m)
-            if key == self._timing_key and self._timing_final:
-                return self._timing_model
-            from gait_nodes.robot.model import load_robot_model
-            from gait_nodes.swing.timing import TableSwingTiming, swing_timing
+            return None, ('fixed timing' if params.timing == 'fixed' else
+                          f'{self.robot.name} has no closed-form limb IK: fixed timing'), True
+        key = (params.swing, params.step_height_m)
+        known = self._timings.get(key)
+        if known is not None and known[2]:
+            return known
+        from gait_nodes.robot.model import load_robot_model
+        from gait_nodes.swing.timing import TableSwingTiming, swing_timing
 
-            if self._robot_model is None:
-                self._robot_model = load_robot_model(str(self.robot.path))
-            model, reason = swing_timing(self._robot_model, params.swing, params.step_height_m)
-            final = params.swing != 'value_table' or isinstance(model, TableSwingTiming)
-            if not final and key == self._timing_key:
-                return self._timing_model  # still the stand-in: keep the same one
-        if reason != self._timing_reason:
-            self.diagnostics.report('timing', OK if final else WARN, reason)
-        self._timing_key, self._timing_model = key, model
-        self._timing_reason, self._timing_final = reason, final
-        return model
+        if self._robot_model is None:
+            self._robot_model = load_robot_model(str(self.robot.path))
+        model, reason = swing_timing(self._robot_model, params.swing, params.step_height_m)
+        final = params.swing != 'value_table' or isinstance(model, TableSwingTiming)
+        if known is not None and not final:
+            return known  # still the stand-in: keep the same one
+        self._timings[key] = (model, reason, final)
+        return model, reason, final
 
-    def _refresh_timing(self, now_s: float) -> None:
-        """Re-make the timing model when the settings changed or the table appeared."""
-        model = self._swing_timing(self.planner.params)
-        if model is not self.planner.swing_timing:
-            self.planner.set_swing_timing(model, now_s)
+    def _retime(self, fork: GaitPlanner, at_s: float):
+        """Worker: time ``fork`` with the table once it exists (UNCHANGED while it does not)."""
+        model, reason, final = self._swing_timing(fork.params)
+        if model is fork.swing_timing:
+            return UNCHANGED
+        fork.set_swing_timing(model, at_s)
+        return ('timing', reason, final)
 
     # --- time ----------------------------------------------------------------------------------
 
     def now_s(self) -> tuple[int, float]:
-        """ROS time [ns] and the planner's time [s]."""
+        """ROS time [ns] and the plan's time [s]."""
         now_ns = self.get_clock().now().nanoseconds
-        return now_ns, (now_ns - self.origin_ns) * 1e-9
+        return now_ns, (now_ns - self.worker.snapshot.origin_ns) * 1e-9
 
-    def _restart_if_clock_jumped(self, now_ns: int, now_s: float) -> float:
-        if 0.0 <= now_s - self._last_now_s <= CLOCK_JUMP_S:
-            return now_s
-        jump_s = now_s - self._last_now_s
+    @property
+    def origin_ns(self) -> int:
+        """ROS time of the plan's 0 s [ns]."""
+        worker = getattr(self, 'worker', None)
+        return self._origin_ns if worker is None else worker.snapshot.origin_ns
+
+    @origin_ns.setter
+    def origin_ns(self, value: int) -> None:
+        self._origin_ns = value
+
+    def _clock_jumped(self, now_ns: int, now_s: float) -> bool:
+        """A clock jump restarts the plan from standstill (True: the restart is under way)."""
+        last_ns, self._last_now_ns = self._last_now_ns, now_ns
+        if last_ns is None or 0 <= now_ns - last_ns <= CLOCK_JUMP_S * NS_PER_S:
+            return False
+        jump_s = (now_ns - last_ns) * 1e-9
         self.diagnostics.report('clock', WARN, f'the clock jumped by {jump_s:.3f} s; the plan '
                                 f'restarts from standstill')
-        state = self.planner.steps[-1].state_after if self.planner.steps else None
+        planner = self.planner
+        state = planner.steps[-1].state_after if planner.steps else None
         pose = state.rest_pose if state is not None else (0.0, 0.0, 0.0)
-        twist = self.planner.requested_twist
-        self.origin_ns = now_ns
-        self.planner = GaitPlanner(self.robot, self.planner.params, base_pose=pose,
-                                   swing_timing=self.planner.swing_timing,
-                                   terrain=self.planner.terrain)
-        self.planner.set_velocity(twist, 0.0)
-        self._last_now_s = 0.0
-        return 0.0
+        twist = self._requested_twist
+
+        def restart(at_ns):
+            fresh = GaitPlanner(self.robot, planner.params, base_pose=pose,
+                                swing_timing=planner.swing_timing, terrain=planner.terrain)
+            fresh.set_velocity(twist, 0.0)
+            return fresh, at_ns
+
+        self._replace(restart, 'clock')
+        return True
+
+    def _replace(self, make, token) -> None:
+        """Have the worker plan from scratch; the tick waits for it (see :meth:`_on_replaced`)."""
+        self._replacing = (token, next(self._commands))
+        self.worker.submit_replace(make, self._replacing)
+        self.worker.run_pending()
+        self._handle_events()
 
     # --- inputs --------------------------------------------------------------------------------
 
@@ -427,18 +502,22 @@ class FootstepPlanner(GuardedNode):
             self.diagnostics.drop('/cmd_vel', f'non-finite velocity {values}')
             return
         twist = Twist2D(float(msg.linear.x), float(msg.linear.y), float(msg.angular.z))
-        changed = twist != self.planner.requested_twist
-        now_ns, now_s = self.now_s()
-        self.inputs.heard('/cmd_vel', now_ns)
-        applied, notes = self.planner.set_velocity(twist, now_s)
-        # /cmd_vel is usually streamed: report a clamp when it starts or changes, not per message.
-        if changed or notes != self._last_velocity_notes:
-            self._last_velocity_notes = notes
-            self.diagnostics.report(
-                'velocity', WARN if notes else OK,
-                '; '.join(notes) if notes else 'velocity command accepted',
-                {'requested_twist': twist.as_tuple(), 'applied_twist': applied.as_tuple(),
-                 'takes_effect_s': self.planner.next_boundary_s(now_s)})
+        self.inputs.heard('/cmd_vel', self.get_clock().now().nanoseconds)
+        # /cmd_vel is usually streamed: the worker plans a twist that differs from the one it
+        # walks; its report (on_velocity) comes when it is planned.
+        if twist != self._requested_twist or self._stale_stop:
+            self._requested_twist, self._stale_stop = twist, False
+            self.worker.submit_velocity(twist)
+
+    def _on_velocity(self, event: VelocityApplied) -> None:
+        notes = list(event.notes)
+        self._last_velocity_notes = notes
+        self.diagnostics.report(
+            'velocity', WARN if notes else OK,
+            '; '.join(notes) if notes else 'velocity command accepted',
+            {'requested_twist': event.requested.as_tuple(),
+             'applied_twist': event.applied.as_tuple(),
+             'takes_effect_s': (event.takes_effect_ns - self.origin_ns) * 1e-9})
 
     def on_tf(self, msg) -> None:
         """Keep the robot's base pose (joining or paused: the measured state)."""
@@ -525,9 +604,13 @@ class FootstepPlanner(GuardedNode):
                               stand_point(self.planner.layout, nominal),
                               self.planner.terrain.height_at(feet[:, 0]))
 
-    def _plan_from_robot(self, now_ns: int) -> None:
-        """Start a new plan at ``now_ns`` from the robot's measured state (or its base pose)."""
-        twist = self.planner.requested_twist
+    def _plan_from_robot(self, now_ns: int, token: str) -> None:
+        """Have the worker plan anew from the robot's measured state (or its base pose).
+
+        The measurement is taken now; the plan (its fastest rhythm, probes) is made in the
+        worker, and ``token`` comes back in its :class:`Replaced` event.
+        """
+        twist = self._requested_twist
         start = self._start(now_ns)
         pose = self._measured.base_pose() if self._measured is not None \
             and self._measured.base_ns is not None else self._base_pose
@@ -537,11 +620,16 @@ class FootstepPlanner(GuardedNode):
             pose = tuple(float(v) for v in centred_pose(
                 start.feet_in_world, self.planner.layout.offsets(self.planner.params.step_width_m),
                 pose[2]))
-        self.planner = GaitPlanner(self.robot, self.planner.params, base_pose=pose,
-                                   swing_timing=self.planner.swing_timing, start=start,
-                                   terrain=self.planner.terrain)
-        self.origin_ns, self._last_now_s = now_ns, 0.0
-        self.planner.set_velocity(twist, 0.0)
+        planner = self.planner
+
+        def plan(at_ns):
+            fresh = GaitPlanner(self.robot, planner.params, base_pose=pose,
+                                swing_timing=planner.swing_timing, start=start,
+                                terrain=planner.terrain)
+            fresh.set_velocity(twist, 0.0)
+            return fresh, now_ns
+
+        self._replace(plan, token)
         where = 'its nominal stance' if start is None else (
             f'the measured footholds, ZMP at {np.round(start.zmp_in_world, 4).tolist()}'
             + (f', landing {[self.robot.foot_names[f] for f in np.flatnonzero(start.airborne())]}'
@@ -569,7 +657,9 @@ class FootstepPlanner(GuardedNode):
         elif measured is not None and self._base_pose is not None and waited_s < JOIN_WAIT_S:
             return False  # the pose, not the joints yet
         if self._base_pose is not None:
-            self._plan_from_robot(now_ns)
+            if self._replacing is None:
+                self._plan_from_robot(now_ns, 'join')
+            return False  # joined once the worker's plan is live (_on_replaced)
         self._joined = True
         self._listen(False)
         return True
@@ -652,15 +742,22 @@ class FootstepPlanner(GuardedNode):
             return True
         if pause['hold'] is not None and not self._measured.since(pause['fresh_ns']):
             return True
-        held_s = (now_ns - pause['since_ns']) * 1e-9
         if pause['hold'] is not None:
-            self._plan_from_robot(now_ns)  # (if this fails, the walk stays paused)
+            if self._replacing is None:
+                # Held until the worker's plan is live (_on_replaced; at once under inproc). If
+                # it fails, the walk stays paused.
+                self._plan_from_robot(now_ns, 'resume')
+            return self._pause is not None
+        self._resumed(now_ns)
+        return False
+
+    def _resumed(self, now_ns: int) -> None:
+        held_s = (now_ns - self._pause['since_ns']) * 1e-9
         self._pause = None
         self._listen(False)
         self.diagnostics.report('walk', OK, f'walking on after a pause of {held_s:.2f} s, '
                                 f'planned from the robot\'s measured state',
                                 {'paused_s': held_s})
-        return False
 
     # --- failures ------------------------------------------------------------------------------
 
@@ -672,8 +769,10 @@ class FootstepPlanner(GuardedNode):
             return 'the walk stays paused, the robot held where it stands; resuming again later'
         if not self._joined:
             return 'not planning yet; joining again at the next tick'
-        self.planner.stand(now_s, self.settings['zmp_horizon_s']
-                           + self.planner.params.step_period_s + RETRY_AFTER_S)
+        if not self.planner.halted:
+            self.worker.submit_stand(self.settings['zmp_horizon_s']
+                                     + self.planner.params.step_period_s + RETRY_AFTER_S)
+            self.worker.run_pending()
         self._last_plan = None
         return (f'stopped at a safe stand (no foot lifts off, the ZMP to the stand point of '
                 f'the feet); planning again in {RETRY_AFTER_S:g} s or at a new velocity')
@@ -730,39 +829,141 @@ class FootstepPlanner(GuardedNode):
         self.inputs.timeout_s = timeout
         if self.inputs.update(now_ns):
             self.diagnostics.publish([self.inputs.status(now_ns)])
-        if self.inputs.stale and not self.planner.twist.is_zero():
-            self.planner.set_velocity(Twist2D(), now_s)
+        if self.inputs.stale and not self._stale_stop and not self._requested_twist.is_zero():
+            self._stale_stop = True
+            self.worker.submit_velocity(Twist2D())
 
     def on_command(self, msg) -> None:
-        """Apply a JSON gait command as parameters; answer on /gait/command_status."""
+        """Hand a JSON gait command to the worker; its answers come on /gait/command_status."""
         try:
-            changes = parse_command(msg.data)
+            command_id, changes = parse_gait_command(msg.data)
         except GaitParameterError as exc:
-            self._answer(msg.data, False, str(exc))
+            command_id = command_id_of(msg.data) or self._new_id()
+            self._answer(Answer(command_id, REJECTED, str(exc), msg.data,
+                                self.planner.params.to_dict()))
             return
-        parameters = [Parameter(name, value=value) for name, value in changes.items()]
-        result = (self.set_parameters_atomically(parameters) if parameters
-                  else SetParametersResult(successful=True))
-        self._answer(msg.data, result.successful,
-                     result.reason if not result.successful else 'accepted')
+        command_id = command_id or self._new_id()
+        try:
+            # The quick checks here (ranges, the robot, the terrain), the plan in the worker.
+            parameters_from_mapping(self.planner.params, changes, self.robot)
+        except GaitParameterError as exc:
+            self._answer(Answer(command_id, REJECTED, str(exc), msg.data,
+                                self.planner.params.to_dict()))
+            return
+        repeated = self.worker.submit_command(
+            command_id, msg.data, functools.partial(self._apply_changes, changes, None))
+        if repeated is None:
+            self.worker.run_pending()
+        self._handle_events()
 
-    def _answer(self, command: str, accepted: bool, reason: str) -> None:
-        command, reason = _shortened(command), _shortened(reason)
-        params = self.planner.params.to_dict()
-        status = {'accepted': accepted, 'reason': reason, 'params': params, 'command': command}
+    def _new_id(self) -> str:
+        return f'{self.get_name()}-{next(self._commands)}'
+
+    def _apply_changes(self, changes: dict, terrain: Staircase | None, fork: GaitPlanner,
+                       at_s: float):
+        """Worker: plan gait ``changes`` (and ``terrain``) on ``fork`` from ``at_s`` on."""
+        params = parameters_from_mapping(fork.params, changes, self.robot)
+        model, reason, final = self._swing_timing(params)
+        if terrain is not None and terrain != fork.terrain:
+            fork.set_terrain(terrain, at_s, params)
+        fork.set_parameters(params, at_s, swing_timing=model)
+        return ('timing', reason, final)
+
+    def _answer(self, answer: Answer) -> None:
+        """Publish ``answer`` on /gait/command_status and report it on /diagnostics."""
+        command, reason = _shortened(answer.text), _shortened(answer.reason)
+        now_ns = self.get_clock().now().nanoseconds
+        status = {'id': answer.command_id, 'state': answer.state,
+                  'accepted': answer.accepted, 'reason': reason, 'params': answer.params,
+                  'command': command}
+        if answer.takes_effect_ns is not None:
+            status['takes_effect_ns'] = answer.takes_effect_ns
+            status['takes_effect_in_s'] = round((answer.takes_effect_ns - now_ns) * 1e-9, 6)
+        if answer.repeated:
+            status['repeated'] = True
         self.status_publisher.publish(get_message('std_msgs/msg/String')(
             data=json.dumps(status)))
-        if accepted:
-            _, now_s = self.now_s()
-            self.diagnostics.report('command', OK, f'command accepted: {command}',
-                                    {'takes_effect_s': self.planner.next_boundary_s(now_s)})
+        values = {'id': answer.command_id, 'state': answer.state}
+        if answer.takes_effect_ns is not None:
+            values['takes_effect_s'] = (answer.takes_effect_ns - self.origin_ns) * 1e-9
+        if answer.accepted:
+            self.diagnostics.report('command', OK, f'command {answer.state}: {command}', values)
         else:
             self.diagnostics.drop('/gait/command', f'{reason} (command: {command})')
+
+    # --- the worker's events ------------------------------------------------------------------
+
+    def _handle_events(self) -> None:
+        """Answers, plans live, failures: what the worker did since the last call."""
+        failed = False
+        for event in self.worker.events():
+            if isinstance(event, Answer):
+                self._answer(event)
+                if event.state == ACCEPTED and not event.repeated:
+                    self._mirror(event.params)
+                elif event.command_id.startswith(PARAMETER_ID) and not event.accepted:
+                    self._mirror(self.planner.params.to_dict())  # the refused value set back
+            elif isinstance(event, VelocityApplied):
+                self._on_velocity(event)
+            elif isinstance(event, Changed):
+                kind, reason, final = event.info
+                self._report_timing(reason, final)
+            elif isinstance(event, ChangeRefused):
+                self.diagnostics.report('timing', WARN, f'{self._timing_reason}; a change '
+                                        f'({event.key}) could not be planned: {event.reason}')
+            elif isinstance(event, Replaced):
+                self._on_replaced(event)
+            elif isinstance(event, Failure):
+                failed = True
+                self.faults.failed('plan', event.error)
+        if not failed and self.faults.failing:
+            self.faults.succeeded('plan')
+
+    def _report_timing(self, reason: str, final: bool) -> None:
+        if reason != self._timing_reason or final != self._timing_final:
+            self._timing_reason, self._timing_final = reason, final
+            self.diagnostics.report('timing', OK if final else WARN, reason)
+
+    def _on_replaced(self, event: Replaced) -> None:
+        if event.token != self._replacing:
+            return
+        token, self._replacing = event.token[0], None
+        now_ns = self.get_clock().now().nanoseconds
+        self._last_plan = None
+        if event.error is not None:
+            if token == 'resume' and self._pause is not None:
+                self._pause['fresh_ns'] = now_ns  # the walk stays paused; resumed again later
+            self.faults.failed(f'{token} plan', event.error)
+            return
+        if token == 'join':
+            self._joined = True
+            self._listen(False)
+        elif token == 'resume' and self._pause is not None:
+            self._resumed(now_ns)
+
+    def _mirror(self, params: dict) -> None:
+        """Set the declared gait parameters to ``params`` (what the plan walks)."""
+        changed = [Parameter(name, value=float(value) if name in NUMERIC_RANGES else value)
+                   for name, value in params.items()
+                   if name in GAIT_FIELDS and self.get_parameter(name).value != value]
+        if changed:
+            self._mirroring = True
+            try:
+                self.set_parameters(changed)
+            finally:
+                self._mirroring = False
 
     # --- parameters ----------------------------------------------------------------------------
 
     def on_set_parameters(self, parameters) -> SetParametersResult:
-        """Check a parameter change as a /gait/command is checked; keep it for the post step."""
+        """Check a parameter change quickly; the worker plans it (answer as for a command).
+
+        A node setting takes effect at once; a gait setting or the staircase is planned by the
+        worker like a /gait/command (id ``parameters-N``): refused there, the parameter is set
+        back and the answer on /gait/command_status says why.
+        """
+        if self._mirroring:
+            return SetParametersResult(successful=True)
         settings = dict(self.settings)
         gait_changes = {}
         stairs = {name: self.get_parameter(name).value for name in STAIRS_DEFAULTS}
@@ -787,88 +988,112 @@ class FootstepPlanner(GuardedNode):
                 check_walkable(terrain, self.robot, params)
         except ParameterError as exc:
             return SetParametersResult(successful=False, reason=str(exc))
-        self._pending = (params, settings, terrain)
+        self._pending = (gait_changes, settings,
+                         terrain if terrain != self.planner.terrain else None)
         return SetParametersResult(successful=True)
 
     def on_parameters_set(self, parameters) -> None:
-        """Apply what :meth:`on_set_parameters` accepted."""
+        """Apply the node settings; hand the gait change to the worker."""
         if self._pending is None:
             return
-        params, settings, terrain = self._pending
+        gait_changes, settings, terrain = self._pending
         self._pending = None
-        _, now_s = self.now_s()
-        if terrain != self.planner.terrain:
-            self.planner.set_terrain(terrain, now_s, params)
-            self._refresh_timing(now_s)
-        elif params != self.planner.params:
-            self.planner.set_parameters(params, now_s)
-            self._refresh_timing(now_s)
+        if gait_changes or terrain is not None:
+            text = json.dumps({**gait_changes, **({'stairs': terrain.count}
+                                                  if terrain is not None else {})})
+            self.worker.submit_command(
+                f'{PARAMETER_ID}{next(self._commands)}', text,
+                functools.partial(self._apply_changes, gait_changes, terrain))
         if settings['rate_hz'] != self.settings['rate_hz']:
             self.destroy_timer(self.timer)
             self.timer = self.create_timer(1.0 / settings['rate_hz'], self.tick)
         self.settings = settings
+        self.worker.cover_s = self._cover_s(self.planner.params)
+        self.worker.run_pending()
 
     # --- outputs -------------------------------------------------------------------------------
 
     def tick(self) -> None:
-        """Extend the plan, publish the footsteps if they changed and the ZMP reference."""
+        """Publish the worker's newest plan: the footsteps if they changed, the ZMP reference."""
+        self._handle_events()
         now_ns, now_s = self.now_s()
         if not self._joined:
             if not self._join(now_ns):
                 return
             now_ns, now_s = self.now_s()
-        now_s = self._restart_if_clock_jumped(now_ns, now_s)
-        self._last_now_s = now_s
+        if self._replacing is not None and self._replacing[0] != 'resume' \
+                or self._clock_jumped(now_ns, now_s):
+            return  # a plan from scratch is under way
         self._check_cmd_vel(now_ns, now_s)
         origin_ns, pause = self.origin_ns, self._pause
         if self._paused(now_ns, now_s):
             return
         if pause is not None or origin_ns != self.origin_ns:  # resumed: the time read anew
             now_ns, now_s = self.now_s()
-        horizon = self.settings['zmp_horizon_s']
-        self.planner.advance(now_s + horizon + self.planner.params.step_period_s)
-        self.planner.prune(now_s)
-        plan = self._within(self.planner.footstep_plan(now_s, self.origin_ns), now_ns,
+        self.worker.run_pending()
+        self._handle_events()
+        snapshot = self.worker.snapshot
+        planner, horizon = snapshot.planner, self.settings['zmp_horizon_s']
+        plan = self._within(planner.footstep_plan(now_s, snapshot.origin_ns), now_ns,
                             now_ns + int(horizon * NS_PER_S))
         if self._last_plan is None or not _same_plan(plan, self._last_plan):
             self.footsteps_publisher.publish(footsteps_to_msg(plan))
             self._last_plan = plan
         self._check_swings(plan, now_ns)
-        reference = self.planner.zmp_reference(now_ns, self.origin_ns, horizon,
-                                               self.settings['zmp_sample_period_s'])
+        reference = planner.zmp_reference(now_ns, snapshot.origin_ns, horizon,
+                                          self.settings['zmp_sample_period_s'])
         # Its corners only: the consumers interpolate linearly between the poses.
         self.zmp_publisher.publish(self._zmp_messages.to_msg(reference.corners()))
+        late = snapshot.planned_until_s < now_s + horizon
+        if late != self._late:
+            self._late = late
+            ahead_s = snapshot.planned_until_s - now_s
+            self.diagnostics.report(
+                'planning', WARN if late else OK,
+                f'the plan reaches {ahead_s:.2f} s ahead, less than the {horizon:g} s horizon: '
+                f'the planning worker is late' if late else 'the plan covers the horizon',
+                {'planned_ahead_s': ahead_s, 'worker_busy_s': self.worker.busy_s})
 
     def report_state(self) -> None:
         """Once a second: the gait, the twist, the rhythm and the margin of the planned ZMP."""
-        _, now_s = self.now_s()
-        self._refresh_timing(now_s)
-        params = self.planner.params
-        steps = self.planner.steps
+        if not self._timing_final:
+            self.worker.submit_change(self._retime, key='timing')
+            self.worker.run_pending()
+        snapshot = self.worker.snapshot
+        report = snapshot.report
+        if not report:
+            return
+        level = OK if report['zmp_margin_kept_m'] >= report['zmp_margin_m'] - 1e-12 else WARN
+        self.diagnostics.report('gait', level, f'{report["resolved_gait"]}, {report["mode"]}',
+                                {**report, 'requested_twist': self._requested_twist.as_tuple(),
+                                 'timing_source': self._timing_reason})
+
+    def _describe_plan(self, planner: GaitPlanner) -> dict:
+        """Worker: what :meth:`report_state` reports of ``planner``."""
+        params = planner.params
+        steps = planner.steps
         kept = min((step.zmp_margin_kept_m for step in steps), default=math.inf)
-        level = OK if kept >= params.zmp_margin_m - 1e-12 else WARN
-        mode = steps[-1].state_after.mode if steps else 'standing'
-        self.diagnostics.report('gait', level, f'{params.resolved_gait(self.robot)}, {mode}', {
+        return {
             'gait': params.gait, 'resolved_gait': params.resolved_gait(self.robot),
-            'mode': mode, 'requested_twist': self.planner.requested_twist.as_tuple(),
-            'applied_twist': self.planner.twist.as_tuple(),
+            'mode': steps[-1].state_after.mode if steps else 'standing',
+            'applied_twist': planner.twist.as_tuple(),
             'zmp_margin_kept_m': kept, 'zmp_margin_m': params.zmp_margin_m,
             'planned_steps': len(steps), 'timing': params.timing,
-            'stairs_count': self.planner.terrain.count,
-            'stairs_total_rise_m': self.planner.terrain.total_rise_m,
-            'timing_source': self._timing_reason, **self._rhythm_values()})
+            'stairs_count': planner.terrain.count,
+            'stairs_total_rise_m': planner.terrain.total_rise_m,
+            **self._rhythm_values(planner)}
 
-    def _rhythm_values(self) -> dict:
+    def _rhythm_values(self, planner: GaitPlanner) -> dict:
         """The walked rhythm (step period, swing, transfer, duty factor, speed) for reports."""
         try:
-            rhythm = self.planner.rhythm()
+            rhythm = planner.rhythm()
         except GaitParameterError:
             return {}
-        params = self.planner.params
+        params = planner.params
         if rhythm is None:
             return {'step_period_s': params.step_period_s, 'swing_s': params.swing_s,
                     'duty_factor': params.duty_factor}
-        twist = self.planner.twist
+        twist = planner.twist
         return {'step_period_s': rhythm.step_period_s, 'swing_s': rhythm.swing_s,
                 'transfer_s': rhythm.transfer_s, 'duty_factor': rhythm.duty_factor,
                 'stride_m': math.hypot(twist.vx_m_s, twist.vy_m_s) * rhythm.cycle_s}

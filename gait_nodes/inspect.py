@@ -3,7 +3,7 @@
 ``python -m gait_nodes.inspect BAG [--json] [--plot DIR] [--robot NAME] [--namespace NS]``
 
 Prints topics, types, counts, rates and duration for any ROS 2 MCAP bag; for gait bags also the
-distance walked, mean speed, step lengths, ZMP stability margin (min, mean, time outside the
+distance walked, net speed, step lengths, ZMP stability margin (min, mean, time outside the
 support polygon), peak joint velocity against the limit, rejected commands and diagnostics by
 level (definitions in :mod:`gait_nodes.bag.analysis`). A bag of a graph run in a ROS namespace
 (``/robot1/gait/footsteps``...) is read as such: the namespace is found from its topics, or
@@ -19,7 +19,7 @@ import json
 import sys
 
 from gait_nodes.cli import ArgumentParser, fail
-from gait_nodes.errors import GaitNodesError
+from gait_nodes.errors import GaitNodesError, os_error_text
 
 PROG = 'python -m gait_nodes.inspect'
 #: Show progress on a non-terminal too above this size [bytes].
@@ -39,11 +39,12 @@ def format_gait(gait: dict | None) -> list[str]:
     lines.append('gait:' + (f' ({gait["robot"]})' if 'robot' in gait else ''))
     base = gait.get('base')
     if base:
-        speed = base['mean_speed_m_s']
-        speed_text = (f', mean speed {speed:.4f} m/s ({speed * 60 * FEET_PER_METRE:.2f} '
+        speed = base['net_speed_m_s']
+        speed_text = (f', net speed {speed:.4f} m/s ({speed * 60 * FEET_PER_METRE:.2f} '
                       f'ft/min)' if speed is not None else '')
-        lines.append(f'  walked:      {base["distance_m"]:.3f} m in {base["time_s"]:.2f} s '
-                     f'(net {base["displacement_m"]:.3f} m){speed_text}')
+        lines.append(f'  walked:      {base["displacement_m"]:.3f} m net (base start to end) '
+                     f'in {base["time_s"]:.2f} s{speed_text}; path {base["distance_m"]:.3f} m '
+                     f'(sway included)')
         if base.get('rise_m') is not None and abs(base['rise_m']) >= 0.005:
             lines.append(f'  climbed:     {base["rise_m"]:+.3f} m (base height, last minus first)')
     steps = gait.get('steps')
@@ -68,8 +69,11 @@ def format_gait(gait: dict | None) -> list[str]:
         lines.append(text)
     commands = gait.get('commands')
     if commands:
-        lines.append(f'  commands:    {commands["answered"]} answered, {commands["accepted"]}'
-                     f' accepted, {commands["rejected"]} rejected')
+        lines.append(f'  commands:    {commands["answered"]} answered: {commands["accepted"]}'
+                     f' accepted ({commands["applied"]} applied), {commands["rejected"]} '
+                     f'rejected, {commands["superseded"]} superseded; most decisions on one '
+                     f'command {commands["most_decisions"]}, most applied '
+                     f'{commands["most_applied"]}')
         lines.extend(f'    rejected: {reason}' for reason in commands['rejections'])
     diagnostics = gait.get('diagnostics')
     if diagnostics:
@@ -180,7 +184,12 @@ def main(args: list[str] | None = None) -> int:
             from gait_nodes.bag.plots import write_plots
 
             robot = options.robot or report.get('gait', {}).get('robot')
-            written = write_plots(inspection.series, options.plot, robot_limits(robot)[1])
+            try:
+                written = write_plots(inspection.series, options.plot, robot_limits(robot)[1])
+            except OSError as error:  # the bag was read: the plots' place is the problem
+                return fail(PROG, GaitNodesError(
+                    f'--plot {options.plot}: cannot write {error.filename or "the plots"}: '
+                    f'{os_error_text(error)}'))
             report['plots'] = [str(p) for p in written]
     except GaitNodesError as error:
         return fail(PROG, error)

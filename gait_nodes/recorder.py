@@ -2,7 +2,10 @@
 
 ``python -m gait_nodes.recorder -o DIR [-t TOPIC[:pkg/msg/Type] ...]``. A clean stop (Ctrl-C,
 SIGTERM) writes the MCAP summary and ``metadata.yaml``; a SIGKILL loses at most the last
-``flush_period_s`` of data (the rest stays readable).
+``flush_period_s`` of data (the rest stays readable). A write that fails (a full disk, a
+directory made read-only) closes the bag at its last flush, readable with its
+``metadata.yaml``; the recorder then reports ERROR on /diagnostics (``recorder: bag``, once a
+second), records nothing more, and exits with status 1 when stopped.
 """
 
 from __future__ import annotations
@@ -13,13 +16,22 @@ import time
 from gait_nodes import graph
 from gait_nodes.bag.writer import BagWriter
 from gait_nodes.cli import run_node
-from gait_nodes.errors import ArgumentError
+from gait_nodes.diagnostics import ERROR, DiagnosticsReporter
+from gait_nodes.errors import ArgumentError, os_error_text
 from gait_nodes.interfaces import get_message
 from gait_nodes.runtime import DurabilityPolicy, Node, QoSProfile
 from gait_nodes.runtime.qos import offered_qos_yaml
 
 #: Topics whose publishers are latched (transient local) in the contract.
 LATCHED_TOPICS = ('/gait/footsteps',)
+#: Period of the ERROR report after the bag failed [s].
+FAILURE_REPORT_PERIOD_S = 1.0
+
+
+def parameter_defaults(output: str | None = None) -> dict[str, object]:
+    """The recorder's parameters and their defaults (``output``: bags/gait_<date-time>)."""
+    return {'output': output or time.strftime('bags/gait_%Y_%m_%d-%H_%M_%S'),
+            'flush_period_s': 0.5}
 
 
 def parse_topics(specs: list[str]) -> dict[str, str]:
@@ -42,21 +54,34 @@ def parse_topics(specs: list[str]) -> dict[str, str]:
 
 
 class Recorder(Node):
-    """Subscribes to topics without deserializing and writes what arrives to a bag."""
+    """Subscribes to topics without deserializing and writes what arrives to a bag.
 
-    def __init__(self, output: str | None = None, topics: dict[str, str] | None = None):
+    Args:
+        output: Bag directory (default: the ``output`` parameter, else bags/gait_<date-time>).
+        topics: ``{topic: pkg/msg/Type}`` to record (default: every contract topic).
+        open_file: How the MCAP file is opened (:class:`BagWriter`'s ``open_file``).
+    """
+
+    def __init__(self, output: str | None = None, topics: dict[str, str] | None = None,
+                 open_file=None):
         super().__init__('recorder')
-        default_output = time.strftime('bags/gait_%Y_%m_%d-%H_%M_%S')
-        output = self.declare_parameter('output', output or default_output).value
-        flush_period_s = self.declare_parameter('flush_period_s', 0.5).value
+        self.writer = None  # destroy_node after a refusal has no bag to close
+        values = {name: self.declare_parameter(name, default).value
+                  for name, default in parameter_defaults(output).items()}
+        self.check_parameter_overrides()  # before a bag directory is made
+        output, flush_period_s = values['output'], values['flush_period_s']
         if not 0 < flush_period_s <= 1.0:
             raise ArgumentError(f'flush_period_s must be in (0, 1] s, got {flush_period_s}')
         # The contract's topics named as the nodes name them: under a namespace the bag holds
         # /robot1/gait/footsteps, and /tf where the nodes' /tf is.
         topics = topics or {graph.node_topic_name(name): type_name
                             for name, type_name in graph.TOPICS.items()}
-        self.writer = None  # destroy_node after a refused output has no bag to close
-        self.writer = BagWriter(output, flush_period_s=flush_period_s)
+        # Made at start, so that subscribers have matched it when a failure is reported.
+        self.diagnostics = DiagnosticsReporter(self)
+        self._failure_reported_ns: int | None = None
+        self._subscriptions_recorded = []
+        self.writer = BagWriter(output, flush_period_s=flush_period_s,
+                                on_error=self._on_write_error, open_file=open_file)
         for name, type_name in topics.items():
             latched = '/' + name.lstrip('/') in LATCHED_TOPICS
             profile = QoSProfile(depth=1000, durability=DurabilityPolicy.TRANSIENT_LOCAL
@@ -65,12 +90,43 @@ class Recorder(Node):
                                        durability=profile.durability)
             resolved = self.resolve_topic_name(name)
             self.writer.add_topic(resolved, type_name, [offered_qos_yaml(publisher_qos)])
-            self.create_subscription(get_message(type_name), name, self._writer_for(resolved),
-                                     profile, raw=True)
+            self._subscriptions_recorded.append(self.create_subscription(
+                get_message(type_name), name, self._writer_for(resolved), profile, raw=True))
         # Messages alone trigger flushes only while they keep coming: a timer bounds the age of
         # the open chunk when traffic stops, so a SIGKILL never loses more than flush_period_s.
-        self.create_timer(flush_period_s / 4, self.writer.flush_if_due)
+        self.create_timer(flush_period_s / 4, self._tick)
         self.get_logger().info(f'recording {len(topics)} topics to {self.writer.path}')
+
+    @property
+    def failure(self) -> str | None:
+        """Why the bag stopped early (one line), or None."""
+        return self.writer.failure if self.writer is not None else None
+
+    def _tick(self) -> None:
+        if self.writer.error is None:
+            self.writer.flush_if_due()
+            return
+        # Stopped here, not in the failing write: that runs in a subscription's callback.
+        while self._subscriptions_recorded:
+            self.destroy_subscription(self._subscriptions_recorded.pop())
+        now_ns = self.get_clock().now().nanoseconds
+        if self._failure_reported_ns is None or \
+                now_ns - self._failure_reported_ns >= FAILURE_REPORT_PERIOD_S * 1e9:
+            self._report_failure(now_ns)
+
+    def _on_write_error(self, writer: BagWriter) -> None:
+        self._report_failure(self.get_clock().now().nanoseconds)
+
+    def _report_failure(self, now_ns: int) -> None:
+        writer = self.writer
+        first = self._failure_reported_ns is None
+        self._failure_reported_ns = now_ns
+        values = {'path': str(writer.path), 'error': os_error_text(writer.error),
+                  'messages_kept': writer.message_count}
+        if first:  # logged once, published until the recorder stops
+            self.diagnostics.report('bag', ERROR, writer.failure, values)
+        else:
+            self.diagnostics.publish([('bag', ERROR, writer.failure, values)])
 
     def _writer_for(self, topic: str):
         clock = self.get_clock()
@@ -83,8 +139,11 @@ class Recorder(Node):
         """Finish the bag, then release the node."""
         if self.writer is not None:
             self.writer.close()
-            self.get_logger().info(f'bag closed: {self.writer.message_count} messages in '
-                                   f'{self.writer.path}')
+            if self.writer.error is None:
+                self.get_logger().info(f'bag closed: {self.writer.message_count} messages in '
+                                       f'{self.writer.path}')
+            elif self._failure_reported_ns is None:  # failed while closing: the log only
+                self.get_logger().error(f'bag: {self.writer.failure}')
         super().destroy_node()
 
 
@@ -99,12 +158,17 @@ def main(args: list[str] | None = None) -> int:
                                  'non-contract topics as name:pkg/msg/Type; relative names '
                                  'resolve under the namespace (--ros-args -r __ns:=/robot1)')
 
+    recorders = []
+
     def factory(options):
         topics = parse_topics(options.topics) if options.topics else None
-        return Recorder(output=options.output, topics=topics)
+        recorders.append(Recorder(output=options.output, topics=topics))
+        return recorders[-1]
 
-    return run_node(factory, args, prog='python -m gait_nodes.recorder',
-                    description=__doc__.split('\n\n')[0], add_arguments=add_arguments)
+    status = run_node(factory, args, prog='python -m gait_nodes.recorder',
+                      description=__doc__.split('\n\n')[0], add_arguments=add_arguments)
+    # A bag cut short is a failure of the recording, already reported (log, /diagnostics).
+    return 1 if status == 0 and recorders and recorders[0].failure else status
 
 
 if __name__ == '__main__':

@@ -114,6 +114,20 @@ def get_scenario(name: str) -> Scenario:
     return SCENARIOS[name]
 
 
+def with_id(text: str, command_id: str) -> str:
+    """``text`` with ``"id": command_id`` first if it is a JSON object without one.
+
+    Anything else (a deliberately bad command) goes out as written.
+    """
+    try:
+        values = json.loads(text)
+    except ValueError:
+        return text
+    if not isinstance(values, dict) or 'id' in values:
+        return text
+    return json.dumps({'id': command_id, **values})
+
+
 class CommandDriver:
     """Publishes a scenario's timed commands from a node, and keeps /cmd_vel streaming.
 
@@ -141,7 +155,8 @@ class CommandDriver:
         self._last_vel_ns = 0
         self._start_ns: int | None = None
         self.statuses: list[dict] = []
-        node.create_subscription(self._string, 'gait/command_status', self._on_status, 10)
+        node.create_subscription(self._string, 'gait/command_status', self._on_status, 1000)
+        self._sent = 0
         node.create_timer(0.02, self._tick)
 
     def start(self) -> None:
@@ -164,7 +179,9 @@ class CommandDriver:
             if command.command is not None:
                 if self._command_publisher.get_subscription_count() == 0:
                     break  # the planner is not matched yet: try again next tick
-                self._command_publisher.publish(self._string(data=command.command))
+                self._sent += 1
+                self._command_publisher.publish(self._string(data=with_id(
+                    command.command, f'scenario-{self._sent}')))
             if command.velocity is not None:
                 self._velocity = command.velocity
                 self._last_vel_ns = 0

@@ -19,6 +19,13 @@ publishes a sixth-order swing with a via point at ``step_height_m`` (Lucy, seed 
 Either way the waypoints are ``sample_period_s`` apart (the whole-body IK interpolates them
 linearly, so at its own tick period the foot's velocity changes smoothly).
 
+The swing follows the footstep planner's gait commands: an accepted one on
+/gait/command_status that changes ``swing`` or ``step_height_m`` is walked by the swings that
+lift off from the step boundary it takes effect at (``takes_effect_ns``). A value table for a new
+step height is loaded, or built in a background thread (the walk goes on); until it is there the
+polynomial swing at that height stands in, as the footstep planner times it (the polynomial
+swing's longer times stand in there too until the table's file appears).
+
 Restarted mid-walk, the node does not send a swing that has been under way for more than
 ``LATE_SWING_S`` without a trajectory: the whole-body IK follows its fallback swing for it, and a
 trajectory arriving mid-air would make the foot jump from one path to the other.
@@ -26,8 +33,10 @@ trajectory arriving mid-air would make the foot jump from one path to the other.
 
 from __future__ import annotations
 
+import json
 import math
 import sys
+import threading
 
 import numpy as np
 
@@ -124,6 +133,12 @@ class SwingLegPolicy(GuardedNode):
         self.faults = FaultGuard(self, self.diagnostics)
         self._values = values
         self._policy, self._table_path = self._load_policy(values)
+        # The planner's swing settings by the time they take effect: [(ns, swing, height)].
+        self._followed: list[tuple[int, str, float]] = []
+        self._tables: dict[float, object] = {}  # step height -> SwingPolicy, or an exception
+        self._building: set[float] = set()
+        if self._policy is not None:
+            self._tables[float(values['step_height_m'])] = self._policy
         self._plan = None
         self._published: dict[tuple[str, int], tuple] = {}
         self._swing_times_of: tuple = (None, [])  # see _swing_times
@@ -135,6 +150,8 @@ class SwingLegPolicy(GuardedNode):
         self.create_subscription(get_message('trajectory_msgs/msg/MultiDOFJointTrajectory'),
                                  node_topic_name(FOOTSTEPS_TOPIC), self._on_footsteps,
                                  qos_profile_latched)
+        self.create_subscription(get_message('std_msgs/msg/String'), 'gait/command_status',
+                                 self._on_command_status, 100)
         self._timer = self.create_timer(1.0 / values['rate_hz'], self._tick)
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self.get_logger().info(self._describe())
@@ -192,6 +209,11 @@ class SwingLegPolicy(GuardedNode):
             self.destroy_timer(self._timer)
             self._timer = self.create_timer(1.0 / values['rate_hz'], self._tick)
         self._values, self._policy, self._table_path = values, policy, path
+        if reload:
+            # The node's own settings, set explicitly, replace what it followed.
+            self._followed = []
+            if policy is not None:
+                self._tables[float(values['step_height_m'])] = policy
         self._lookups.clear()
         self.diagnostics.report('settings', OK, self._describe())
         return SetParametersResult(successful=True)
@@ -210,6 +232,56 @@ class SwingLegPolicy(GuardedNode):
             return
         self._plan = plan
         self._tick()
+
+    def _on_command_status(self, msg) -> None:
+        """Follow an accepted gait command's swing and step height from when it takes effect."""
+        try:
+            status = json.loads(msg.data)
+            if status.get('state') != 'accepted':
+                return
+            params, takes_effect_ns = status['params'], int(status['takes_effect_ns'])
+            swing, height = str(params['swing']), float(params['step_height_m'])
+        except (ValueError, TypeError, KeyError, AttributeError):
+            return  # not an answer this node can follow (the footstep planner checks commands)
+        if swing not in SWING_METHODS or not 0.0 < height <= 1.0:
+            return
+        if self.robot.description.extra.get('limb_ik') is None:
+            swing = 'polynomial'
+        self._followed = [f for f in self._followed if f[0] < takes_effect_ns]
+        self._followed.append((takes_effect_ns, swing, height))
+        if swing == 'value_table':
+            self._table_for(height)  # start loading (or building) it now
+
+    def _table_for(self, height: float):
+        """The value-table policy for ``height``, or None while it is loaded or built."""
+        known = self._tables.get(height)
+        if known is not None:
+            return None if isinstance(known, Exception) else known
+        if height not in self._building:
+            self._building.add(height)
+            values = {**self._values, 'swing': 'value_table', 'step_height_m': height,
+                      'table': ''}
+            threading.Thread(target=self._load_table, args=(values,), daemon=True,
+                             name=f'swing-table-{height:g}').start()
+        return None
+
+    def _load_table(self, values: dict) -> None:
+        """Worker: load or build the table of ``values`` (the walk goes on meanwhile)."""
+        height = float(values['step_height_m'])
+        try:
+            policy, _ = self._load_policy(values)
+        except Exception as exc:  # noqa: BLE001 (reported from the tick; polynomial meanwhile)
+            policy = exc
+        self._tables[height] = policy
+        self._building.discard(height)
+
+    def _swing_settings(self, lift_ns: int) -> tuple[str, float]:
+        """(swing method, step height [m]) of a swing lifting off at ``lift_ns``."""
+        settings = (self._values['swing'], float(self._values['step_height_m']))
+        for takes_effect_ns, swing, height in self._followed:
+            if takes_effect_ns <= lift_ns:
+                settings = (swing, height)
+        return settings
 
     # --- output -------------------------------------------------------------------------------
 
@@ -259,39 +331,46 @@ class SwingLegPolicy(GuardedNode):
         values = self._values
         trajectory = None
         climb = float(swing.end_in_world[2] - swing.start_in_world[2])
-        if self._policy is not None and climb < -1e-9:
+        method, height = self._swing_settings(lift_ns)
+        policy = None
+        if method == 'value_table':
+            policy = self._table_for(height)
+            failed = self._tables.get(height)
+            if isinstance(failed, Exception):
+                self.diagnostics.report('swing', WARN, f'no value table for step height '
+                                        f'{height:g} m ({failed}): polynomial swings')
+        if policy is not None and climb < -1e-9:
             # A foot put down from where a pause or a restarted planner found it in the air (the
             # planner refuses stairs with the value table): the table swings between footholds
             # on the ground, the polynomial swing lowers it. Expected, not a failure.
             self.diagnostics.report('swing', WARN, f'{swing.foot} at {swing.lift_off_s:.3f} s '
                                     f'lands from {-climb:.4g} m above its foothold (left in '
                                     f'the air): sending the polynomial swing')
-        elif self._policy is not None:
+        elif policy is not None:
             try:
-                trajectory = self._value_table_swing(plan, swing, lift_ns)
+                trajectory = self._value_table_swing(policy, plan, swing, lift_ns)
             except GaitNodesError as exc:
                 self.diagnostics.report('swing', ERROR, f'{swing.foot} at {swing.lift_off_s:.3f}'
                                         f' s: {exc}; sending the polynomial swing instead')
         if trajectory is None:
             samples = max(values['polynomial_samples'],
                           int(math.ceil(swing.duration_s / values['sample_period_s'])) + 1)
-            trajectory, _ = polynomial_swing(swing, lift_ns, values['step_height_m'], samples)
+            trajectory, _ = polynomial_swing(swing, lift_ns, height, samples)
         self._publisher.publish(contract.swing_trajectory_to_msg(trajectory))
         self.published_count += 1
 
-    def _value_table_swing(self, plan, swing, lift_ns: int) -> contract.SwingTrajectory:
+    def _value_table_swing(self, policy, plan, swing, lift_ns: int) -> contract.SwingTrajectory:
         climb = float(swing.end_in_world[2] - swing.start_in_world[2])
         if abs(climb) > 1e-9:  # the footstep planner refuses stairs with this swing
             raise SwingPolicyError(f'the value-table swing is built for flat ground; this '
                                    f'swing climbs {climb:+.4g} m (stairs need swing: '
                                    f'polynomial)')
-        policy = self._policy
         table = policy.table
         ik = policy.timing.ik
         mirror = ik.mirrors[ik.foot_index[swing.foot]]
         yaw = body_yaw(plan, swing.lift_off_s)
         step_fr, turn = limb_step(swing, mirror, yaw)
-        key = (round(step_fr[0], 6), round(step_fr[1], 6), round(turn, 6))
+        key = (table.step_height_m, round(step_fr[0], 6), round(step_fr[1], 6), round(turn, 6))
         if key not in self._lookups:
             self._lookups[key] = policy.path_for_step(step_fr, turn)
         path, clamped = self._lookups[key]

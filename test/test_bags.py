@@ -1,5 +1,7 @@
 """Bags: independent readers, metadata, damage, inspect numbers, plots, recorder kills, replay."""
 
+import errno
+import io
 import json
 import math
 import os
@@ -125,7 +127,8 @@ def test_inspect_numbers_agree_with_the_construction(gait_bag_dir):
     samples = gait_bag.SECONDS * gait_bag.RATE_HZ
     times = np.arange(samples) / gait_bag.RATE_HZ
     assert gait['base']['distance_m'] == pytest.approx(0.1 * times[-1], abs=1e-9)
-    assert gait['base']['mean_speed_m_s'] == pytest.approx(0.1, abs=1e-9)
+    assert gait['base']['net_speed_m_s'] == pytest.approx(0.1, abs=1e-9)
+    assert gait['base']['path_speed_m_s'] == pytest.approx(0.1, abs=1e-9)
     margins = np.array([gait_bag.expected_margin(0.1 * t, gait_bag.zmp_y(t)) for t in times])
     assert gait['zmp_margin']['min_m'] == pytest.approx(margins.min(), abs=1e-6)
     assert gait['zmp_margin']['mean_m'] == pytest.approx(margins.mean(), abs=1e-6)
@@ -145,6 +148,28 @@ def test_inspect_numbers_agree_with_the_construction(gait_bag_dir):
     assert gait['diagnostics']['by_level'] == {'OK': 8, 'WARN': 1, 'ERROR': 1}
 
 
+def test_speed_is_the_net_advance_of_the_base_and_says_so():
+    """A crawl sways: 6.6 mm/s forward is reported, not the 17 mm/s of its path (issue 25)."""
+    from gait_nodes.bag.analysis import GaitSeries, base_metrics
+    from gait_nodes.inspect import format_gait
+
+    times = np.arange(0, 20.0, 0.01)
+    x = 0.0066 * times
+    y = 0.02 * np.sin(2 * np.pi * times / 4.0)  # sway, 20 mm each side, a 4 s cycle
+    series = GaitSeries(base=[(int(t * 1e9), xi, yi, 0.5, 0.0) for t, xi, yi in
+                              zip(times, x, y, strict=True)])
+    base = base_metrics(series)
+    elapsed = times[-1] - times[0]
+    net = np.hypot(x[-1] - x[0], y[-1] - y[0]) / elapsed
+    path = np.sum(np.hypot(np.diff(x), np.diff(y))) / elapsed
+    assert base['net_speed_m_s'] == pytest.approx(net, abs=1e-6)
+    assert base['path_speed_m_s'] == pytest.approx(path, abs=1e-6) and path > 2 * net
+    [line] = format_gait({'base': base})[1:]
+    assert f'net speed {net:.4f} m/s' in line, line
+    assert f'path {base["distance_m"]:.3f} m (sway included)' in line, line
+    assert f'{path:.4f}' not in line  # no other speed to be mistaken for it
+
+
 def test_inspect_cli_json_text_and_plots(gait_bag_dir, tmp_path, capsys):
     from gait_nodes.inspect import main
 
@@ -160,6 +185,16 @@ def test_inspect_cli_json_text_and_plots(gait_bag_dir, tmp_path, capsys):
     assert main([str(gait_bag_dir)]) == 0
     text = capsys.readouterr().out
     assert 'metadata.yaml matches' in text and 'rejected: step_length_m' in text
+
+
+def test_inspect_names_the_plot_directory_it_cannot_write(gait_bag_dir, tmp_path, capsys):
+    from gait_nodes.inspect import main
+
+    (tmp_path / 'a_file').write_text('not a directory\n')
+    assert main([str(gait_bag_dir), '--plot', str(tmp_path / 'a_file' / 'plots')]) == 2
+    [line] = capsys.readouterr().err.splitlines()
+    assert f'--plot {tmp_path / "a_file" / "plots"}: cannot write' in line
+    assert 'Not a directory' in line and str(gait_bag_dir) not in line
 
 
 @pytest.mark.parametrize('make', ['text file', 'empty dir', 'missing', 'sqlite bag', 'bad yaml'])
@@ -559,3 +594,222 @@ def test_chunk_thread_error_is_raised_on_the_callers_thread_and_nothing_hangs():
         chunk_thread.finish_chunk()
         chunk_thread.stop()
     chunk_thread.stop()  # raised once; the thread is gone
+
+
+# --- write failures: a full disk, a file system that refuses ---------------------------------
+
+class DiskOf(io.FileIO):
+    """A new file on a disk with ``free`` bytes left: what fits is written, then ENOSPC.
+
+    The kernel's behaviour (a short write, then the error), under Python's own buffering.
+    """
+
+    def __init__(self, path, free: int):
+        super().__init__(path, 'xb')
+        self.free = free
+
+    def write(self, data) -> int:
+        """Write what fits; ENOSPC when nothing does."""
+        if self.free <= 0:
+            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+        written = super().write(memoryview(data)[:self.free])
+        self.free -= written
+        return written
+
+
+def disk_of(free: int):
+    return lambda path: io.BufferedWriter(DiskOf(path, free))
+
+
+def write_flushing_every(writer: BagWriter, messages, every: int) -> list[int]:
+    """Write ``messages`` with the contract topics, flushing every ``every``; the flush counts."""
+    for topic, type_name in TOPICS.items():
+        writer.add_topic(topic, type_name, [])
+    flushed = [0]
+    for k, (topic, stamp, data) in enumerate(messages):
+        writer.write(topic, data, stamp)
+        if k % every == every - 1:
+            writer.flush()
+            flushed.append(k + 1)
+    writer.close()
+    writer.close()
+    return flushed
+
+
+def assert_readable_bag_of(bag: Path, messages) -> None:
+    """``bag`` holds exactly ``messages``, complete, and metadata.yaml agrees (us and mcap)."""
+    from mcap.reader import make_reader
+
+    assert sorted(p.name for p in bag.iterdir()) == sorted([f'{bag.name}_0.mcap',
+                                                            'metadata.yaml'])
+    got, damage = read_all(bag)
+    assert got == messages and not damage
+    report = inspect_bag(bag).report
+    assert report['complete'] and report['message_count'] == len(messages)
+    assert report['metadata_check'] == {'matches': True, 'problems': []}
+    with open(bag / f'{bag.name}_0.mcap', 'rb') as stream:
+        assert sum(1 for _ in make_reader(stream).iter_messages()) == len(messages)
+
+
+@pytest.mark.parametrize('background', [True, False], ids=['chunk-thread', 'inline'])
+def test_a_full_disk_closes_the_bag_readable_at_its_last_flush(tmp_path, background):
+    expected = written_messages()
+    failures = []
+    bag = tmp_path / 'full'
+    writer = BagWriter(bag, flush_period_s=3600, chunk_size=8192, background=background,
+                       on_error=failures.append, open_file=disk_of(40_000))
+    flushed = write_flushing_every(writer, expected, 500)  # no call raises
+    assert failures == [writer]
+    assert writer.error.errno == errno.ENOSPC
+    assert str(bag / 'full_0.mcap') in writer.failure
+    assert 'No space left on device' in writer.failure and '\n' not in writer.failure
+    kept = writer.message_count
+    assert kept in flushed and 0 < kept < len(expected)
+    assert f'{kept} messages' in writer.failure
+    assert_readable_bag_of(bag, expected[:kept])
+
+
+def test_a_summary_that_does_not_fit_loses_no_message(tmp_path):
+    expected = written_messages()
+    write_flushing_every(BagWriter(tmp_path / 'whole', chunk_size=8192), expected, 10**9)
+    size = (tmp_path / 'whole' / 'whole_0.mcap').stat().st_size
+    failures = []
+    writer = BagWriter(tmp_path / 'short', chunk_size=8192, on_error=failures.append,
+                       open_file=disk_of(size - 200))  # all but the end of the summary
+    write_flushing_every(writer, expected, 10**9)
+    assert failures == [writer] and writer.message_count == len(expected)
+    assert '(0 lost)' in writer.failure
+    assert_readable_bag_of(tmp_path / 'short', expected)
+
+
+def test_a_bag_file_that_cannot_be_started_is_refused_and_nothing_is_left(tmp_path):
+    from gait_nodes.errors import ConfigError
+
+    bag = tmp_path / 'new' / 'deeper' / 'bag'
+    with pytest.raises(ConfigError, match=r'cannot write bag file .*bag_0\.mcap: \[Errno 28\] '
+                                          r'No space left on device'):
+        BagWriter(bag, open_file=disk_of(0))
+    assert list(tmp_path.iterdir()) == []
+
+
+def big_joint_state(index: int, stamp):
+    """A JointState of ~800 bytes that does not compress, ``position[0] == index``."""
+    msg = get_message('sensor_msgs/msg/JointState')(
+        name=['a'], position=[float(index)] + [random.random() for _ in range(99)])
+    msg.header.stamp = stamp
+    return msg
+
+
+def indices_in(bag: Path) -> list[int]:
+    from gait_nodes.interfaces import deserialize_message
+
+    joint_state = get_message('sensor_msgs/msg/JointState')
+    return [int(deserialize_message(data, joint_state).position[0])
+            for _, _, _, data in BagReader(bag).messages()]
+
+
+def bag_errors(arrays) -> list:
+    from gait_nodes.diagnostics import ERROR, level_value
+
+    return [status for array in arrays for status in array.status
+            if status.name == 'recorder: bag' and level_value(status.level) == ERROR]
+
+
+def test_recorder_on_a_full_disk_reports_stops_and_the_graph_goes_on(tmp_path):
+    """In process (inproc): the disk fills; no exception reaches the executor."""
+    from gait_nodes.recorder import Recorder
+
+    bag = tmp_path / 'full'
+    runtime.init(args=['test', '--ros-args', '-p', 'recorder:flush_period_s:=0.1'],
+                 runtime='inproc', signal_handlers=False)
+    try:
+        talker = runtime.Node('talker')
+        publisher = talker.create_publisher(get_message('sensor_msgs/msg/JointState'),
+                                            '/joint_states', 10)
+        sent = []
+
+        def tick():
+            publisher.publish(big_joint_state(len(sent), talker.get_clock().now().to_msg()))
+            sent.append(len(sent))
+
+        talker.create_timer(0.01, tick)
+        diagnostics = []
+        talker.create_subscription(get_message('diagnostic_msgs/msg/DiagnosticArray'),
+                                   '/diagnostics', diagnostics.append, 10)
+        recorder = Recorder(output=str(bag),
+                            topics={'/joint_states': 'sensor_msgs/msg/JointState'},
+                            open_file=disk_of(60_000))
+        executor = runtime.SingleThreadedExecutor()
+        executor.add_node(talker)
+        executor.add_node(recorder)
+        for _ in range(40):  # flushes go by wall time: some between the simulated steps
+            executor.spin_for(0.1)
+            time.sleep(0.02)
+        assert len(sent) == 400  # the graph went on
+        errors = bag_errors(diagnostics)
+        assert errors, 'no ERROR on /diagnostics'
+        assert str(bag / 'full_0.mcap') in errors[0].message
+        assert 'No space left on device' in errors[0].message
+        assert {v.key: v.value for v in errors[0].values}['path'] == str(bag)
+        assert recorder.subscriptions == []  # recording stopped
+        kept = recorder.writer.message_count
+    finally:
+        runtime.shutdown()
+    assert 0 < kept < 400
+    assert indices_in(bag) == list(range(kept))
+    report = inspect_bag(bag).report
+    assert report['complete'] and report['metadata_check']['matches']
+
+
+def test_recorder_process_on_a_full_disk_reports_and_stops_cleanly(dds, tmp_path):
+    """Over DDS: the recorder's files are limited to 30 kB (RLIMIT_FSIZE: the kernel's EFBIG).
+
+    Python ignores SIGXFSZ, so a write past the limit fails with an OSError as on a full disk.
+    """
+    import resource
+
+    def limit_file_size():
+        resource.setrlimit(resource.RLIMIT_FSIZE, (30_000, 30_000))
+
+    bag = tmp_path / 'limited'
+    recorder = subprocess.Popen(
+        [sys.executable, '-m', 'gait_nodes.recorder', '-o', str(bag), '-t', '/joint_states',
+         '--ros-args', '-p', 'flush_period_s:=0.1'], env=dds_env(), stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE, text=True, preexec_fn=limit_file_size)
+    node = runtime.Node('bag_test_full_disk')
+    publisher = node.create_publisher(get_message('sensor_msgs/msg/JointState'),
+                                      '/joint_states', 10)
+    diagnostics = []
+    node.create_subscription(get_message('diagnostic_msgs/msg/DiagnosticArray'),
+                             '/diagnostics', diagnostics.append, 10)
+    sent = []
+
+    def tick():
+        publisher.publish(big_joint_state(len(sent), node.get_clock().now().to_msg()))
+        sent.append(len(sent))
+
+    executor = runtime.SingleThreadedExecutor()
+    executor.add_node(node)
+    wait_for_matched_recorder(recorder)
+    timer = node.create_timer(0.01, tick)
+    deadline = time.monotonic() + 10.0
+    while time.monotonic() < deadline and not bag_errors(diagnostics):
+        executor.spin_for(0.1)
+    timer.cancel()
+    executor.spin_for(1.5)  # the ERROR again, once a second
+    recorder.send_signal(signal.SIGINT)
+    stdout, stderr = recorder.communicate(timeout=15)
+    node.destroy_node()
+    errors = bag_errors(diagnostics)
+    assert len(errors) >= 2, (stdout, stderr)
+    assert str(bag / 'limited_0.mcap') in errors[0].message
+    assert 'File too large' in errors[0].message
+    assert recorder.returncode == 1, stderr
+    assert 'Traceback' not in stderr
+    logged = [line for line in (stdout + stderr).splitlines() if 'ERROR' in line]
+    assert len(logged) == 1 and 'File too large' in logged[0], stdout + stderr
+    kept = indices_in(bag)
+    assert kept and kept == list(range(kept[0], kept[0] + len(kept)))
+    report = inspect_bag(bag).report
+    assert report['complete'] and report['metadata_check']['matches']
+    assert report['message_count'] == len(kept) < len(sent)

@@ -215,3 +215,52 @@ def test_node_processes_get_one_blas_thread_unless_the_environment_says_otherwis
     assert environment['OMP_NUM_THREADS'] == '4'  # the user's setting wins
     assert environment['PATH'] == '/bin' and environment['EXTRA'] == 'x'
     assert set(NODE_ENVIRONMENT_DEFAULTS) <= set(environment)
+
+
+def test_run_refuses_a_record_directory_it_cannot_create_at_once(tmp_path):
+    (tmp_path / 'a_file').write_text('not a directory\n')
+    result = run(['-m', 'gait_nodes', 'run', '--fast', '--record', 'a_file/bag'], cwd=tmp_path)
+    assert_bad_input(result, '--record a_file/bag', 'not a directory')
+    assert 'gait_nodes run:' not in result.stdout  # refused before the graph started
+    assert sorted(p.name for p in tmp_path.iterdir()) == ['a_file']
+
+
+@pytest.mark.skipif(os.geteuid() == 0, reason='root writes in a read-only directory')
+def test_run_refuses_a_record_directory_without_write_permission(tmp_path):
+    locked = tmp_path / 'locked'
+    locked.mkdir(mode=0o555)
+    result = run(['-m', 'gait_nodes', 'run', '--fast', '--record', 'locked/bag'], cwd=tmp_path)
+    assert_bad_input(result, '--record locked/bag', 'Permission denied')
+    assert list(locked.iterdir()) == []
+
+
+def test_run_with_plots_it_cannot_write_says_so_on_one_line_and_prints_the_summary(tmp_path):
+    (tmp_path / 'a_file').write_text('not a directory\n')
+    result = run(['-m', 'gait_nodes', 'run', '--fast', '--duration', '1', '--record', 'bag',
+                  '--plot', 'a_file/plots'], cwd=tmp_path)
+    assert result.returncode == 1, result.stderr
+    assert 'Traceback' not in result.stderr
+    errors = [line for line in result.stderr.splitlines() if 'error' in line]
+    assert len(errors) == 1 and 'a_file/plots' in errors[0], result.stderr
+    assert 'gait_nodes run:' in result.stdout and 'metadata.yaml matches' in result.stdout
+
+
+def test_run_on_a_full_disk_keeps_what_was_recorded_and_prints_the_summary(tmp_path):
+    """The run's files are limited to 100 kB (RLIMIT_FSIZE: writes past it fail, EFBIG)."""
+    import resource
+
+    def limit_file_size():
+        resource.setrlimit(resource.RLIMIT_FSIZE, (100_000, 100_000))
+
+    result = subprocess.run(
+        [sys.executable, '-m', 'gait_nodes', 'run', '--runtime', 'inproc', '--duration', '6',
+         '--scenario', 'robosimian_crawl_polynomial', '--record', 'bag', '--no-plot'],
+        cwd=tmp_path, env=env_with(), capture_output=True, text=True, timeout=120,
+        preexec_fn=limit_file_size)
+    assert result.returncode == 1, result.stderr
+    assert 'Traceback' not in result.stderr
+    assert 'File too large' in result.stderr  # the recorder's ERROR
+    assert 'RECORDING STOPPED EARLY' in result.stdout and 'File too large' in result.stdout
+    assert 'simulated 6.00 s' in result.stdout  # the walk went on to the end
+    assert 'metadata.yaml matches' in result.stdout
+    assert (tmp_path / 'bag' / 'metadata.yaml').is_file()

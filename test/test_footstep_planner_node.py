@@ -182,7 +182,8 @@ def test_a_command_waits_for_the_step_boundary_and_keeps_the_zmp_continuous(quad
     assert status['accepted'] and status['params']['step_length_m'] == 0.15
     quadruped.spin(0.02)
     after = quadruped.references()[-1]
-    boundary_s = float(quadruped.statuses('command')[-1].values[0].value)
+    values = {v.key: v.value for v in quadruped.statuses('command')[-1].values}
+    boundary_s = float(values['takes_effect_s'])
     boundary_ns = quadruped.planner.origin_ns + int(round(boundary_s * NS))
     common = np.intersect1d(before.stamps_ns, after.stamps_ns)
     a, b = before.sample(common), after.sample(common)

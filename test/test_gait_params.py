@@ -19,11 +19,13 @@ from gait_nodes.planning.gait_params import (
     CHOICE_FIELDS,
     NUMERIC_RANGES,
     GaitParameters,
+    command_id_of,
     command_schema,
     duty_factor_bounds,
     nominal_stance_width_m,
     parameters_from_mapping,
     parse_command,
+    parse_gait_command,
 )
 from gait_nodes.robot.description import load_robot_description
 
@@ -171,7 +173,9 @@ def test_schema_agrees_with_the_dataclass():
     schema = command_schema()
     properties = schema['properties']
     assert schema['additionalProperties'] is False
-    assert list(properties) == list(GaitParameters.__dataclass_fields__)
+    assert list(properties) == ['id', *GaitParameters.__dataclass_fields__]
+    assert properties['id'] == {**properties['id'], 'type': 'string', 'minLength': 1,
+                                'maxLength': 128}
     for name, (low, high, _) in NUMERIC_RANGES.items():
         assert properties[name]['type'] == 'number'
         assert properties[name]['exclusiveMinimum'] == low
@@ -181,6 +185,25 @@ def test_schema_agrees_with_the_dataclass():
     # Every default passes the schema.
     defaults = GaitParameters.for_robot(QUADRUPED).to_dict()
     assert parse_command(json.dumps(defaults)) == defaults
+    assert parse_gait_command(json.dumps({'id': 'a-1', **defaults})) == ('a-1', defaults)
+
+
+@pytest.mark.parametrize('text, match', [
+    ('{"step_length_m": 0.1, "step_length_m": 0.2}', r"\['step_length_m'\] given more than once"),
+    ('{"id": "a", "id": "b"}', r"\['id'\] given more than once"),
+    ('{"gait": {"x": 1, "x": 2}}', r"\['x'\] given more than once"),
+    ('{"id": ""}', 'id'),
+    ('{"id": 7}', 'string'),
+])
+def test_a_key_given_twice_or_a_bad_id_is_refused(text, match):
+    with pytest.raises(GaitParameterError, match=match):
+        parse_gait_command(text)
+
+
+def test_the_id_of_a_bad_command_is_found_for_its_answer():
+    assert command_id_of('{"id": "x-1", "step_length_m": -1}') == 'x-1'
+    assert command_id_of('{"id": 3}') is None
+    assert command_id_of('not json') is None
 
 
 def test_auto_follows_the_thesis_crossover_on_the_robot_that_has_it():

@@ -7,7 +7,9 @@ independent reader of the bag can check it:
   ``(count - 1) / (last - first log time)`` of that topic.
 - ``distance_m``: path length of ``odom -> base_link`` (from ``/tf``) in the ground plane;
   ``displacement_m``: straight-line distance from its first to its last position;
-  ``mean_speed_m_s``: ``distance_m`` over the time between those two samples (header stamps);
+  ``net_speed_m_s``: ``displacement_m`` over the time between those two samples (header
+  stamps; :func:`net_speed`), the speed at which the robot advanced, sway excluded;
+  ``path_speed_m_s``: ``distance_m`` over the same time (sway included);
   ``rise_m``: height of the last base position above the first (stairs climbed).
 - ``steps``: each swing executed by the time the bag ends (the latest /gait/footsteps version of
   it, see :class:`gait_nodes.contract.FootstepPlan`); a step's length is the horizontal distance
@@ -20,7 +22,8 @@ independent reader of the bag can check it:
   ``hardware_id`` of the bag's diagnostics). ``/joint_commands`` (JointTrajectory) counts as
   the trajectory a joint_trajectory_controller follows: every point of each message until the
   next message's first point replaces the rest (points at header stamp + time_from_start).
-- ``commands``: ``/gait/command_status`` answers, accepted and rejected with their reasons.
+- ``commands``: ``/gait/command_status`` answers per command: decisions (accepted, rejected with
+  their reasons, superseded), 'applied' answers, repeats (:func:`command_answers`).
 - ``diagnostics``: statuses on ``/diagnostics`` counted by level and by name.
 - ``consistency``: the nodes' outputs checked against each other with the robot's full model
   (COM reached vs asked, ZMP by inverse dynamics vs the monitor's, feet vs footsteps, stance
@@ -226,8 +229,33 @@ def _round(value: float, digits: int = 6):
     return None if value is None or not math.isfinite(value) else round(float(value), digits)
 
 
+def net_speed(base: np.ndarray, start_ns: float | None = None,
+              end_ns: float | None = None) -> float | None:
+    """Net speed of the base [m/s]: its horizontal displacement over the time it took.
+
+    Sway and back-and-forth motion do not count, only where the base got to.
+
+    Args:
+        base: Base positions by time, rows ``(stamp [ns], x, y, z)`` sorted by stamp (as
+            :attr:`GaitSeries.base`).
+        start_ns: Start of the interval [ns] (default: the first sample); positions between
+            samples are interpolated linearly.
+        end_ns: End of the interval [ns] (default: the last sample).
+
+    Returns:
+        The speed, or None when the interval is empty.
+    """
+    start = base[0, 0] if start_ns is None else start_ns
+    end = base[-1, 0] if end_ns is None else end_ns
+    if len(base) < 2 or end <= start:
+        return None
+    x0, x1 = np.interp([start, end], base[:, 0], base[:, 1])
+    y0, y1 = np.interp([start, end], base[:, 0], base[:, 2])
+    return float(np.hypot(x1 - x0, y1 - y0) / ((end - start) * 1e-9))
+
+
 def base_metrics(series: GaitSeries) -> dict | None:
-    """Distance, displacement and mean speed of the base from /tf."""
+    """Distance, displacement and speeds (net and along the path) of the base from /tf."""
     if len(series.base) < 2:
         return None
     base = np.array(sorted(series.base))
@@ -238,7 +266,8 @@ def base_metrics(series: GaitSeries) -> dict | None:
             'distance_m': _round(distance),
             'displacement_m': _round(float(np.linalg.norm(xy[-1] - xy[0]))),
             'time_s': _round(elapsed),
-            'mean_speed_m_s': _round(distance / elapsed) if elapsed > 0 else None,
+            'net_speed_m_s': _round(net_speed(base)),
+            'path_speed_m_s': _round(distance / elapsed) if elapsed > 0 else None,
             'rise_m': _round(float(base[-1, 3] - base[0, 3]))}
 
 
@@ -363,13 +392,43 @@ def joint_metrics(series: GaitSeries, limit_of: Callable[[str], float | None]) -
 
 
 def command_metrics(series: GaitSeries) -> dict | None:
-    """Accepted and rejected gait commands with the rejection reasons."""
+    """The gait commands' answers (see :func:`command_answers`)."""
     if not series.statuses:
         return None
-    rejected = [s for s in series.statuses if s.get('accepted') is False]
-    return {'answered': len(series.statuses),
-            'accepted': sum(1 for s in series.statuses if s.get('accepted') is True),
+    return command_answers(series.statuses)
+
+
+def command_answers(statuses: list[dict]) -> dict:
+    """What /gait/command_status said, per command (its ``id``).
+
+    ``answered``: commands answered (distinct ids; a status without an id, from an older bag,
+    counts alone); ``accepted``, ``rejected``, ``superseded``: their decisions; ``applied``:
+    accepted commands that said they took effect; ``repeated``: answers to a repeated id;
+    ``most_decisions`` and ``most_applied``: the most decisions (and 'applied' answers) one
+    command got, 1 when every command was decided (applied) once; ``rejections``: the
+    rejected commands' reasons.
+    """
+    decisions: dict[object, list[dict]] = {}
+    applied: dict[object, int] = {}
+    repeated = 0
+    for k, status in enumerate(statuses):
+        key = status.get('id', ('no id', k))
+        state = status.get('state') or ('accepted' if status.get('accepted') else 'rejected')
+        if status.get('repeated'):
+            repeated += 1
+        elif state == 'applied':
+            applied[key] = applied.get(key, 0) + 1
+        else:
+            decisions.setdefault(key, []).append({**status, 'state': state})
+    first = [answers[0] for answers in decisions.values()]
+    rejected = [s for s in first if s['state'] == 'rejected']
+    return {'answered': len(decisions),
+            'accepted': sum(1 for s in first if s['state'] == 'accepted'),
             'rejected': len(rejected),
+            'superseded': sum(1 for s in first if s['state'] == 'superseded'),
+            'applied': len(applied), 'repeated': repeated,
+            'most_decisions': max((len(a) for a in decisions.values()), default=0),
+            'most_applied': max(applied.values(), default=0),
             'rejections': [str(s.get('reason', '')) for s in rejected]}
 
 

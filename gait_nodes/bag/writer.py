@@ -11,24 +11,29 @@ its own, see :class:`ChunkThread`); a clean ``close()`` writes every chunk, the 
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import io
 import itertools
+import os
 import queue
+import shutil
 import struct
 import threading
 import time
 import zlib
+from collections.abc import Callable
 from pathlib import Path
+from typing import BinaryIO
 
 import yaml
 from mcap import writer as mcap_writer
 from mcap.data_stream import RecordBuilder
 from mcap.opcode import Opcode
-from mcap.records import Chunk, ChunkIndex, MessageIndex
-from mcap.writer import CompressionType, IndexType, Writer
+from mcap.records import Chunk, ChunkIndex, DataEnd, Footer, MessageIndex
+from mcap.writer import MCAP0_MAGIC, CompressionType, IndexType, Writer
 
-from gait_nodes.errors import ConfigError
+from gait_nodes.errors import ConfigError, os_error_text
 
 ROS_DISTRO = 'jazzy'
 #: An MCAP Message record up to its data: opcode, record length, channel id, sequence, log time
@@ -152,9 +157,10 @@ class ChunkThread:
     ChunkIndex kept for the summary. Chunks are written in the order they were finished.
 
     :meth:`flush` asks for the stream to be flushed after the chunks finished before it;
+    once it is, :attr:`flushed` holds the file offset reached and the flush's ``marker``.
     :meth:`stop` waits until all are written, after which chunks are written at once again
     (the summary the Writer's ``finish`` writes comes after every chunk). An error of the
-    thread (a full disk) is raised by the next call made here.
+    thread (a full disk) is raised by the next call made here; the jobs after it are dropped.
     """
 
     def __init__(self, writer: Writer, stream, compression: CompressionType,
@@ -178,6 +184,9 @@ class ChunkThread:
         self._thread: threading.Thread | None = None
         self._error: BaseException | None = None
         self._stopped = False
+        #: ``(file offset, marker)`` of the last flush done: every byte before it was handed
+        #: to the operating system.
+        self.flushed: tuple[int, object] | None = None
         writer._Writer__finalize_chunk = self.finish_chunk
 
     @classmethod
@@ -220,10 +229,10 @@ class ChunkThread:
             self._submit(records)
         self._submit(job)
 
-    def flush(self) -> None:
-        """Flush the stream once the chunks finished so far are written."""
+    def flush(self, marker: object = None) -> None:
+        """Flush the stream once the chunks finished so far are written (see :attr:`flushed`)."""
         self._raise_error()
-        self._submit(None)
+        self._submit(_Flush(marker))
 
     def stop(self) -> None:
         """Wait until every chunk is written; later chunks are written at once."""
@@ -261,8 +270,9 @@ class ChunkThread:
 
     def _do(self, job) -> None:
         stream = self._stream
-        if job is None:
+        if isinstance(job, _Flush):
             stream.flush()
+            self.flushed = (stream.tell(), job.marker)
             return
         if isinstance(job, bytes):
             stream.write(job)
@@ -290,6 +300,13 @@ class ChunkThread:
             uncompressed_size=len(data)))
 
 
+@dataclasses.dataclass(frozen=True)
+class _Flush:
+    """A ChunkThread job: flush the stream, then remember ``marker`` as flushed."""
+
+    marker: object
+
+
 @dataclasses.dataclass
 class _Topic:
     channel_id: int
@@ -300,8 +317,40 @@ class _Topic:
     count: int = 0
 
 
+@dataclasses.dataclass(frozen=True)
+class _Extent:
+    """What a bag holds up to some point: message counts (per topic) and log-time span."""
+
+    message_count: int
+    start_ns: int | None
+    end_ns: int
+    counts: dict[str, int]
+
+
+def _records_bytes(*records) -> bytes:
+    builder = RecordBuilder()
+    for record in records:
+        record.write(builder)
+    return builder.end()
+
+
+#: An MCAP ending without a summary section (DataEnd, a Footer with no summary, the magic):
+#: what a bag whose writing failed gets after its last intact record, so that it is a
+#: complete, unindexed MCAP file (readers scan it) rather than a cut-off one.
+_UNINDEXED_END = b''.join([_records_bytes(DataEnd(data_section_crc=0),
+                                          Footer(summary_start=0, summary_offset_start=0,
+                                                 summary_crc=0)), MCAP0_MAGIC])
+
+
 class BagWriter:
     """Writes one rosbag2 bag; a context manager whose ``close()`` is safe to call twice.
+
+    A write that fails (a full disk, a directory made read-only or unwritable: any OSError)
+    does not escape: the writer closes the bag at the last point it had flushed (at most
+    ``flush_period_s`` back), so that the directory holds a complete MCAP file with every
+    message written until then and a ``metadata.yaml`` that agrees with it; later messages
+    are dropped. :attr:`error` and :attr:`failure` say what happened, and ``on_error`` is
+    called once.
 
     Args:
         path: Bag directory to create (must not exist).
@@ -310,26 +359,51 @@ class BagWriter:
         compression: 'zstd', 'lz4' or 'none' (per chunk, as rosbag2's MCAP storage does).
         background: Compress and write finished chunks on a thread (:class:`ChunkThread`);
             the file is the same.
+        on_error: ``on_error(writer)``, called once when writing fails, after the bag was
+            closed.
+        open_file: ``open_file(path) -> binary file`` opening the MCAP file for writing
+            (default ``open(path, 'wb')``).
+
+    Raises:
+        ConfigError: The directory exists, cannot be created, or the MCAP file cannot be
+            started in it (nothing is left behind then).
     """
 
     def __init__(self, path: str | Path, flush_period_s: float = 0.5,
-                 chunk_size: int = 1 << 20, compression: str = 'zstd', background: bool = True):
+                 chunk_size: int = 1 << 20, compression: str = 'zstd', background: bool = True,
+                 on_error: Callable[[BagWriter], None] | None = None,
+                 open_file: Callable[[Path], BinaryIO] | None = None):
         self.path = Path(path)
-        if self.path.exists():
-            raise ConfigError(f'bag directory {self.path} exists already; not overwriting')
-        try:
-            self.path.mkdir(parents=True)
-        except OSError as exc:
-            raise ConfigError(f'cannot create bag directory {self.path}: {exc}') from exc
-        self.mcap_path = self.path / f'{self.path.name}_0.mcap'
-        self._stream = open(self.mcap_path, 'wb')  # noqa: SIM115 - closed in close()
         kinds = {'zstd': CompressionType.ZSTD, 'lz4': CompressionType.LZ4,
                  'none': CompressionType.NONE}
         if compression not in kinds:
             raise ConfigError(f'compression must be one of {", ".join(kinds)}, got '
                               f'{compression!r}')
-        self._writer = Writer(self._stream, chunk_size=chunk_size, compression=kinds[compression])
-        self._writer.start(profile='ros2', library=f'gait_nodes, {ROS_DISTRO}')
+        if self.path.exists():
+            raise ConfigError(f'bag directory {self.path} exists already; not overwriting')
+        created = self.path  # the outermost directory made here, removed if the start fails
+        while not created.parent.exists() and created.parent != created:
+            created = created.parent
+        try:
+            self.path.mkdir(parents=True)
+        except OSError as exc:
+            raise ConfigError(f'cannot create bag directory {self.path}: '
+                              f'{os_error_text(exc)}') from exc
+        self.mcap_path = self.path / f'{self.path.name}_0.mcap'
+        self._stream = None
+        try:
+            self._stream = (open_file or _open_new)(self.mcap_path)
+            self._writer = Writer(self._stream, chunk_size=chunk_size,
+                                  compression=kinds[compression])
+            self._writer.start(profile='ros2', library=f'gait_nodes, {ROS_DISTRO}')
+            self._stream.flush()
+        except OSError as exc:
+            if self._stream is not None:
+                with contextlib.suppress(OSError):
+                    self._stream.close()
+            shutil.rmtree(created, ignore_errors=True)
+            raise ConfigError(f'cannot write bag file {self.mcap_path}: '
+                              f'{os_error_text(exc)}') from exc
         self._append = message_appender(self._writer) or self._add_messages
         self._chunk_thread = ChunkThread.attach(self._writer, self._stream) \
             if background else None
@@ -345,6 +419,13 @@ class BagWriter:
         self.end_ns = 0
         self.message_count = 0
         self._closed = False
+        #: ``(file offset, _Extent)`` flushed without a ChunkThread (or before it flushed).
+        self._flushed: tuple[int, _Extent] = (self._stream.tell(), self._extent())
+        self._on_error = on_error
+        #: The OSError that stopped the writing, if one did.
+        self.error: OSError | None = None
+        #: One line for a person: what failed, where, and what the bag holds.
+        self.failure: str | None = None
 
     def __enter__(self) -> BagWriter:
         return self
@@ -372,13 +453,15 @@ class BagWriter:
 
     def write(self, topic: str, data: bytes, log_time_ns: int,
               publish_time_ns: int | None = None) -> None:
-        """Append one serialized message received at ``log_time_ns``."""
+        """Append one serialized message received at ``log_time_ns`` (dropped once closed)."""
+        if self._closed:
+            return
         entry = self.topics[topic]
         self._pending.append((entry.channel_id, log_time_ns, bytes(data),
                               publish_time_ns or log_time_ns, entry.count))
         entry.count += 1
         if len(self._pending) >= _PENDING_MAX or time.monotonic() >= self._flush_at:
-            self._take_pending(flush_if_due=True)
+            self._take_pending_or_fail()
 
     def topic_writer(self, topic: str, now_ns):
         """``write(data)`` doing ``self.write(topic, data, now_ns())``, for a recorder's callback.
@@ -393,15 +476,23 @@ class BagWriter:
         monotonic = time.monotonic
 
         def write(data: bytes) -> None:
+            if self._closed:
+                return
             if data.__class__ is not bytes:
                 data = bytes(data)
             log_time = now_ns()
             pending.append((channel_id, log_time, data, log_time, entry.count))
             entry.count += 1
             if len(pending) >= _PENDING_MAX or monotonic() >= self._flush_at:
-                self._take_pending(flush_if_due=True)
+                self._take_pending_or_fail()
 
         return write
+
+    def _take_pending_or_fail(self) -> None:
+        try:
+            self._take_pending(flush_if_due=True)
+        except OSError as exc:
+            self._fail(exc)
 
     def _take_pending(self, flush_if_due: bool = False) -> None:
         """Append the pending messages to the MCAP chunk; then flush if ``flush_if_due``."""
@@ -423,6 +514,11 @@ class BagWriter:
             self._writer.add_message(channel_id=channel_id, log_time=log_time, data=data,
                                      publish_time=publish_time, sequence=sequence)
 
+    def _extent(self) -> _Extent:
+        """What the MCAP chunks hold so far (call after :meth:`_take_pending`)."""
+        return _Extent(self.message_count, self.start_ns, self.end_ns,
+                       {name: topic.count for name, topic in self.topics.items()})
+
     def flush_if_due(self) -> None:
         """Flush when the open chunk is older than ``flush_period_s`` (call it from a timer)."""
         if not self._closed and time.monotonic() >= self._flush_at:
@@ -430,30 +526,40 @@ class BagWriter:
 
     def flush(self) -> None:
         """Finish the open chunk and push it to the file (with a ChunkThread: have it pushed)."""
-        self._take_pending()
-        if self._chunk_thread is not None:
-            self._chunk_thread.finish_chunk()
-            self._chunk_thread.flush()
-        else:
-            self._writer.flush()
+        if self._closed:
+            return
+        try:
+            self._take_pending()
+            extent = self._extent()
+            if self._chunk_thread is not None:
+                self._chunk_thread.finish_chunk()
+                self._chunk_thread.flush(extent)
+            else:
+                self._writer.flush()
+                self._flushed = (self._stream.tell(), extent)
+        except OSError as exc:
+            self._fail(exc)
+            return
         self._flush_at = time.monotonic() + self.flush_period_s
 
-    def metadata(self) -> dict:
-        """``metadata.yaml`` contents (rosbag2 version 9)."""
-        self._take_pending()
-        start = self.start_ns or 0
-        duration = max(self.end_ns - start, 0)
+    def metadata(self, extent: _Extent | None = None) -> dict:
+        """``metadata.yaml`` contents (rosbag2 version 9), of ``extent`` (default: everything)."""
+        if extent is None:
+            self._take_pending()
+            extent = self._extent()
+        start = extent.start_ns or 0
+        duration = max(extent.end_ns - start, 0)
         return {'rosbag2_bagfile_information': {
             'version': 9,
             'storage_identifier': 'mcap',
             'duration': {'nanoseconds': duration},
             'starting_time': {'nanoseconds_since_epoch': start},
-            'message_count': self.message_count,
+            'message_count': extent.message_count,
             'topics_with_message_count': [
                 {'topic_metadata': {
                     'name': t.name, 'type': t.type_name, 'serialization_format': 'cdr',
                     'offered_qos_profiles': t.qos_yaml, 'type_description_hash': t.type_hash},
-                 'message_count': t.count}
+                 'message_count': extent.counts.get(t.name, 0)}
                 for t in self.topics.values()],
             'compression_format': '',
             'compression_mode': '',
@@ -461,7 +567,7 @@ class BagWriter:
             'files': [{'path': self.mcap_path.name,
                        'starting_time': {'nanoseconds_since_epoch': start},
                        'duration': {'nanoseconds': duration},
-                       'message_count': self.message_count}],
+                       'message_count': extent.message_count}],
             'custom_data': None,
             'ros_distro': ROS_DISTRO,
         }}
@@ -470,23 +576,96 @@ class BagWriter:
         """Write the MCAP summary and ``metadata.yaml``; a second call does nothing."""
         if self._closed:
             return
-        self._closed = True
+        self.flush()  # every chunk flushed before the summary: a failure after it loses none
+        if self._closed:
+            return  # the flush failed and closed the bag
         metadata = self.metadata()
-        if self._chunk_thread is not None:
-            try:
+        try:
+            if self._chunk_thread is not None:
                 try:
                     self._chunk_thread.finish_chunk()
                 finally:
                     self._chunk_thread.stop()  # every chunk written before the summary
-            except BaseException:
-                self._stream.close()
-                raise
-        info = metadata['rosbag2_bagfile_information']
-        self._writer.add_metadata('rosbag2', {
-            'serialized_metadata': yaml.safe_dump(info, sort_keys=False),
-            'ros_distro': ROS_DISTRO})
-        self._writer.finish()
-        self._stream.close()
+            info = metadata['rosbag2_bagfile_information']
+            self._writer.add_metadata('rosbag2', {
+                'serialized_metadata': yaml.safe_dump(info, sort_keys=False),
+                'ros_distro': ROS_DISTRO})
+            self._writer.finish()
+            self._stream.close()
+        except OSError as exc:
+            self._fail(exc)
+            return
+        except BaseException:
+            self._closed = True
+            self._stream.close()
+            raise
+        self._closed = True
+        try:
+            self._write_metadata(metadata)
+        except OSError as exc:
+            extent = self._extent()
+            self._report_failure(exc, self.path / 'metadata.yaml', extent, extent.message_count,
+                                 'the .mcap file is complete')
+
+    def _write_metadata(self, metadata: dict) -> None:
         tmp = self.path / 'metadata.yaml.tmp'
-        tmp.write_text(yaml.safe_dump(metadata, sort_keys=False), encoding='utf-8')
-        tmp.replace(self.path / 'metadata.yaml')
+        try:
+            tmp.write_text(yaml.safe_dump(metadata, sort_keys=False), encoding='utf-8')
+            tmp.replace(self.path / 'metadata.yaml')
+        except OSError:
+            with contextlib.suppress(OSError):
+                tmp.unlink()
+            raise
+
+    def _durable(self) -> tuple[int, _Extent]:
+        """``(offset, extent)`` of the last flush known done: the file holds it intact."""
+        flushed = self._chunk_thread.flushed if self._chunk_thread is not None else None
+        return flushed or self._flushed
+
+    def _fail(self, error: OSError) -> None:
+        """Close the bag after a failed write: its MCAP file and metadata.yaml as last flushed.
+
+        Whatever came after the last flush (a partly written chunk, the summary) is cut off
+        and the file ended without a summary (:data:`_UNINDEXED_END`); the truncation gives
+        back the space a full disk needs for that and for ``metadata.yaml``. When even that
+        cannot be written the file stays cut at the flush, as a killed recorder's would.
+        """
+        if self.error is not None:
+            return
+        self._closed = True
+        accepted = self.message_count + len(self._pending)
+        self._pending.clear()
+        if self._chunk_thread is not None:
+            with contextlib.suppress(Exception):
+                self._chunk_thread.stop()  # its queued jobs are dropped after an error
+        with contextlib.suppress(OSError):
+            self._stream.close()  # the raw file is closed even when its flush fails
+        offset, extent = self._durable()
+        try:
+            os.truncate(self.mcap_path, offset)
+            with open(self.mcap_path, 'ab') as stream:
+                stream.write(_UNINDEXED_END)
+        except OSError:
+            with contextlib.suppress(OSError):
+                os.truncate(self.mcap_path, offset)
+        note = ''
+        try:
+            self._write_metadata(self.metadata(extent))
+        except OSError as exc:
+            note = f'; metadata.yaml not written either: {os_error_text(exc)}'
+        self._report_failure(error, self.mcap_path, extent, accepted, f'recording stopped{note}')
+
+    def _report_failure(self, error: OSError, where: Path, extent: _Extent, accepted: int,
+                        consequence: str) -> None:
+        self.error = error
+        self.message_count = extent.message_count
+        self.failure = (f'cannot write {error.filename or where}: {os_error_text(error)}; '
+                        f'{consequence}: {self.path} holds the {extent.message_count} '
+                        f'messages written before it ({accepted - extent.message_count} '
+                        f'lost)')
+        if self._on_error is not None:
+            self._on_error(self)
+
+
+def _open_new(path: Path) -> BinaryIO:
+    return open(path, 'xb')  # noqa: SIM115 - closed by BagWriter.close

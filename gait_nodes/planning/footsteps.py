@@ -25,6 +25,7 @@ All times here are float seconds from the planner's origin (the node maps them t
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import math
 import operator
@@ -417,11 +418,24 @@ class GaitPlanner:
     def set_swing_timing(self, swing_timing, now_s: float) -> None:
         """Time the steps from the next step boundary after ``now_s`` with ``swing_timing``."""
         self._timing = swing_timing
-        self._rhythms.clear()
-        self._clamped.clear()
-        self._fastest.clear()
+        # New caches, not emptied ones: a fork (see fork) shares them with the plan it came from.
+        self._rhythms, self._clamped, self._fastest = {}, {}, {}
         self._twist, _ = self._clamp(self._requested, self._params)
         self._replan(now_s)
+
+    def fork(self) -> GaitPlanner:
+        """A copy to plan a change on, or to read while this one plans on.
+
+        The steps are immutable and shared; the copy has its own list of them and its own
+        memoized outputs. The rhythm and velocity caches are shared while both keep the same
+        swing timing model (they hold what follows from the robot, the parameters and the
+        model alone).
+        """
+        twin = copy.copy(self)
+        twin._steps = list(self._steps)
+        twin._outputs = ((), {})
+        twin._last_zmp_reference = None
+        return twin
 
     def rhythm(self, params: GaitParameters | None = None,
                twist: Twist2D | None = None) -> Rhythm | None:
@@ -470,15 +484,23 @@ class GaitPlanner:
                                                 cycle_of, self._fastest)
         return self._clamped[key]
 
-    def set_parameters(self, params: GaitParameters, now_s: float) -> None:
+    def set_parameters(self, params: GaitParameters, now_s: float,
+                       swing_timing: object = ...) -> None:
         """Use ``params`` from the next step boundary after ``now_s``.
+
+        ``swing_timing``, if given, replaces the swing timing model with them (timing the new
+        parameters with the old model first would search their rhythm for nothing).
 
         Raises:
             GaitParameterError: ``params`` do not suit the robot (nothing changes).
             TerrainError: ``params`` cannot walk the terrain (nothing changes).
         """
         params.check_robot(self.robot)
-        self._keep_out_m = check_walkable(self._terrain, self.robot, params)
+        keep_out_m = check_walkable(self._terrain, self.robot, params)
+        if swing_timing is not ... and swing_timing is not self._timing:
+            self._timing = swing_timing
+            self._rhythms, self._clamped, self._fastest = {}, {}, {}
+        self._keep_out_m = keep_out_m
         twist, _ = self._clamp(self._requested, params)
         self._params, self._twist = params, twist
         self._replan(now_s)

@@ -303,18 +303,36 @@ _SCHEMA: dict | None = None
 
 
 def parse_command(text: str) -> dict[str, object]:
-    """The changes asked by a /gait/command JSON text, checked against the schema.
+    """The changes asked by a /gait/command JSON text (see :func:`parse_gait_command`)."""
+    return parse_gait_command(text)[1]
+
+
+def parse_gait_command(text: str) -> tuple[str | None, dict[str, object]]:
+    """``(id, changes)`` of a /gait/command JSON text, checked against the schema.
+
+    ``id`` (a string, optional: None when absent) names the command, so that a retry of it is
+    applied once; the changes are the other keys.
 
     Raises:
-        GaitCommandError: Invalid JSON, not an object, a NaN or infinite number, an unknown key,
-            a wrong type or a value outside the schema's range; the message says which.
+        GaitCommandError: Invalid JSON, a key given twice, not an object, a NaN or infinite
+            number, an unknown key, a wrong type or a value outside the schema's range; the
+            message says which.
     """
     import json
 
     import jsonschema
 
+    def no_duplicates(pairs):
+        keys = [key for key, _ in pairs]
+        twice = sorted({key for key in keys if keys.count(key) > 1})
+        if twice:
+            raise GaitCommandError(f'key(s) {twice} given more than once; each at most once')
+        return dict(pairs)
+
     try:
-        values = json.loads(text)
+        values = json.loads(text, object_pairs_hook=no_duplicates)
+    except GaitCommandError:
+        raise
     except (ValueError, TypeError) as exc:  # JSONDecodeError, or an integer of > 4300 digits
         raise GaitCommandError(f'invalid JSON: {exc}') from exc
     except RecursionError as exc:
@@ -333,8 +351,21 @@ def parse_command(text: str) -> dict[str, object]:
     if error is not None:
         where = '.'.join(str(p) for p in error.absolute_path)
         raise GaitCommandError(f'{where + ": " if where else ""}{error.message}')
-    return {key: float(value) if key in NUMERIC_RANGES else value
-            for key, value in values.items()}
+    command_id = values.pop('id', None)
+    return command_id, {key: float(value) if key in NUMERIC_RANGES else value
+                        for key, value in values.items()}
+
+
+def command_id_of(text: str) -> str | None:
+    """The ``id`` of a /gait/command text if it has a usable one, however bad the rest is."""
+    import json
+
+    try:
+        values = json.loads(text)
+    except (ValueError, TypeError, RecursionError):
+        return None
+    command_id = values.get('id') if isinstance(values, dict) else None
+    return command_id if isinstance(command_id, str) and 0 < len(command_id) <= 128 else None
 
 
 @functools.lru_cache(maxsize=8)

@@ -51,7 +51,9 @@ class RosArguments:
     params_files: list[Path] = dataclasses.field(default_factory=list)
     remaps: list[tuple[str | None, str, str]] = dataclasses.field(default_factory=list)
     log_level: str | None = None
-    file_params: list[tuple[str, dict[str, object]]] = dataclasses.field(default_factory=list)
+    #: ``(node pattern, parameters, params file)`` for each section of the params files.
+    file_params: list[tuple[str, dict[str, object], Path]] = dataclasses.field(
+        default_factory=list)
 
     def node_name(self, default: str) -> str:
         """Node name after ``__node:=`` remapping."""
@@ -86,20 +88,49 @@ class RosArguments:
             particular (``-p`` and params-file sections without wildcards): those must be
             declared by the node, while wildcard sections may hold other nodes' parameters.
         """
-        full_name = (namespace.rstrip('/') + '/' + node_name) if namespace != '/' else (
-            '/' + node_name)
         overrides: dict[str, object] = {}
         addressed: set[str] = set()
-        for pattern, values in self.file_params:
-            if node_pattern_matches(pattern, full_name):
-                overrides.update(values)
-                if '*' not in pattern:
-                    addressed.update(values)
+        for pattern, values, _ in self._sections_for(node_name, namespace):
+            overrides.update(values)
+            if '*' not in pattern:
+                addressed.update(values)
         for node, name, value in self.params:
             if node in (None, node_name):
                 overrides[name] = value
                 addressed.add(name)
         return overrides, addressed
+
+    def override_sources(self, node_name: str, namespace: str = '/') -> dict[str, str]:
+        """Where each override of one node comes from: ``params file PATH`` or ``-p``."""
+        sources = {}
+        for _, values, path in self._sections_for(node_name, namespace):
+            sources.update(dict.fromkeys(values, f'params file {path}'))
+        for node, name, _ in self.params:
+            if node in (None, node_name):
+                sources[name] = f'-p {name}:=...'
+        return sources
+
+    def _sections_for(self, node_name: str, namespace: str):
+        full_name = (namespace.rstrip('/') + '/' + node_name) if namespace != '/' else (
+            '/' + node_name)
+        return [section for section in self.file_params
+                if node_pattern_matches(section[0], full_name)]
+
+
+def unknown_parameters_message(node: str, unknown: list[str], sources: dict[str, str],
+                               accepted: list[str]) -> str:
+    """One line refusing the ``unknown`` overrides of ``node``, with their sources.
+
+    Args:
+        node: The node's fully qualified name.
+        unknown: The names it does not declare.
+        sources: Where each override comes from (:meth:`RosArguments.override_sources`).
+        accepted: The names it declares.
+    """
+    names = ', '.join(f'{name!r} ({sources[name]})' if name in sources else repr(name)
+                      for name in unknown)
+    return (f'{node}: unknown parameter{"s" if len(unknown) > 1 else ""} {names}; {node} '
+            f'accepts: {", ".join(accepted) or "none"}')
 
 
 def parse_value(text: str) -> object:
@@ -186,7 +217,8 @@ def parse_ros_args(ros: list[str]) -> RosArguments:
         elif arg == '--params-file':
             path = Path(operand(arg))
             parsed.params_files.append(path)
-            parsed.file_params.extend(load_params_file(path))
+            parsed.file_params.extend((pattern, values, path)
+                                      for pattern, values in load_params_file(path))
         elif arg in ('-r', '--remap'):
             node, source, target = _split_assignment(operand(arg), arg)
             _check_remap(arg, source, target)

@@ -8,10 +8,12 @@ from __future__ import annotations
 
 import functools
 import math
+from collections.abc import Iterable
 
 from gait_nodes.errors import GaitNodesError, ParameterNotDeclaredError
 from gait_nodes.interfaces import get_message, message_type_name
 from gait_nodes.runtime import context as context_module
+from gait_nodes.runtime.args import unknown_parameters_message
 from gait_nodes.runtime.clock import NS_PER_S, Clock, ClockType
 from gait_nodes.runtime.endpoints import TopicEndpointTypeEnum
 from gait_nodes.runtime.logging import RcutilsLogger
@@ -195,6 +197,7 @@ class Node:
                 expand_topic_name(target, self._name, self._namespace)
             for source, target in ros_args.topic_remaps(self._name).items()
         }
+        self._ros_args = ros_args
         overrides, addressed = ros_args.overrides_for(self._name, self._namespace)
         for parameter in parameter_overrides or []:
             overrides[parameter.name] = parameter.value
@@ -540,15 +543,21 @@ class Node:
                                                            self.get_namespace())
         return sorted(name for name in addressed if not self._rclpy_node.has_parameter(name))
 
-    def check_parameter_overrides(self) -> None:
-        """Raise when an override names a parameter this node does not declare."""
-        unused = self.unused_parameter_overrides()
-        if unused:
-            declared = sorted(self._rclpy_node.get_parameters_by_prefix('') if self._rclpy_node
-                              else self._parameters.parameters)
-            raise ParameterNotDeclaredError(
-                f'{self.get_fully_qualified_name()}: unknown parameter(s) '
-                f'{", ".join(unused)}; this node declares: {", ".join(declared)}')
+    def check_parameter_overrides(self, accepted: Iterable[str] = ()) -> None:
+        """Raise when an override names a parameter this node does not declare.
+
+        Args:
+            accepted: Names the node will declare later (a check before its start-up work).
+        """
+        accepted = set(accepted)
+        unknown = [name for name in self.unused_parameter_overrides() if name not in accepted]
+        if unknown:
+            declared = set(self._rclpy_node.get_parameters_by_prefix('') if self._rclpy_node
+                           else self._parameters.parameters)
+            ros_args = self.context.ros_args if self._rclpy_node else self._ros_args
+            sources = ros_args.override_sources(self.get_name(), self.get_namespace())
+            raise ParameterNotDeclaredError(unknown_parameters_message(
+                self.get_fully_qualified_name(), unknown, sources, sorted(declared | accepted)))
 
 
 def _to_rclpy_parameters(parameter_list) -> list:

@@ -1,0 +1,474 @@
+"""Planning off the control path: a worker plans, checks and hands over whole plans.
+
+The footstep planner's control path (its 10 Hz tick, publishing the footsteps and the ZMP
+reference the robot walks) must never wait for planning: timing probes through the whole-body
+IK, the fastest rhythm's search, a swing timing model for a new step height or a plan from the
+robot's measured state take from milliseconds to seconds. As nav2's planner and controller
+servers do, :class:`OnlinePlanner` keeps that work apart: the node submits what it wants
+changed, a worker (a thread, or the caller itself in the deterministic ``inproc`` runtime)
+plans it on a copy of the live plan, and the control path only reads whole, finished plans
+(:attr:`OnlinePlanner.snapshot`), which the worker keeps planned ``cover_s`` ahead.
+
+A change joins the motion under way. Submitted at ``now``, it is planned from ``at_s = now +
+lead`` on: every step that has started by then is kept as it is, and the change starts at the
+first step boundary after ``at_s`` (all feet down, the ZMP reference, the COM, the footholds and
+the swings continuous there; a standstill ends at ``at_s``). The lead covers the worker's own
+time (measured) and :data:`LEAD_S`, the time the new plan needs to reach the swing-leg policy
+and the whole-body IK before it changes anything. The candidate is planned
+:data:`CHECK_CYCLES` gait cycles past the join, through every check the planner makes (reach,
+the joint-limit timing of every swing and transfer); a failure rejects the command and the live
+plan goes on unchanged. At the handover the join must still be :data:`MIN_LEAD_S` ahead of the
+clock; a worker that was too slow plans it again from a later ``at_s``, up to
+:data:`MAX_ATTEMPTS` times, then rejects the command as busy.
+
+Gait commands carry an id. Each gets exactly one decision (accepted, rejected, or superseded:
+a newer command arrived before the worker started on it) and, once accepted, a second answer
+when it took effect. A command whose id was already seen is not applied again: it gets the
+decision the first one got (or, still pending, the one it will get).
+"""
+
+from __future__ import annotations
+
+import collections
+import dataclasses
+import math
+import threading
+import time
+from collections.abc import Callable
+
+from gait_nodes.errors import GaitNodesError
+from gait_nodes.planning.footsteps import GaitPlanner, Twist2D
+
+NS_PER_S = 1_000_000_000
+#: Least time from a plan's handover to the first change it makes [s]: the swing-leg policy and
+#: the whole-body IK get the new footsteps and references before anything differs.
+LEAD_S = 0.5
+#: A candidate is handed over only while its join is at least this far ahead [s].
+MIN_LEAD_S = 0.3
+#: Plans of one command tried before it is rejected as busy (the worker too slow each time).
+MAX_ATTEMPTS = 3
+#: A candidate plan is checked over this many gait cycles after its join.
+CHECK_CYCLES = 1.0
+#: Decisions remembered for repeated ids.
+REMEMBERED_IDS = 1000
+
+ACCEPTED, REJECTED, SUPERSEDED, APPLIED = 'accepted', 'rejected', 'superseded', 'applied'
+#: What a change's ``apply`` returns when it leaves the plan as it is (nothing handed over).
+UNCHANGED = object()
+
+
+@dataclasses.dataclass(frozen=True)
+class Answer:
+    """What /gait/command_status says of a command.
+
+    Attributes:
+        command_id: The command's id.
+        state: ``accepted``, ``rejected``, ``superseded`` (all three the decision) or
+            ``applied`` (the accepted change took effect).
+        reason: Why (rejected, superseded), or what was accepted.
+        text: The command as received.
+        params: The gait parameters after the change (accepted, applied) or as they stay.
+        takes_effect_ns: ROS time of the step boundary the change takes effect at [ns]
+            (accepted, applied), else None.
+        repeated: The answer to a command whose id was already seen (not applied again).
+    """
+
+    command_id: str
+    state: str
+    reason: str
+    text: str
+    params: dict
+    takes_effect_ns: int | None = None
+    repeated: bool = False
+
+    @property
+    def accepted(self) -> bool:
+        """Whether the change is (or will be) walked."""
+        return self.state in (ACCEPTED, APPLIED)
+
+
+@dataclasses.dataclass(frozen=True)
+class Failure:
+    """Planning the live plan ahead failed; the worker stopped it at a safe stand."""
+
+    error: Exception
+    what: str
+
+
+@dataclasses.dataclass(frozen=True)
+class Replaced:
+    """A plan from scratch (``submit_replace``) is live, or could not be made (``error``)."""
+
+    token: object
+    error: Exception | None
+
+
+@dataclasses.dataclass(frozen=True)
+class VelocityApplied:
+    """A /cmd_vel is planned: the twist walked from ``takes_effect_ns`` on and any clamp notes."""
+
+    requested: Twist2D
+    applied: Twist2D
+    notes: tuple[str, ...]
+    takes_effect_ns: int
+
+
+@dataclasses.dataclass(frozen=True)
+class ChangeRefused:
+    """A change without a command (``submit_change``) could not be planned; nothing changed."""
+
+    key: str
+    reason: str
+
+
+@dataclasses.dataclass(frozen=True)
+class Changed:
+    """A change without a command (e.g. a new swing timing model) is live; ``info`` says what."""
+
+    info: object
+    takes_effect_ns: int
+
+
+@dataclasses.dataclass(frozen=True)
+class Snapshot:
+    """A finished plan for the control path: read it, never change it.
+
+    Attributes:
+        planner: A copy of the live plan (its outputs are computed on demand and memoized in it).
+        origin_ns: ROS time of the plan's 0 s [ns].
+        generation: Counts the plans made from scratch (``submit_replace``).
+        planned_until_s: The plan's steps reach this time [s].
+        report: What the worker measured of the plan for the node's reports (the rhythm).
+    """
+
+    planner: GaitPlanner
+    origin_ns: int
+    generation: int
+    planned_until_s: float
+    report: dict
+
+
+@dataclasses.dataclass
+class _Job:
+    kind: str  # 'command' | 'velocity' | 'change' | 'replace' | 'stand'
+    payload: object
+    command_id: str = ''
+    text: str = ''
+    submitted_ns: int = 0
+
+
+class OnlinePlanner:
+    """Owns the live gait plan; changes it in a worker and hands over whole plans.
+
+    Args:
+        planner: The live plan to start from (owned by this object from now on).
+        origin_ns: ROS time of its 0 s [ns].
+        clock_ns: The node's clock: ROS time now [ns].
+        cover_s: The worker keeps the plan this far ahead of the clock [s] (the control path's
+            horizon, a step and the time of a slow candidate).
+        threaded: Plan in a background thread (``start``/``stop``); False: :meth:`run_pending`
+            does the work when the caller asks (the deterministic ``inproc`` runtime).
+        describe: ``describe(planner) -> dict``: the report kept with each snapshot.
+        failure_hold_s: ``failure_hold_s(planner) -> float``: how long a failed plan holds its
+            safe stand before walking again [s].
+        job_done: ``job_done(kind, seconds)`` after each job of the worker (for benchmarks).
+    """
+
+    def __init__(self, planner: GaitPlanner, origin_ns: int, clock_ns: Callable[[], int], *,
+                 cover_s: float, threaded: bool = False,
+                 describe: Callable[[GaitPlanner], dict] | None = None,
+                 failure_hold_s: Callable[[GaitPlanner], float] | None = None,
+                 job_done: Callable[[str, float], None] | None = None):
+        self._live = planner
+        self._origin_ns = int(origin_ns)
+        self._clock_ns = clock_ns
+        self.cover_s = float(cover_s)
+        self._threaded = threaded
+        self._describe = describe or (lambda planner: {})
+        self._failure_hold_s = failure_hold_s or (lambda planner: 1.0)
+        self._generation = 0
+        self._lock = threading.Lock()
+        self._jobs: collections.deque[_Job] = collections.deque()
+        self._events: list = []
+        self._outbox: list = []  # the worker's events, out once the plan they speak of is
+        self._decided: collections.OrderedDict[str, Answer] = collections.OrderedDict()
+        self._pending: set[str] = set()  # ids submitted, not decided yet
+        self._to_apply: list[Answer] = []  # accepted, not taken effect yet
+        self._work_s = 0.0  # the last candidate's planning time [s]
+        self._wake = threading.Event()
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._busy_since: float | None = None
+        self._job_done = job_done or (lambda kind, seconds: None)
+        self._extend()
+        self._publish()
+
+    # --- the control path's side: every call is short --------------------------------------
+
+    @property
+    def snapshot(self) -> Snapshot:
+        """The newest finished plan."""
+        return self._snapshot
+
+    @property
+    def busy_s(self) -> float:
+        """How long the worker has been working on its current job [s] (0: idle)."""
+        since = self._busy_since
+        return 0.0 if since is None else time.monotonic() - since
+
+    def submit_command(self, command_id: str, text: str,
+                       apply: Callable[[GaitPlanner, float], object]) -> Answer | None:
+        """Plan ``apply(fork, at_s)`` as a command; its answers come from :meth:`events`.
+
+        ``apply`` changes the fork of the live plan from ``at_s`` on (e.g.
+        ``fork.set_parameters(params, at_s)``) and raises :class:`GaitNodesError` if the change
+        cannot be walked. A command still waiting for the worker is superseded by this one.
+
+        Returns:
+            The answer at once for a repeated id (it is not planned again), else None.
+        """
+        with self._lock:
+            if command_id in self._decided:
+                answer = dataclasses.replace(self._decided[command_id], repeated=True)
+                self._events.append(answer)
+                return answer
+            if command_id in self._pending:
+                return None  # its answer is coming
+            for job in [j for j in self._jobs if j.kind == 'command']:
+                self._jobs.remove(job)
+                self._decide(job, SUPERSEDED, f'superseded by command {command_id!r}, which '
+                             f'came before this one was planned: nothing of it is applied')
+            self._pending.add(command_id)
+            self._jobs.append(_Job('command', apply, command_id, text, self._clock_ns()))
+        self._wake.set()
+        return None
+
+    def submit_velocity(self, twist: Twist2D) -> None:
+        """Walk ``twist`` from the first step boundary the worker can join (latest one wins)."""
+        self._submit(_Job('velocity', twist), replaces='velocity')
+
+    def submit_change(self, apply: Callable[[GaitPlanner, float], object],
+                      key: str = 'change') -> None:
+        """Plan ``apply(fork, at_s)`` like a command, without an answer (a failure is dropped).
+
+        A change of the same ``key`` still waiting is replaced by this one.
+        """
+        self._submit(_Job('change', apply, command_id=key), replaces=('change', key))
+
+    def submit_replace(self, make: Callable[[int], tuple[GaitPlanner, int]],
+                       token: object = None) -> None:
+        """Replace the live plan by ``make(now_ns) -> (planner, origin_ns)`` (a plan from scratch).
+
+        Every job waiting is dropped but gait commands (answered as usual, planned on the new
+        plan). A :class:`Replaced` event with ``token`` says when it is live or that it failed.
+        """
+        with self._lock:
+            for job in [j for j in self._jobs if j.kind in ('velocity', 'change', 'replace')]:
+                self._jobs.remove(job)
+            self._jobs.appendleft(_Job('replace', (make, token)))
+        self._wake.set()
+
+    def submit_stand(self, hold_s: float) -> None:
+        """Stop at a safe stand now and hold it ``hold_s`` (see :meth:`GaitPlanner.stand`)."""
+        with self._lock:
+            self._jobs.appendleft(_Job('stand', float(hold_s)))
+        self._wake.set()
+
+    def events(self) -> list:
+        """Answers and reports since the last call, in order."""
+        with self._lock:
+            self._check_applied()
+            events, self._events = self._events, []
+        return events
+
+    # --- the worker ------------------------------------------------------------------------
+
+    def start(self) -> None:
+        """Start the worker thread (threaded mode)."""
+        if self._threaded and self._thread is None:
+            self._thread = threading.Thread(target=self._loop, name='gait-planning',
+                                            daemon=True)
+            self._thread.start()
+
+    def stop(self) -> None:
+        """Stop the worker thread (its current job finishes first)."""
+        self._stop.set()
+        self._wake.set()
+        if self._thread is not None:
+            self._thread.join(timeout=10.0)
+            self._thread = None
+
+    def run_pending(self) -> None:
+        """Do every job waiting and keep the plan ahead, in the caller's thread (not threaded)."""
+        if not self._threaded:
+            self._work()
+
+    def _loop(self) -> None:
+        while not self._stop.is_set():
+            self._wake.wait(timeout=0.05)
+            self._wake.clear()
+            self._work()
+
+    def _work(self) -> None:
+        while True:
+            with self._lock:
+                job = self._jobs.popleft() if self._jobs else None
+            if job is None:
+                break
+            started = time.monotonic()
+            self._busy_since = started
+            try:
+                self._run(job)
+            except Exception as exc:  # noqa: BLE001 (the worker never dies of a plan)
+                self._emit(Failure(exc, f'the {job.kind} job'))
+            finally:
+                self._busy_since = None
+                self._job_done(job.kind, time.monotonic() - started)
+            self._extend()
+            self._publish()
+        if self._extend():
+            self._publish()
+        if self._outbox:
+            with self._lock:
+                self._events.extend(self._outbox)
+                self._to_apply.extend(event for event in self._outbox
+                                      if isinstance(event, Answer) and event.state == ACCEPTED)
+            self._outbox = []
+
+    def _submit(self, job: _Job, replaces) -> None:
+        with self._lock:
+            for old in list(self._jobs):
+                if (old.kind == replaces if isinstance(replaces, str)
+                        else (old.kind, old.command_id) == replaces):
+                    self._jobs.remove(old)
+            self._jobs.append(job)
+        self._wake.set()
+
+    def _now_s(self) -> float:
+        return (self._clock_ns() - self._origin_ns) * 1e-9
+
+    def _run(self, job: _Job) -> None:
+        if job.kind == 'replace':
+            make, token = job.payload
+            try:
+                planner, origin_ns = make(self._clock_ns())
+            except Exception as exc:  # noqa: BLE001 (reported: the live plan goes on)
+                self._emit(Replaced(token, exc))
+                return
+            self._live, self._origin_ns = planner, int(origin_ns)
+            self._generation += 1
+            self._emit(Replaced(token, None))
+        elif job.kind == 'stand':
+            self._live.stand(self._now_s(), job.payload)
+        else:
+            self._plan_change(job)
+
+    def _plan_change(self, job: _Job) -> None:
+        """Plan a command, a velocity or a change on a fork; hand it over if it joins in time."""
+        lead_s = LEAD_S + self._work_s
+        for _ in range(MAX_ATTEMPTS):
+            started = time.monotonic()
+            at_s = self._now_s() + lead_s
+            fork = self._live.fork()
+            try:
+                result = self._apply(job, fork, at_s)
+                if result is UNCHANGED and job.kind != 'command':
+                    return
+                cycle_s = fork.params.cycle_s
+                rhythm = fork.rhythm()
+                if rhythm is not None:
+                    cycle_s = rhythm.cycle_s
+                fork.advance(fork.next_boundary_s(at_s) + CHECK_CYCLES * cycle_s)
+            except Exception as exc:  # noqa: BLE001 (any failure of the candidate refuses it)
+                self._work_s = time.monotonic() - started
+                self._refuse(job, str(exc) if isinstance(exc, GaitNodesError)
+                             else f'{type(exc).__name__}: {exc}')
+                return
+            self._work_s = time.monotonic() - started
+            if at_s - self._now_s() >= MIN_LEAD_S or not self._threaded:
+                takes_effect_ns = self._origin_ns + int(round(
+                    fork.next_boundary_s(at_s) * NS_PER_S))
+                self._live = fork
+                self._handed_over(job, result, takes_effect_ns)
+                return
+            lead_s = LEAD_S + 2.0 * self._work_s
+        self._refuse(job, f'busy: the planner could not plan it ahead of the motion '
+                          f'({MAX_ATTEMPTS} tries, the last {self._work_s:.2f} s); send it again')
+
+    def _apply(self, job: _Job, fork: GaitPlanner, at_s: float):
+        if job.kind == 'velocity':
+            if job.payload == fork.requested_twist:
+                return UNCHANGED
+            applied, notes = fork.set_velocity(job.payload, at_s)
+            return applied, tuple(notes)
+        return job.payload(fork, at_s)
+
+    def _refuse(self, job: _Job, reason: str) -> None:
+        if job.kind == 'command':
+            with self._lock:
+                self._outbox.append(self._decide(job, REJECTED, reason, publish=False))
+        elif job.kind == 'velocity':
+            # A twist is checked (finite) before it is submitted: what fails here is planning.
+            self._emit(Failure(GaitNodesError(reason), f'the velocity {job.payload.as_tuple()}'))
+        else:
+            self._emit(ChangeRefused(job.command_id, reason))
+
+    def _handed_over(self, job: _Job, result, takes_effect_ns: int) -> None:
+        if job.kind == 'command':
+            with self._lock:
+                answer = self._decide(job, ACCEPTED, f'accepted: takes effect at the step '
+                                      f'boundary at {takes_effect_ns * 1e-9:.3f} s',
+                                      takes_effect_ns, publish=False)
+            self._outbox.append(answer)
+        elif job.kind == 'velocity':
+            applied, notes = result
+            self._emit(VelocityApplied(job.payload, applied, notes, takes_effect_ns))
+        else:
+            self._emit(Changed(result, takes_effect_ns))
+
+    def _decide(self, job: _Job, state: str, reason: str, takes_effect_ns: int | None = None,
+                publish: bool = True) -> Answer:
+        """Record the decision on ``job`` and emit it unless told not to (the lock held)."""
+        answer = Answer(job.command_id, state, reason, job.text, self._live.params.to_dict(),
+                        takes_effect_ns)
+        self._pending.discard(job.command_id)
+        self._decided[job.command_id] = answer
+        while len(self._decided) > REMEMBERED_IDS:
+            self._decided.popitem(last=False)
+        if publish:
+            self._events.append(answer)
+        return answer
+
+    def _check_applied(self) -> None:
+        """Emit APPLIED for the accepted commands whose step boundary has come (lock held)."""
+        now_ns = self._clock_ns()
+        due = [a for a in self._to_apply if a.takes_effect_ns <= now_ns]
+        for answer in due:
+            self._to_apply.remove(answer)
+            applied = dataclasses.replace(answer, state=APPLIED,
+                                          reason='applied: the change is walked from here')
+            self._decided[answer.command_id] = applied
+            self._events.append(applied)
+
+    def _emit(self, event) -> None:
+        """Keep a worker's event until its plan is published (see :meth:`_work`)."""
+        self._outbox.append(event)
+
+    def _extend(self) -> bool:
+        """Plan the live plan ``cover_s`` ahead and forget what is past; True if it changed."""
+        now_s = self._now_s()
+        try:
+            added = self._live.advance(now_s + self.cover_s)
+        except Exception as exc:  # noqa: BLE001 (the worker never dies of a plan)
+            self._live.stand(now_s, self._failure_hold_s(self._live))
+            self._emit(Failure(exc, 'planning ahead'))
+            added = True
+        steps = len(self._live.steps)
+        self._live.prune(now_s - 1.0)
+        return added or len(self._live.steps) != steps
+
+    def _publish(self) -> None:
+        live = self._live
+        planned = live.steps[-1].end_s if live.steps else -math.inf
+        self._snapshot = Snapshot(live.fork(), self._origin_ns, self._generation, planned,
+                                  self._describe(live))

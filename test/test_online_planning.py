@@ -1,0 +1,224 @@
+"""The planning worker (gait_nodes.planning.online) driven directly, without a runtime.
+
+What it must guarantee: a change joins the live plan at a step boundary ahead of the clock and
+leaves everything before it as it was; a change that cannot be walked changes nothing; every
+command gets exactly one decision (and an accepted one its 'applied' answer once); an id is
+applied once; in a thread, the control path's plan keeps covering its horizon while a slow
+change is planned, and a change is never handed over closer to the clock than its lead.
+"""
+
+import threading
+import time
+
+import numpy as np
+import pytest
+from planning_helpers import robot
+
+from gait_nodes.errors import GaitParameterError
+from gait_nodes.planning import online
+from gait_nodes.planning.footsteps import GaitPlanner, Twist2D
+from gait_nodes.planning.online import (
+    ACCEPTED,
+    APPLIED,
+    REJECTED,
+    SUPERSEDED,
+    Answer,
+    OnlinePlanner,
+    VelocityApplied,
+)
+
+NS = 1_000_000_000
+QUADRUPED = robot('quadruped')
+
+
+class FakeClock:
+    """A clock the test moves: ROS time [ns]."""
+
+    def __init__(self):
+        self.now_ns = 0
+
+    def __call__(self):
+        """ROS time now [ns]."""
+        return self.now_ns
+
+    def advance(self, seconds):
+        """Move the clock ``seconds`` on."""
+        self.now_ns += int(round(seconds * NS))
+
+
+def walking(clock, threaded=False):
+    planner = GaitPlanner(QUADRUPED)
+    planner.set_velocity(Twist2D(0.1), 0.0)
+    worker = OnlinePlanner(planner, 0, clock, cover_s=6.0, threaded=threaded)
+    return worker
+
+
+def step_length(step_length_m):
+    def apply(fork, at_s):
+        fork.set_parameters(fork.params.replace(step_length_m=step_length_m), at_s)
+    return apply
+
+
+def answers(worker):
+    return [event for event in worker.events() if isinstance(event, Answer)]
+
+
+def test_a_change_joins_at_a_step_boundary_after_its_lead_and_keeps_what_came_before():
+    clock = FakeClock()
+    worker = walking(clock)
+    clock.advance(3.3)  # mid-step
+    worker.run_pending()
+    before = worker.snapshot.planner
+    assert worker.submit_command('a', '{}', step_length(0.15)) is None
+    worker.run_pending()
+    (decision,) = answers(worker)
+    assert decision.state == ACCEPTED and decision.params['step_length_m'] == 0.15
+    join_s = decision.takes_effect_ns / NS
+    now_s = clock.now_ns / NS
+    assert join_s >= now_s + online.LEAD_S
+    after = worker.snapshot.planner
+    # Every step that starts before the join is the same object; the steps from the join on
+    # are new, planned with the new length and starting where the old ones ended.
+    kept = [step for step in after.steps if step.start_s < join_s - 1e-12]
+    assert kept and all(any(step is old for old in before.steps) for step in kept)
+    assert kept[-1].end_s == pytest.approx(join_s)
+    new = [step for step in after.steps if step.start_s >= join_s - 1e-12]
+    assert new and all(step.params.step_length_m == 0.15 for step in new)
+    np.testing.assert_allclose(new[0].positions_start, kept[-1].positions_end, atol=0)
+    times = np.linspace(now_s, join_s, 200)
+    np.testing.assert_allclose(after.zmp(times), before.zmp(times), atol=1e-12)
+    # Its answer that it took effect comes once the clock passes the boundary, once.
+    clock.advance(join_s - now_s - 0.01)
+    assert answers(worker) == []
+    clock.advance(0.02)
+    (applied,) = answers(worker)
+    assert applied.state == APPLIED and applied.command_id == 'a'
+    clock.advance(5.0)
+    assert answers(worker) == []
+
+
+def test_a_change_that_cannot_be_walked_changes_nothing():
+    clock = FakeClock()
+    worker = walking(clock)
+    clock.advance(2.0)
+    worker.run_pending()
+    before = worker.snapshot.planner
+
+    def unwalkable(fork, at_s):
+        fork.set_parameters(fork.params.replace(step_length_m=0.12), at_s)
+        raise GaitParameterError('no: a swing leaves the reach')
+
+    worker.submit_command('bad', '{}', unwalkable)
+    worker.run_pending()
+    (decision,) = answers(worker)
+    assert decision.state == REJECTED and 'reach' in decision.reason
+    assert decision.params == before.params.to_dict()
+    after = worker.snapshot.planner
+    assert after.params == before.params
+    assert all(a is b for a, b in zip(after.steps, before.steps, strict=False))
+
+
+def test_a_waiting_command_is_superseded_and_every_command_is_answered_once():
+    clock = FakeClock()
+    worker = walking(clock)
+    ids = [f'c{k}' for k in range(1000)]
+    for k, command_id in enumerate(ids):
+        worker.submit_command(command_id, '{}', step_length(0.1 + 0.0001 * (k % 100)))
+    worker.run_pending()
+    decisions = answers(worker)
+    assert sorted(a.command_id for a in decisions) == sorted(ids)
+    states = {a.command_id: a.state for a in decisions}
+    assert all(states[i] == SUPERSEDED for i in ids[:-1])
+    assert states[ids[-1]] == ACCEPTED
+    assert worker.snapshot.planner.params.step_length_m == pytest.approx(0.1 + 0.0001 * 99)
+
+
+def test_a_repeated_id_is_answered_again_and_not_applied_again():
+    clock = FakeClock()
+    worker = walking(clock)
+    calls = []
+
+    def counted(fork, at_s):
+        calls.append(at_s)
+        step_length(0.15)(fork, at_s)
+
+    worker.submit_command('once', '{}', counted)
+    worker.run_pending()
+    (first,) = answers(worker)
+    repeat = worker.submit_command('once', '{}', counted)
+    worker.run_pending()
+    assert repeat is not None and repeat.repeated and repeat.state == first.state
+    assert [a.repeated for a in answers(worker)] == [True]
+    assert len(calls) == 1
+
+
+def test_a_velocity_is_planned_ahead_and_reported_once():
+    clock = FakeClock()
+    worker = walking(clock)
+    clock.advance(1.0)
+    worker.submit_velocity(Twist2D(0.03))
+    worker.submit_velocity(Twist2D(0.08))  # the latest waiting twist wins
+    worker.run_pending()
+    events = [e for e in worker.events() if isinstance(e, VelocityApplied)]
+    assert len(events) == 1 and events[0].requested == Twist2D(0.08)
+    assert events[0].takes_effect_ns >= clock.now_ns + online.LEAD_S * NS
+    worker.submit_velocity(Twist2D(0.08))  # the same twist: nothing to plan
+    worker.run_pending()
+    assert worker.events() == []
+
+
+def test_in_a_thread_the_plan_covers_the_horizon_while_a_slow_change_is_planned():
+    start = time.monotonic_ns()
+
+    def clock():
+        return time.monotonic_ns() - start
+
+    worker = walking(clock, threaded=True)
+    worker.start()
+    try:
+        def slow(fork, at_s):
+            time.sleep(0.6)  # longer than the lead: the first plan joins too late
+            step_length(0.15)(fork, at_s)
+
+        worker.submit_command('slow', '{}', slow)
+        covered = []
+        deadline = time.monotonic() + 10.0
+        decisions = []
+        while not decisions and time.monotonic() < deadline:
+            now_s = clock() / NS
+            covered.append(worker.snapshot.planned_until_s - now_s)
+            decisions = answers(worker)
+            time.sleep(0.01)
+        (decision,) = decisions
+        handed_over_ns = clock()
+        assert decision.state == ACCEPTED
+        # Planned again from a later start: the join still a lead ahead of the handover.
+        assert decision.takes_effect_ns - handed_over_ns >= (online.MIN_LEAD_S - 0.1) * NS
+        assert min(covered) > 2.5  # the control path's horizon stayed covered
+    finally:
+        worker.stop()
+
+
+def test_in_a_thread_a_change_always_too_slow_is_rejected_as_busy(monkeypatch):
+    monkeypatch.setattr(online, 'LEAD_S', 0.05)
+    start = time.monotonic_ns()
+    worker = walking(lambda: time.monotonic_ns() - start, threaded=True)
+    worker.start()
+    entered = threading.Event()
+    try:
+        def slower_each_time(fork, at_s):
+            entered.set()
+            time.sleep(0.2 + 3.0 * (at_s - (time.monotonic_ns() - start) / NS))
+            step_length(0.15)(fork, at_s)
+
+        worker.submit_command('slow', '{}', slower_each_time)
+        deadline = time.monotonic() + 20.0
+        decisions = []
+        while not decisions and time.monotonic() < deadline:
+            decisions = answers(worker)
+            time.sleep(0.01)
+        (decision,) = decisions
+        assert decision.state == REJECTED and decision.reason.startswith('busy')
+        assert worker.snapshot.planner.params.step_length_m != 0.15
+    finally:
+        worker.stop()
