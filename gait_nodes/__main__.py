@@ -84,6 +84,12 @@ def build_parser() -> ArgumentParser:
     run.add_argument('--gait', default=None, help='gait: biped | crawl | trot | auto')
     run.add_argument('--nodes', default=None,
                      help=f'comma-separated subset of {",".join(graph.NODES)}')
+    run.add_argument('--namespace', metavar='NS', default=None,
+                     help='start the graph in ROS namespace NS (e.g. /robot1), as a launch '
+                          "file's namespace does: every node process, the recorder included, "
+                          'gets -r __ns:=NS, and /tf, /tf_static and /diagnostics are remapped '
+                          'into it (/clock stays global), so that graphs in different '
+                          'namespaces share a ROS_DOMAIN_ID without mixing')
     run.add_argument('--json', action='store_true', help='print the summary as JSON')
     return parser
 
@@ -123,8 +129,8 @@ class TopicCounter:
         self.last_ns: dict[str, int] = {}
         self._clock = node.get_clock()
         for topic, type_name in graph.TOPICS.items():
-            node.create_subscription(get_message(type_name), topic, self._counter(topic), 100,
-                                     raw=True)
+            node.create_subscription(get_message(type_name), graph.node_topic_name(topic),
+                                     self._counter(topic), 100, raw=True)
 
     def _counter(self, topic: str):
         def count(_data) -> None:
@@ -148,7 +154,15 @@ class TopicCounter:
 
 
 def _record_args(options) -> list[str]:
-    return ['-o', options.record]
+    namespace = options.namespace_args
+    return ['-o', options.record, *(['--ros-args', *namespace] if namespace else [])]
+
+
+def _monitor(options, runtime):
+    """The launcher's own node: in the graph's namespace, none of the user's -p/-r."""
+    namespace = options.namespace_args
+    return runtime.Node('gait_run_monitor', use_global_arguments=False,
+                        cli_args=['--ros-args', *namespace] if namespace else None)
 
 
 def _check_bag_directory(path: str) -> None:
@@ -187,7 +201,7 @@ def run_inproc(options, names: list[str], ros: list[str]) -> dict:
             executor.add_node(recorder)
         # The monitor is ours, not the user's: the graph's -p/-r do not address it (as in
         # run_processes, where it never sees them).
-        monitor = runtime.Node('gait_run_monitor', use_global_arguments=False)
+        monitor = _monitor(options, runtime)
         counter = TopicCounter(monitor)
         driver = CommandDriver(monitor, get_scenario(options.scenario).commands)
         executor.add_node(monitor)
@@ -221,7 +235,7 @@ def run_processes(options, names: list[str], ros: list[str], runtime_name: str) 
     processes: dict[str, subprocess.Popen] = {}
     exit_codes: dict[str, int] = {}
     try:
-        monitor = runtime.Node('gait_run_monitor')
+        monitor = _monitor(options, runtime)
         # Recording, the traffic is counted from the bag: a subscriber of every stream here
         # would be one more reader each node process sends every message to.
         counter = None if options.record else TopicCounter(monitor)
@@ -321,8 +335,9 @@ def print_summary(summary: dict, as_json: bool) -> None:
         print(json.dumps(summary, indent=2, sort_keys=True))
         return
     nodes = ', '.join(summary['nodes']) or 'none'
+    namespace = summary.get('namespace', '/')
     print(f'gait_nodes run: scenario {summary.get("scenario")}, runtime {summary["runtime"]}, '
-          f'nodes: {nodes}')
+          + (f'namespace {namespace}, ' if namespace != '/' else '') + f'nodes: {nodes}')
     if not summary['nodes']:
         print('  no gait nodes are installed in this version yet; the graph ran empty')
     timing = f'  wall time {summary["wall_s"]:.2f} s'
@@ -371,25 +386,29 @@ def print_summary(summary: dict, as_json: bool) -> None:
             print(f'  details: python -m gait_nodes.inspect {summary["bag"]}')
 
 
-def _inspect_recording(bag: str, plot_dir: str | None) -> dict:
+def _inspect_recording(bag: str, plot_dir: str | None, namespace: str = '/') -> dict:
     """The inspect report of the bag just recorded (an ``error`` entry if it cannot be read).
 
     Args:
         bag: The bag directory.
         plot_dir: Where to write the PNG plots (none when None).
+        namespace: The graph's namespace.
     """
     from gait_nodes.bag.analysis import inspect_bag, robot_limits
 
     try:
-        inspection = inspect_bag(bag)
+        inspection = inspect_bag(bag, namespace=namespace)
     except GaitNodesError as exc:
         return {'error': str(exc)}
     report = inspection.report
     keep = ('message_count', 'duration_s', 'complete', 'damage', 'metadata_check', 'gait')
     kept = {key: report[key] for key in keep if key in report}
-    kept['topics'] = {row['topic']: {'messages': row['count'], 'rate_hz': row['rate_hz']}
+    names = graph.contract_topics([row['topic'] for row in report.get('topics', [])],
+                                  report.get('namespace', '/'))
+    kept['topics'] = {names[row['topic']]: {'messages': row['count'],
+                                            'rate_hz': row['rate_hz']}
                       for row in report.get('topics', [])
-                      if row['topic'] in graph.TOPICS and row['count']}
+                      if row['topic'] in names and row['count']}
     if plot_dir:
         from gait_nodes.bag.plots import write_plots
 
@@ -421,6 +440,7 @@ def main(args: list[str] | None = None) -> int:
             options.runtime = 'inproc'
         runtime_name = select_runtime(options.runtime)
         names = _selected_nodes(options)
+        options.namespace_args = graph.namespace_arguments(options.namespace)
         # Each node would refuse a parameter it does not declare, after its start-up work.
         checked = names + ([RECORDER] if options.record is not None and
                            runtime_name == 'inproc' else [])
@@ -440,7 +460,9 @@ def main(args: list[str] | None = None) -> int:
         with tempfile.TemporaryDirectory(prefix='gait_nodes_run_') as tmp:
             params_file = Path(tmp) / 'graph_params.yaml'
             params_file.write_text(yaml.safe_dump(_graph_params(options)))
-            ros = ['--ros-args', '--params-file', str(params_file), *ros[1:]]
+            # The namespace first: a user's own -r after it still wins.
+            ros = ['--ros-args', '--params-file', str(params_file), *options.namespace_args,
+                   *ros[1:]]
             if runtime_name == 'inproc':
                 summary = run_inproc(options, names, ros)
             else:
@@ -448,11 +470,14 @@ def main(args: list[str] | None = None) -> int:
     except GaitNodesError as exc:
         return fail(PROG, exc)
     summary['scenario'] = options.scenario
+    summary['namespace'] = options.namespace_args[1][len('__ns:='):] \
+        if options.namespace_args else '/'
     if options.record:
         summary['bag'] = os.path.abspath(options.record)
         plot_dir = None if options.no_plot else (options.plot or
                                                   options.record.rstrip('/') + '_plots')
-        summary['inspect'] = _inspect_recording(options.record, plot_dir)
+        summary['inspect'] = _inspect_recording(options.record, plot_dir,
+                                                summary['namespace'])
         if not summary['topics']:
             summary['topics'] = summary['inspect'].get('topics', {})
         if 'plot_error' in summary['inspect']:

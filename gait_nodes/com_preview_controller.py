@@ -42,6 +42,10 @@ overloaded machine, a jump in time) the state is carried over to now, never step
 from a stale time, and the gap is reported (WARN, ``com_preview_controller: controller``); so
 is a clock that jumped back behind the committed states.
 
+A /gait/zmp_reference with more than one publisher (two graphs on one domain) is refused, not
+mixed (:mod:`gait_nodes.single_source`): the controller runs on as with a stale one, ERROR on
+``com_preview_controller: inputs``, until one planner is left.
+
 A ZMP reference with a NaN, out-of-order stamps, too short a horizon (< ``preview_s``) or in a
 frame other than odom is dropped and reported on /diagnostics; the controller keeps its last good
 reference and its state. A parameter change that the controller cannot use (Riccati equation
@@ -67,10 +71,12 @@ from gait_nodes.com.support_height import SupportHeight
 from gait_nodes.diagnostics import ERROR, OK, WARN, DiagnosticsReporter
 from gait_nodes.errors import ComPlanningError, GaitNodesError
 from gait_nodes.faults import FaultGuard, GuardedNode
+from gait_nodes.graph import node_topic_name
 from gait_nodes.interfaces import get_message
 from gait_nodes.paths import node_defaults as shipped_node_defaults
 from gait_nodes.robot.description import load_robot_description
 from gait_nodes.runtime import DurabilityPolicy, QoSProfile, SetParametersResult
+from gait_nodes.single_source import SingleSource
 from gait_nodes.watchdog import InputWatchdog
 
 NODE_NAME = 'com_preview_controller'
@@ -159,19 +165,24 @@ class ComPreviewController(GuardedNode):
         self.inputs = InputWatchdog([ZMP_TOPIC], values['stale_after_s'],
                                     self.get_clock().now().nanoseconds,
                                     holding='running on the last reference, held at its end')
+        # ZMP references from two planners (two graphs on one domain) are refused, as stale.
+        self.sources = SingleSource(self, [ZMP_TOPIC], 'running on the last reference, held '
+                                    'at its end', watchdog=self.inputs)
         self._measured_com: deque = deque(maxlen=50)  # (received [ns], stamp [ns], (x, y))
         self._started_ns = self.get_clock().now().nanoseconds
         self._publisher = self.create_publisher(
-            get_message('trajectory_msgs/msg/MultiDOFJointTrajectory'), COM_TOPIC, 10)
-        self.create_subscription(get_message('nav_msgs/msg/Path'), ZMP_TOPIC,
+            get_message('trajectory_msgs/msg/MultiDOFJointTrajectory'), node_topic_name(COM_TOPIC),
+            10)
+        self.create_subscription(get_message('nav_msgs/msg/Path'), node_topic_name(ZMP_TOPIC),
                                  self._on_zmp_reference, 10)
         self.create_subscription(
-            get_message('trajectory_msgs/msg/MultiDOFJointTrajectory'), FOOTSTEPS_TOPIC,
+            get_message('trajectory_msgs/msg/MultiDOFJointTrajectory'),
+            node_topic_name(FOOTSTEPS_TOPIC),
             self._on_footsteps, QoSProfile(depth=1,
                                            durability=DurabilityPolicy.TRANSIENT_LOCAL))
         # Only where the generator starts: dropped once it runs (see _tick).
         self._measured_com_subscription = self.create_subscription(
-            get_message('geometry_msgs/msg/PointStamped'), MEASURED_COM_TOPIC,
+            get_message('geometry_msgs/msg/PointStamped'), node_topic_name(MEASURED_COM_TOPIC),
             self._on_measured_com, 10)
         # The incremental reader relies on poses shared by identity between the planner's
         # successive messages, which holds within one process (inproc) only. Over DDS the
@@ -296,6 +307,8 @@ class ComPreviewController(GuardedNode):
     # --- inputs -------------------------------------------------------------------------------
 
     def _on_zmp_reference(self, msg) -> None:
+        if self.sources.refuses(ZMP_TOPIC):
+            return
         try:
             reference = self._zmp_reader.read(msg) if self._zmp_reader is not None \
                 else contract.zmp_reference_from_msg(msg)

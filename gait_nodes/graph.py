@@ -38,6 +38,76 @@ TOPICS: dict[str, str] = {
 }
 
 
+#: Contract topics that the nodes name absolutely, as ROS libraries do: tf2 (``/tf``,
+#: ``/tf_static``), diagnostic_updater (``/diagnostics``) and rclpy's time source (``/clock``).
+#: Every other topic is named relative (``gait/footsteps``), so that a node's namespace
+#: (``--ros-args -r __ns:=/robot1``) puts it under ``/robot1``.
+ABSOLUTE_TOPICS = ('/tf', '/tf_static', '/diagnostics', '/clock')
+#: The absolute topics that belong to one robot: a launcher that starts a robot in a namespace
+#: remaps them into it (``-r /tf:=tf``), as nav2's multi-robot launch files do. ``/clock`` stays
+#: global: one time for the domain, as ROS has it.
+ROBOT_TOPICS = ('/tf', '/tf_static', '/diagnostics')
+
+
+def node_topic_name(topic: str) -> str:
+    """How the nodes name contract topic ``topic``: relative unless in ABSOLUTE_TOPICS."""
+    return topic if topic in ABSOLUTE_TOPICS else topic.lstrip('/')
+
+
+def namespace_arguments(namespace: str | None) -> list[str]:
+    """ROS arguments (inside ``--ros-args``) that start a node in ``namespace`` as a robot's.
+
+    ``-r __ns:=NS`` and, for the topics of ROBOT_TOPICS, ``-r /tf:=tf``: empty without one.
+    """
+    if namespace in (None, '', '/'):
+        return []
+    from gait_nodes.runtime.args import absolute_namespace
+
+    arguments = ['-r', f'__ns:={absolute_namespace(namespace)}']
+    for topic in ROBOT_TOPICS:
+        arguments += ['-r', f'{topic}:={topic.lstrip("/")}']
+    return arguments
+
+
+def contract_topics(topics, namespace: str = '/') -> dict[str, str]:
+    """``{topic: contract topic}`` for the topics of a graph run in ``namespace``.
+
+    ``/robot1/gait/footsteps`` is ``/gait/footsteps`` of namespace ``/robot1``; an absolute
+    topic of ABSOLUTE_TOPICS (``/tf`` not remapped into the namespace) counts too, unless the
+    namespace has its own. Topics of other namespaces are left out.
+    """
+    prefix = '' if namespace == '/' else namespace.rstrip('/')
+    names: dict[str, str] = {}
+    for topic in topics:
+        if prefix and topic.startswith(prefix + '/') and topic[len(prefix):] in TOPICS:
+            names[topic] = topic[len(prefix):]
+    taken = set(names.values())
+    for topic in topics:
+        if topic in TOPICS and topic not in taken and (not prefix or topic in ABSOLUTE_TOPICS):
+            names[topic] = topic
+    return names
+
+
+def graph_namespaces(topics) -> dict[str, int]:
+    """The namespaces whose contract topics are among ``topics``: ``{namespace: count}``.
+
+    ``/r1/gait/zmp`` counts for ``/r1``, ``/gait/zmp`` for ``/``; the absolute topics of
+    ABSOLUTE_TOPICS count for ``/`` only when no namespace has other contract topics.
+    """
+    counts: dict[str, int] = {}
+    for topic in topics:
+        for contract in TOPICS:
+            if topic.endswith(contract) and (len(topic) == len(contract)
+                                             or topic[-len(contract) - 1] != '/'):
+                namespace = topic[:-len(contract)] or '/'
+                if namespace == '/' and contract in ABSOLUTE_TOPICS:
+                    continue
+                counts[namespace] = counts.get(namespace, 0) + 1
+    if not counts and any(topic in ABSOLUTE_TOPICS for topic in topics):
+        counts['/'] = 1
+    return counts
+
+
 def module_exists(path: str) -> bool:
     """Whether the module of a ``module:Class`` path is installed."""
     module = path.split(':')[0]

@@ -1,14 +1,16 @@
 """inspect: what a rosbag2 MCAP bag (or a lone .mcap) holds, and how the gait in it went.
 
-``python -m gait_nodes.inspect BAG [--json] [--plot DIR] [--robot NAME]``
+``python -m gait_nodes.inspect BAG [--json] [--plot DIR] [--robot NAME] [--namespace NS]``
 
 Prints topics, types, counts, rates and duration for any ROS 2 MCAP bag; for gait bags also the
 distance walked, net speed, step lengths, ZMP stability margin (min, mean, time outside the
 support polygon), peak joint velocity against the limit, rejected commands and diagnostics by
-level (definitions in :mod:`gait_nodes.bag.analysis`). A truncated or damaged bag is read up to
-the damage, and what was lost is said. ``--json`` prints one JSON object instead; ``--plot DIR``
-writes PNGs. Exit status: 0 when the bag was read (even partly), 2 when the path is not a bag or
-the arguments are wrong.
+level (definitions in :mod:`gait_nodes.bag.analysis`). A bag of a graph run in a ROS namespace
+(``/robot1/gait/footsteps``...) is read as such: the namespace is found from its topics, or
+given with ``--namespace`` when the bag holds several graphs. A truncated or damaged bag is
+read up to the damage, and what was lost is said. ``--json`` prints one JSON object instead;
+``--plot DIR`` writes PNGs. Exit status: 0 when the bag was read (even partly), 2 when the path
+is not a bag or the arguments are wrong.
 """
 
 from __future__ import annotations
@@ -124,6 +126,9 @@ def format_report(report: dict) -> str:
                      'was flushed')
     lines.append(f'files:     {", ".join(report["files"])}')
     lines.append(f'duration:  {report["duration_s"]:.3f} s, {report["message_count"]} messages')
+    if report.get('namespace', '/') != '/':
+        lines.append(f'namespace: {report["namespace"]} (the gait section reads the contract '
+                     f'topics under it)')
     width = max([len(t['topic']) for t in report['topics']] + [5])
     type_width = max([len(t['type']) for t in report['topics']] + [4])
     lines.append(f'{"topic":<{width}}  {"type":<{type_width}}  {"count":>8}  {"rate":>10}')
@@ -151,6 +156,9 @@ def main(args: list[str] | None = None) -> int:
     parser.add_argument('--plot', metavar='DIR', help='write PNG plots into DIR')
     parser.add_argument('--robot', help='robot name or YAML for joint limits (default: the '
                                         "hardware_id in the bag's diagnostics)")
+    parser.add_argument('--namespace', metavar='NS',
+                        help="the graph's ROS namespace (default: the bag's, found from its "
+                             'topics; needed when it holds several)')
     progress_group = parser.add_mutually_exclusive_group()
     progress_group.add_argument('--progress', dest='progress', action='store_true',
                                 default=None, help='always show a progress bar on stderr')
@@ -169,7 +177,8 @@ def main(args: list[str] | None = None) -> int:
 
         with tqdm(total=total, unit='B', unit_scale=True, desc='reading', disable=not show,
                   file=sys.stderr, leave=False) as bar:
-            inspection = inspect_bag(options.bag, robot=options.robot, progress=bar.update)
+            inspection = inspect_bag(options.bag, robot=options.robot, progress=bar.update,
+                                     namespace=options.namespace)
         report = inspection.report
         if options.plot:
             from gait_nodes.bag.plots import write_plots

@@ -31,6 +31,9 @@ joint_trajectory_controller would refuse (unknown or repeated joint names, no po
 ``time_from_start`` negative or not strictly increasing, positions not one per joint, velocities
 or accelerations neither empty nor one per joint, efforts, NaN) is dropped whole and reported
 with what was wrong; the held trajectory is unchanged. Accelerations are checked, not used.
+/joint_commands from more than one publisher (two graphs on one domain) are refused, not mixed
+(:mod:`gait_nodes.single_source`): the robot is held where its trajectory has it, ERROR on
+``kinematic_simulator: inputs``, until one IK is left.
 
 With ``publish_clock`` the simulator owns time: it advances by one period per tick (paced by the
 wall clock) and publishes /clock, which every node started with ``use_sim_time:=true`` follows.
@@ -79,6 +82,7 @@ from gait_nodes.settings import checked_number as _number
 from gait_nodes.sim.kinematics import ActuatorStep, KinematicSimulation, SimulationSettings
 from gait_nodes.sim.trajectory import HeldTrajectory
 from gait_nodes.sim.zmp_monitor import SlidingDifferences, Support, ZmpMonitor, ZmpState
+from gait_nodes.single_source import SingleSource
 from gait_nodes.watchdog import InputWatchdog
 
 NODE_NAME = 'kinematic_simulator'
@@ -251,6 +255,9 @@ class KinematicSimulator(GuardedNode):
 
         self.diagnostics = DiagnosticsReporter(self, self.robot.name)
         self.faults = FaultGuard(self, self.diagnostics)
+        # Commands from two IKs (two graphs on one domain) are refused, never mixed.
+        self.sources = SingleSource(self, ['/joint_commands'], 'holding the robot where it is',
+                                    on_change=self._on_sources)
         self._msg = {name.rsplit('/', 1)[1]: get_message(name) for name in (
             'sensor_msgs/msg/JointState', 'geometry_msgs/msg/PointStamped',
             'geometry_msgs/msg/PolygonStamped', 'geometry_msgs/msg/Point32',
@@ -274,21 +281,21 @@ class KinematicSimulator(GuardedNode):
         self._marker_parts_cache = self._marker_parts()
         joint_state = self._msg['JointState']
         point = self._msg['PointStamped']
-        self._joint_states = self.create_publisher(joint_state, '/joint_states', 10)
+        self._joint_states = self.create_publisher(joint_state, 'joint_states', 10)
         self._tf = self.create_publisher(get_message('tf2_msgs/msg/TFMessage'), '/tf', 100)
-        self._zmp = self.create_publisher(point, '/gait/zmp', 10)
-        self._com = self.create_publisher(point, '/gait/com', 10)
+        self._zmp = self.create_publisher(point, 'gait/zmp', 10)
+        self._com = self.create_publisher(point, 'gait/com', 10)
         self._polygon = self.create_publisher(get_message('geometry_msgs/msg/PolygonStamped'),
-                                              '/gait/support_polygon', 10)
+                                              'gait/support_polygon', 10)
         self._markers = self.create_publisher(get_message('visualization_msgs/msg/MarkerArray'),
-                                              '/gait/markers', 10)
+                                              'gait/markers', 10)
         self._clock_publisher = (
             self.create_publisher(get_message('rosgraph_msgs/msg/Clock'), '/clock', 10)
             if self.params.publish_clock else None)
         self.create_subscription(get_message('trajectory_msgs/msg/JointTrajectory'),
-                                 '/joint_commands', self._on_joint_commands, 10)
+                                 'joint_commands', self._on_joint_commands, 10)
         self.create_subscription(get_message('trajectory_msgs/msg/MultiDOFJointTrajectory'),
-                                 '/gait/footsteps', self._on_footsteps,
+                                 'gait/footsteps', self._on_footsteps,
                                  QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL))
         self.timer = self._make_timer(self.params.rate_hz)
         self.add_on_set_parameters_callback(self._on_set_parameters)
@@ -352,6 +359,8 @@ class KinematicSimulator(GuardedNode):
     # -- inputs --------------------------------------------------------------------------------
 
     def _on_joint_commands(self, msg) -> None:
+        if self.sources.refuses('/joint_commands'):
+            return
         received_ns = self._now_ns()
         try:
             command = joint_trajectory_from_msg(msg, self.robot.joint_names)
@@ -364,6 +373,14 @@ class KinematicSimulator(GuardedNode):
             self.inputs.heard('/joint_commands', received_ns)
             if self.inputs.stale:
                 self._inputs_quiet_ns = (0, 0)  # fresh again: the verdict changes
+
+    def _on_sources(self) -> None:
+        """Refusing /joint_commands: hold the robot where its trajectory has it now."""
+        self._inputs_quiet_ns = (0, 0)  # the verdict changes
+        if self.sources.refused:
+            now_ns = self._now_ns()
+            held, _ = self.trajectory.sample(now_ns)
+            self.trajectory.replace([now_ns], held[None, :], np.zeros((1, held.size)), now_ns)
 
     def _follow(self, command: JointTrajectoryCommand, received_ns: int) -> None:
         """Replace the held trajectory with ``command`` from its first point on.
@@ -421,7 +438,8 @@ class KinematicSimulator(GuardedNode):
             self._started_ns = now_ns
             self.inputs = InputWatchdog(
                 ['/joint_commands'], self.params.stale_after_s, now_ns,
-                holding='following the held trajectory, then holding its last point')
+                holding='following the held trajectory, then holding its last point',
+                sources=self.sources)
             if self._last_command_ns is not None:
                 self.inputs.heard('/joint_commands', self._last_command_ns)
             q0 = self.simulation.q.copy()

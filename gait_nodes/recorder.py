@@ -35,17 +35,20 @@ def parameter_defaults(output: str | None = None) -> dict[str, object]:
 
 
 def parse_topics(specs: list[str]) -> dict[str, str]:
-    """``['/a', '/b:pkg/msg/T']`` -> ``{topic: type}``; contract topics need no type."""
+    """``['gait/zmp', '/tf', 'b:pkg/msg/T']`` -> ``{topic: type}``; contract topics need no type.
+
+    Names resolve as the node's own do (``ros2 bag record`` too): a relative name under the
+    recorder's namespace, an absolute one as it is.
+    """
     topics = {}
     for spec in specs:
         name, _, type_name = spec.partition(':')
-        if not name.startswith('/'):
-            name = '/' + name
         if not type_name:
-            if name not in graph.TOPICS:
+            contract = '/' + name.lstrip('/')
+            if contract not in graph.TOPICS:
                 raise ArgumentError(f'topic {name} is not in the contract: give its type as '
                                     f'{name}:pkg/msg/Type')
-            type_name = graph.TOPICS[name]
+            type_name = graph.TOPICS[contract]
         topics[name] = type_name
     return topics
 
@@ -69,7 +72,10 @@ class Recorder(Node):
         output, flush_period_s = values['output'], values['flush_period_s']
         if not 0 < flush_period_s <= 1.0:
             raise ArgumentError(f'flush_period_s must be in (0, 1] s, got {flush_period_s}')
-        topics = topics or dict(graph.TOPICS)
+        # The contract's topics named as the nodes name them: under a namespace the bag holds
+        # /robot1/gait/footsteps, and /tf where the nodes' /tf is.
+        topics = topics or {graph.node_topic_name(name): type_name
+                            for name, type_name in graph.TOPICS.items()}
         # Made at start, so that subscribers have matched it when a failure is reported.
         self.diagnostics = DiagnosticsReporter(self)
         self._failure_reported_ns: int | None = None
@@ -77,14 +83,15 @@ class Recorder(Node):
         self.writer = BagWriter(output, flush_period_s=flush_period_s,
                                 on_error=self._on_write_error, open_file=open_file)
         for name, type_name in topics.items():
-            latched = name in LATCHED_TOPICS
+            latched = '/' + name.lstrip('/') in LATCHED_TOPICS
             profile = QoSProfile(depth=1000, durability=DurabilityPolicy.TRANSIENT_LOCAL
                                  if latched else DurabilityPolicy.VOLATILE)
             publisher_qos = QoSProfile(depth=1 if latched else 10,
                                        durability=profile.durability)
-            self.writer.add_topic(name, type_name, [offered_qos_yaml(publisher_qos)])
+            resolved = self.resolve_topic_name(name)
+            self.writer.add_topic(resolved, type_name, [offered_qos_yaml(publisher_qos)])
             self._subscriptions_recorded.append(self.create_subscription(
-                get_message(type_name), name, self._writer_for(name), profile, raw=True))
+                get_message(type_name), name, self._writer_for(resolved), profile, raw=True))
         # Messages alone trigger flushes only while they keep coming: a timer bounds the age of
         # the open chunk when traffic stops, so a SIGKILL never loses more than flush_period_s.
         self.create_timer(flush_period_s / 4, self._tick)
@@ -148,7 +155,8 @@ def main(args: list[str] | None = None) -> int:
                             help='bag directory to create (default bags/gait_<date-time>)')
         parser.add_argument('-t', '--topics', nargs='+', default=None, metavar='TOPIC',
                             help='topics to record (default: every contract topic); '
-                                 'non-contract topics as /name:pkg/msg/Type')
+                                 'non-contract topics as name:pkg/msg/Type; relative names '
+                                 'resolve under the namespace (--ros-args -r __ns:=/robot1)')
 
     recorders = []
 

@@ -58,6 +58,20 @@ def bag_channels(reader: BagReader) -> dict[str, Channel]:
     return {channel.topic: channel for channel in reader.channels.values()}
 
 
+def _bag_topic(topic: str, channels) -> str:
+    """``topic`` as the bag names it: ``/gait/zmp`` is ``/robot1/gait/zmp`` in a namespaced bag."""
+    if topic in channels:
+        return topic
+    from gait_nodes.bag.analysis import bag_namespace
+
+    try:
+        namespace = bag_namespace(channels)
+    except GaitNodesError:
+        return topic  # several graphs: only the full name tells
+    candidate = namespace.rstrip('/') + '/' + topic.lstrip('/')
+    return candidate if candidate in channels else topic
+
+
 class Replayer:
     """Plays a bag through publishers of one node.
 
@@ -80,7 +94,7 @@ class Replayer:
         self.rate = rate
         self.clock_period_ns = int(1e9 / clock_hz) if clock_hz > 0 else 0
         channels = bag_channels(BagReader(self.bag))
-        wanted = set(topics) if topics else set(channels)
+        wanted = {_bag_topic(topic, channels) for topic in topics} if topics else set(channels)
         missing = sorted(wanted - set(channels))
         if missing:
             raise ArgumentError(f'topics not in {self.bag}: {missing}; the bag has '
@@ -174,7 +188,9 @@ def main(args: list[str] | None = None) -> int:
     parser = ArgumentParser(prog=PROG, description=__doc__.split('\n\n')[0])
     parser.add_argument('bag', help='rosbag2 directory or .mcap file')
     parser.add_argument('--rate', type=float, default=1.0, help='playback speed factor')
-    parser.add_argument('--topics', nargs='+', metavar='TOPIC', help='topics to play')
+    parser.add_argument('--topics', nargs='+', metavar='TOPIC',
+                        help="topics to play, as the bag names them (a namespaced bag's "
+                             'contract topics also without its namespace)')
     parser.add_argument('--clock', nargs='?', type=float, const=100.0, default=0.0,
                         metavar='HZ', help='publish the bag time on /clock (default 100 Hz)')
     parser.add_argument('--loop', action='store_true', help='play again and again')

@@ -220,15 +220,15 @@ class CommandDriver:
         self._node = node
         self._twist = get_message('geometry_msgs/msg/Twist')
         self._string = get_message('std_msgs/msg/String')
-        self._vel_publisher = node.create_publisher(self._twist, '/cmd_vel', 10)
-        self._command_publisher = node.create_publisher(self._string, '/gait/command', 10)
+        self._vel_publisher = node.create_publisher(self._twist, 'cmd_vel', 10)
+        self._command_publisher = node.create_publisher(self._string, 'gait/command', 10)
         self._pending = sorted(commands, key=lambda c: c.at_s)
         self._velocity: tuple[float, float, float] | None = None
         self._repeat_ns = int(repeat_period_s * 1e9)
         self._last_vel_ns = 0
         self._start_ns: int | None = None
         self.statuses: list[dict] = []
-        node.create_subscription(self._string, '/gait/command_status', self._on_status, 1000)
+        node.create_subscription(self._string, 'gait/command_status', self._on_status, 1000)
         self._sent = 0
         node.create_timer(0.02, self._tick)
 

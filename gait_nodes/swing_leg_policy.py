@@ -45,6 +45,7 @@ from gait_nodes.cli import run_node
 from gait_nodes.diagnostics import ERROR, OK, WARN, DiagnosticsReporter
 from gait_nodes.errors import GaitNodesError, ParameterError, SwingPolicyError
 from gait_nodes.faults import FaultGuard, GuardedNode
+from gait_nodes.graph import node_topic_name
 from gait_nodes.interfaces import get_message
 from gait_nodes.paths import node_defaults
 from gait_nodes.robot.model import load_robot_model
@@ -144,10 +145,12 @@ class SwingLegPolicy(GuardedNode):
         self._lookups: dict[tuple, tuple] = {}
         self.published_count = 0
         self._publisher = self.create_publisher(
-            get_message('trajectory_msgs/msg/MultiDOFJointTrajectory'), SWING_TOPIC, 10)
+            get_message('trajectory_msgs/msg/MultiDOFJointTrajectory'),
+            node_topic_name(SWING_TOPIC), 10)
         self.create_subscription(get_message('trajectory_msgs/msg/MultiDOFJointTrajectory'),
-                                 FOOTSTEPS_TOPIC, self._on_footsteps, qos_profile_latched)
-        self.create_subscription(get_message('std_msgs/msg/String'), '/gait/command_status',
+                                 node_topic_name(FOOTSTEPS_TOPIC), self._on_footsteps,
+                                 qos_profile_latched)
+        self.create_subscription(get_message('std_msgs/msg/String'), 'gait/command_status',
                                  self._on_command_status, 100)
         self._timer = self.create_timer(1.0 / values['rate_hz'], self._tick)
         self.add_on_set_parameters_callback(self._on_set_parameters)

@@ -15,6 +15,10 @@ Some inputs are events rather than streams (one /gait/swing_trajectory per plann
 that was due did not come) until the next :meth:`InputWatchdog.heard`. A stream input can be
 switched off (:meth:`InputWatchdog.watch`, e.g. an optional /cmd_vel timeout): it is then never
 stale.
+
+An input that more than one node publishes is *refused* (:mod:`gait_nodes.single_source`, given
+as ``sources``): while it is, it counts among the stale inputs (the node cannot use it, and
+holds), and the status is ERROR, naming its publishers.
 """
 
 from __future__ import annotations
@@ -22,7 +26,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 
-from gait_nodes.diagnostics import OK, WARN
+from gait_nodes.diagnostics import ERROR, OK, WARN
 from gait_nodes.errors import ParameterError
 
 ASPECT = 'inputs'
@@ -38,13 +42,15 @@ class InputWatchdog:
         holding: What the node does while an input is stale, for the WARN message
             (e.g. 'holding the last command').
         events: Event inputs (see the module docstring), watched after ``topics``.
+        sources: The node's :class:`gait_nodes.single_source.SingleSource`, whose refused
+            inputs are reported here (also settable later as ``sources``).
 
     Raises:
         ParameterError: No topic, or ``timeout_s`` not a finite number > 0.
     """
 
     def __init__(self, topics: Sequence[str], timeout_s: float, start_ns: int,
-                 holding: str = '', events: Sequence[str] = ()):
+                 holding: str = '', events: Sequence[str] = (), sources=None):
         if not topics and not events:
             raise ParameterError('a watchdog needs at least one topic')
         self.topics = tuple(topics) + tuple(events)
@@ -56,6 +62,7 @@ class InputWatchdog:
         self._missed: dict[str, str] = {}
         self._off: set[str] = set()
         self._stale: tuple[str, ...] = ()
+        self.sources = sources
 
     @property
     def timeout_s(self) -> float:
@@ -102,8 +109,15 @@ class InputWatchdog:
         last = self._last_ns[topic]
         return (int(now_ns) - (self._start_ns if last is None else last)) * 1e-9
 
+    @property
+    def refused(self) -> dict[str, str]:
+        """Inputs refused now for having several publishers: topic -> who publishes."""
+        return self.sources.refused if self.sources is not None else {}
+
     def is_stale(self, topic: str, now_ns: int) -> bool:
-        """Whether ``topic`` is stale at ``now_ns`` (older than the timeout, or event missed)."""
+        """Whether ``topic`` is stale at ``now_ns`` (too old, event missed, or refused)."""
+        if topic in self.refused:
+            return True
         if topic in self.events:
             return topic in self._missed
         if topic in self._off:
@@ -118,6 +132,7 @@ class InputWatchdog:
     def update(self, now_ns: int) -> bool:
         """Re-evaluate at ``now_ns``; True when the set of stale inputs changed."""
         stale = tuple(topic for topic in self.topics if self.is_stale(topic, now_ns))
+        stale += tuple(topic for topic in self.refused if topic not in stale)
         changed = stale != self._stale
         self._stale = stale
         return changed
@@ -132,6 +147,17 @@ class InputWatchdog:
             if topic in self._off:
                 values[f'{topic} watched'] = 'no'
         values['stale'] = ','.join(self._stale)
+        refused = {topic: who for topic, who in self.refused.items() if topic in self._stale}
+        if refused:
+            values['refused'] = ','.join(refused)
+            for topic in refused:
+                values[f'{topic} publishers'] = self.sources.publishers.get(topic, 0)
+            message = (f'refusing to mix {"; ".join(refused.values())}: '
+                       f'{self.sources.holding} until one is left')
+            others = [topic for topic in self._stale if topic not in refused]
+            if others:
+                message += f'; stale too: {", ".join(others)}'
+            return ASPECT, ERROR, message, values
         if self._stale:
             parts = []
             for topic in self._stale:

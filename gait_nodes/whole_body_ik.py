@@ -37,6 +37,9 @@ message is no jump: the previous one still covers ``horizon_s`` ahead.
   COM reference late) was held at its last knot by its consumer: the next one starts there, at
   rest, at the latest knot time at or before now (no knot in the past is solved), and catches
   up within the velocity limits.
+* A reference with more than one publisher (two graphs on one domain) is refused, not mixed
+  (:mod:`gait_nodes.single_source`): the node holds as with a stale COM reference, ERROR on
+  ``whole_body_ik: inputs``, until one publisher is left.
 * A foot in swing per the plan with no swing trajectory covering a knot's instant follows the
   fallback swing (quintic smoothstep from lift-off to landing place, lifted by
   ``fallback_step_height_m``; :func:`gait_nodes.robot.whole_body_ik.fallback_swing_pose`).
@@ -90,6 +93,7 @@ from gait_nodes.robot.whole_body_ik import (
 )
 from gait_nodes.runtime import QoSProfile, SetParametersResult, qos_profile_latched
 from gait_nodes.settings import checked_number as _number
+from gait_nodes.single_source import SingleSource
 from gait_nodes.watchdog import InputWatchdog
 
 NODE_NAME = 'whole_body_ik'
@@ -100,6 +104,8 @@ COM_ERROR_WARN_M = 1e-3
 #: micrometre: below any mechanical meaning, above the interpolation of equal windows sampled
 #: at other instants) changed it [m, m/s, rad].
 COM_CHANGE_M = 1e-6
+#: The inputs that one node only may publish (gait_nodes.single_source).
+REFERENCES = ('/gait/com_reference', '/gait/footsteps', '/gait/swing_trajectory')
 
 
 def node_defaults() -> dict:
@@ -225,18 +231,21 @@ class WholeBodyIk(GuardedNode):
 
         self.diagnostics = DiagnosticsReporter(self, self.robot.name)
         self.faults = FaultGuard(self, self.diagnostics)
+        # References from two graphs on one domain are refused (held as when stale), never mixed.
+        self.sources = SingleSource(self, REFERENCES, 'holding the last joint command',
+                                    watchdog=self.inputs)
         # Shared by every /joint_commands message (published messages are read-only).
         self._joint_names = list(self.robot.joint_names)
         self.publisher = self.create_publisher(
-            get_message('trajectory_msgs/msg/JointTrajectory'), '/joint_commands', 10)
+            get_message('trajectory_msgs/msg/JointTrajectory'), 'joint_commands', 10)
         trajectory = get_message('trajectory_msgs/msg/MultiDOFJointTrajectory')
-        self.create_subscription(trajectory, '/gait/com_reference', self._on_com_reference, 10)
-        self.create_subscription(trajectory, '/gait/footsteps', self._on_footsteps,
+        self.create_subscription(trajectory, 'gait/com_reference', self._on_com_reference, 10)
+        self.create_subscription(trajectory, 'gait/footsteps', self._on_footsteps,
                                  QoSProfile(depth=1, durability=qos_profile_latched.durability))
-        self.create_subscription(trajectory, '/gait/swing_trajectory', self._on_swing, 10)
+        self.create_subscription(trajectory, 'gait/swing_trajectory', self._on_swing, 10)
         # Heard only until motion starts (see _stop_listening_to_the_robot).
         self._robot_subscriptions = [
-            self.create_subscription(get_message('sensor_msgs/msg/JointState'), '/joint_states',
+            self.create_subscription(get_message('sensor_msgs/msg/JointState'), 'joint_states',
                                      self._on_joint_states, 10),
             self.create_subscription(get_message('tf2_msgs/msg/TFMessage'), '/tf', self._on_tf,
                                      100)]
@@ -286,6 +295,8 @@ class WholeBodyIk(GuardedNode):
     # -- inputs --------------------------------------------------------------------------------
 
     def _on_com_reference(self, msg) -> None:
+        if self.sources.refuses('/gait/com_reference'):
+            return
         try:
             track = com_track_from_msg(msg)
         except ContractError as exc:
@@ -304,6 +315,8 @@ class WholeBodyIk(GuardedNode):
         self.inputs.heard('/gait/com_reference', self._com_received_ns)
 
     def _on_footsteps(self, msg) -> None:
+        if self.sources.refuses('/gait/footsteps'):
+            return
         try:
             plan = footsteps_from_msg(msg)
             if set(plan.foot_names) != set(self.robot.foot_names):
@@ -318,6 +331,8 @@ class WholeBodyIk(GuardedNode):
         self._feet = FootTargets(plan, self.robot.foot_names)
 
     def _on_swing(self, msg) -> None:
+        if self.sources.refuses('/gait/swing_trajectory'):
+            return
         try:
             swing = swing_trajectory_from_msg(msg)
             if swing.foot not in self.robot.foot_names:
@@ -412,7 +427,8 @@ class WholeBodyIk(GuardedNode):
                 self._solution_times_s.clear()
             # The trajectory ends at its last knot: the robot stops there, at rest.
             self._publish([knots.times_ns[-1]], [knots.positions[-1]], [self._zero_velocity])
-        elif self._com_track is not None and self._plan is not None:
+        elif self._com_track is not None and self._plan is not None and \
+                not self.sources.refused:
             if not self._moving:
                 self._moving = True
                 self._stop_listening_to_the_robot()
@@ -584,7 +600,7 @@ class WholeBodyIk(GuardedNode):
         if waiting:
             holding = 'the current posture' if self._joined else 'nothing yet'
             message = f'holding {holding}, waiting for {", ".join(waiting)}' + (
-                f'; {message}' if level == WARN else '')
+                f'; {message}' if level >= WARN else '')
         values.update({'waiting_for': ','.join(waiting),
                        'fallback_swing_ticks': window.fallback_ticks,
                        'dropped': ','.join(f'{t}:{n}'

@@ -5,12 +5,19 @@ Usage::
     ros2 launch gait_nodes gait.launch.py robot:=robosimian gait:=crawl
     ros2 launch gait_nodes gait.launch.py record:=bags/walk   # also record to an MCAP bag
     ros2 launch gait_nodes gait.launch.py robot:=biped gait:=biped swing:=polynomial
+    ros2 launch gait_nodes gait.launch.py namespace:=robot1 use_sim_time:=false  # a second robot
 
 The robot walks when it is asked to: ``ros2 topic pub /cmd_vel geometry_msgs/msg/Twist
 "{linear: {x: 0.04}}"`` or ``python -m gait_nodes.command --vel 0.04 0 0``.
 
 Each node loads ``share/gait_nodes/config/<node>.yaml`` when the package ships one, then the
 launch arguments. Without ROS, ``python -m gait_nodes run`` starts the same graph.
+
+``namespace`` puts the whole graph, the recorder included, in a ROS namespace with launch_ros'
+own mechanism (``/robot1/gait/footsteps``, ``/robot1/footstep_planner``; the launch file may
+also be included under a PushRosNamespace). /tf, /tf_static and /diagnostics are remapped into
+it, as nav2 does for a robot of several; /clock stays global, so two simulated robots on one
+domain run with ``use_sim_time:=false`` (two simulators' /clock would mix their times).
 """
 
 import os
@@ -28,6 +35,7 @@ from launch_ros.actions import Node
 from launch_ros.parameter_descriptions import ParameterValue
 
 from gait_nodes.cli import NODE_ENVIRONMENT_DEFAULTS
+from gait_nodes.graph import ROBOT_TOPICS
 
 PACKAGE = 'gait_nodes'
 
@@ -55,6 +63,9 @@ def generate_launch_description():
     swing = ParameterValue(LaunchConfiguration('swing'), value_type=str)
     use_sim_time = ParameterValue(LaunchConfiguration('use_sim_time'), value_type=bool)
     record = LaunchConfiguration('record')
+    namespace = LaunchConfiguration('namespace')
+    # The robot's own absolute topics go into its namespace with it (no-ops without one).
+    remappings = [(topic, topic.lstrip('/')) for topic in ROBOT_TOPICS]
 
     arguments = [
         DeclareLaunchArgument(
@@ -77,6 +88,12 @@ def generate_launch_description():
             'use_sim_time',
             default_value='true',
             description='Follow /clock, published by kinematic_simulator.',
+        ),
+        DeclareLaunchArgument(
+            'namespace',
+            default_value='',
+            description='ROS namespace of the graph (e.g. robot1): its topics, nodes and '
+                        'recorder go under it; empty: none.',
         ),
         DeclareLaunchArgument(
             'record',
@@ -103,8 +120,10 @@ def generate_launch_description():
                 package=PACKAGE,
                 executable=node_name,
                 name=node_name,
+                namespace=namespace,
                 output='screen',
                 parameters=[*_params_file(node_name), overrides],
+                remappings=remappings,
             )
         )
 
@@ -113,7 +132,9 @@ def generate_launch_description():
             package=PACKAGE,
             executable='recorder',
             name='recorder',
+            namespace=namespace,
             output='screen',
+            remappings=remappings,
             arguments=['-o', record],
             parameters=[*_params_file('recorder'), {'use_sim_time': use_sim_time}],
             condition=IfCondition(NotEqualsSubstitution(record, '')),

@@ -159,6 +159,7 @@ def test_launch_file_compiles_and_declares_its_arguments():
         'swing': 'value_table',
         'use_sim_time': 'true',
         'record': '',
+        'namespace': '',
     }
     assert 'generate_launch_description' in {
         node.name for node in tree.body if isinstance(node, ast.FunctionDef)

@@ -48,7 +48,7 @@ from gait_nodes.bag.reader import BagReader
 from gait_nodes.diagnostics import LEVEL_NAMES, level_value
 from gait_nodes.errors import ConfigError, GaitNodesError
 from gait_nodes.geometry import convex_hull, signed_distance
-from gait_nodes.graph import TOPICS
+from gait_nodes.graph import TOPICS, contract_topics, graph_namespaces
 from gait_nodes.interfaces import deserialize_message, get_message
 
 #: Samples of each /gait/zmp_reference window kept in the series: its first 0.2 s (the next
@@ -463,32 +463,78 @@ class Inspection:
     series: GaitSeries
 
 
+def bag_namespace(topics, namespace: str | None = None) -> str:
+    """The namespace of the gait graph whose topics ``topics`` are (``/`` for none).
+
+    ``namespace`` given: that one, made absolute. Otherwise the namespace with the most contract
+    topics (``/robot1`` for ``/robot1/gait/footsteps``...).
+
+    Raises:
+        GaitNodesError: The topics are those of several graphs in as many namespaces.
+    """
+    if namespace:
+        return namespace if namespace.startswith('/') else '/' + namespace
+    counts = graph_namespaces(topics)
+    if not counts:
+        return '/'
+    most = max(counts.values())
+    best = sorted(name for name, count in counts.items() if count == most)
+    if len(best) > 1:
+        raise GaitNodesError(f'the bag holds the gait topics of {len(best)} graphs, in '
+                             f'namespaces {", ".join(best)}: choose one with --namespace')
+    return best[0]
+
+
+def _known_topics(reader: BagReader) -> set[str]:
+    """The topics a bag declares so far: its channels read and its metadata.yaml's."""
+    topics = {channel.topic for channel in reader.channels.values()}
+    info = (reader.metadata or {}).get('rosbag2_bagfile_information') or {}
+    for entry in info.get('topics_with_message_count') or []:
+        name = (entry.get('topic_metadata') or {}).get('name')
+        if isinstance(name, str):
+            topics.add(name)
+    return topics
+
+
 def inspect_bag(path: str | Path, robot: str | None = None,
-                progress: Callable[[int], None] | None = None) -> Inspection:
+                progress: Callable[[int], None] | None = None,
+                namespace: str | None = None) -> Inspection:
     """Read a bag once and compute its report (see the module docstring for the definitions).
 
     Args:
         path: Bag directory or ``.mcap`` file.
         robot: Robot name or YAML for joint limits (default: the diagnostics' hardware_id).
         progress: Called with the number of bytes read since the last call.
+        namespace: The ROS namespace of the graph to analyse (``/robot1`` for a bag of
+            ``/robot1/gait/...`` topics). Default: the bag's, detected from its topics.
 
     Raises:
         NotABagError: The path is not a bag.
+        GaitNodesError: The bag holds several namespaced graphs and ``namespace`` is None.
     """
     reader = BagReader(path)
     collector = _Collector()
     counts = Counter()
     first, last = {}, {}
     types = {}
+    # Bag topic -> contract topic, decided once the bag's channels are known (the first
+    # message comes after them in a recorder's bag); a channel that comes later is added.
+    names: dict[str, str] | None = None
     for channel, log_ns, _, data in reader.messages(progress=progress):
         topic = channel.topic
         counts[topic] += 1
         if topic not in first:
             first[topic] = log_ns
             types[topic] = channel.type_name
+            if names is not None and topic not in names:
+                names.update(contract_topics([topic], namespace))
         last[topic] = log_ns
-        if topic in GAIT_TOPICS and channel.message_encoding == 'cdr':
-            collector.message(topic, channel.type_name, data)
+        if names is None:
+            namespace = bag_namespace(_known_topics(reader), namespace)
+            names = contract_topics(_known_topics(reader), namespace)
+        contract = names.get(topic)
+        if contract in GAIT_TOPICS and channel.message_encoding == 'cdr':
+            collector.message(contract, channel.type_name, data)
     series = collector.series
     for channel in reader.channels.values():
         types.setdefault(channel.topic, channel.type_name)
@@ -514,6 +560,7 @@ def inspect_bag(path: str | Path, robot: str | None = None,
         'duration_s': _round((end - start) * 1e-9) if start is not None else 0.0,
         'topics': topics,
         'metadata_check': metadata_check(reader.metadata, counts, types),
+        'namespace': namespace or bag_namespace(_known_topics(reader)),
     }
     gait = gait_report(series, robot)
     if gait:

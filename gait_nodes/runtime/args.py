@@ -62,11 +62,11 @@ class RosArguments:
                 return target
         return default
 
-    def namespace(self, default: str | None) -> str:
-        """Namespace after ``__ns:=`` remapping, always absolute."""
+    def namespace(self, default: str | None, node_name: str | None = None) -> str:
+        """Namespace after ``__ns:=`` (or ``node_name:__ns:=``) remapping, always absolute."""
         namespace = default or '/'
         for node, source, target in self.remaps:
-            if source == '__ns' and node is None:
+            if source == '__ns' and node in (None, node_name):
                 namespace = target
         return namespace if namespace.startswith('/') else '/' + namespace
 
@@ -170,6 +170,12 @@ def _check_remap(flag: str, source: str, target: str) -> None:
                                    "joined by '/', optionally after '/' or '~/'")
     if not rule.fullmatch(target):
         raise ArgumentError(f'{flag} {source}:={target}: {target!r} is not {what}')
+
+
+def absolute_namespace(namespace: str, flag: str = '--namespace') -> str:
+    """``namespace`` as rcl takes it for ``__ns`` and made absolute; ArgumentError if not one."""
+    _check_remap(flag, '__ns', namespace)
+    return namespace if namespace.startswith('/') else '/' + namespace
 
 
 def split_ros_args(argv: list[str]) -> tuple[list[str], list[str]]:
@@ -327,9 +333,14 @@ def _node_sections(document: dict, prefix: str, where: str):
 
 
 def node_pattern_matches(pattern: str, full_name: str) -> bool:
-    """Whether a params-file key (``/**``, ``node``, ``/ns/node``, ``/*/node``) names a node."""
+    """Whether a params-file key (``/**``, ``node``, ``/ns/node``, ``/*/node``) names a node.
+
+    As rclpy matches them (jazzy, ``_populate_node_parameters_from_rcl_params``): a key is a
+    fully qualified name, ``/`` prepended when it has none, so ``node`` names ``/node`` only
+    and ``/**/node`` a node of that name in any namespace.
+    """
     if not pattern.startswith('/'):
-        pattern = '/' + pattern if '/' in pattern else '/**/' + pattern
+        pattern = '/' + pattern
     regex = ''
     for part in re.split(r'(/\*\*|\*)', pattern):
         if part == '/**':

@@ -18,6 +18,14 @@ from gait_nodes.runtime.qos import DurabilityPolicy, HistoryPolicy, ReliabilityP
 #: Longest single wait, so that a signal handler runs within this time [ns].
 WAIT_SLICE_NS = 50_000_000
 _MAX_BLOCKING_NS = 100_000_000
+#: The lease our participants announce [s] (Cyclone's default: 10 s). A process that dies
+#: without a goodbye (SIGKILL) keeps its endpoints in everyone's graph until its lease runs out,
+#: and a node that refuses an input with two publishers (gait_nodes.single_source) would hold
+#: that long after a crashed producer was restarted. Cyclone renews the lease from its own
+#: threads (and with every message), not from Python's: a busy node does not lose it.
+PARTICIPANT_LEASE_S = 3.0
+#: Samples read from a built-in topic at once (every endpoint of a domain fits).
+_GRAPH_BATCH = 4096
 
 
 def _localhost_config() -> Path:
@@ -64,6 +72,42 @@ def _qos(profile, user_data: bytes):
 def dds_topic_name(topic: str) -> str:
     """ROS topic ``/a/b`` -> DDS topic ``rt/a/b``."""
     return 'rt' + topic
+
+
+def ros_type_name(dds_type: str) -> str:
+    """DDS type ``pkg::msg::dds_::Name_`` -> ROS type ``pkg/msg/Name`` (others unchanged)."""
+    parts = dds_type.replace('.', '::').split('::')
+    if len(parts) == 4 and parts[2] == 'dds_' and parts[3].endswith('_'):
+        return f'{parts[0]}/{parts[1]}/{parts[3][:-1]}'
+    return dds_type
+
+
+def _gid(guid) -> list[int]:
+    """A DDS GUID as rmw's GID: its 16 bytes (rclpy pads them to 24 with zeros in Jazzy)."""
+    return list(guid.bytes) + [0] * 8
+
+
+def _profile_of(qos):
+    """Our QoSProfile of a discovered endpoint's Cyclone Qos (what rclpy reports)."""
+    from cyclonedds.core import Policy
+
+    from gait_nodes.runtime.qos import QoSProfile
+
+    profile = QoSProfile(depth=1)
+    for policy in qos or ():
+        if isinstance(policy, Policy.History.KeepLast):
+            profile.history, profile.depth = HistoryPolicy.KEEP_LAST, policy.depth
+        elif policy == Policy.History.KeepAll:
+            profile.history = HistoryPolicy.KEEP_ALL
+        elif isinstance(policy, Policy.Reliability.Reliable):
+            profile.reliability = ReliabilityPolicy.RELIABLE
+        elif policy == Policy.Reliability.BestEffort:
+            profile.reliability = ReliabilityPolicy.BEST_EFFORT
+        elif policy == Policy.Durability.TransientLocal:
+            profile.durability = DurabilityPolicy.TRANSIENT_LOCAL
+        elif policy == Policy.Durability.Volatile:
+            profile.durability = DurabilityPolicy.VOLATILE
+    return profile
 
 
 class _DdsPublisher:
@@ -119,8 +163,12 @@ class DdsTransport:
         if not 0 <= domain_id <= 232:
             raise RuntimeSelectionError(f'ROS_DOMAIN_ID must be in 0..232, got {domain_id}')
         self.domain_id = domain_id
+        from cyclonedds.core import Policy, Qos
+        from cyclonedds.util import duration
+
+        lease = Qos(Policy.Liveliness.Automatic(duration(seconds=PARTICIPANT_LEASE_S)))
         try:
-            self.participant = DomainParticipant(domain_id)
+            self.participant = DomainParticipant(domain_id, qos=lease)
         except Exception as exc:  # cyclonedds raises DDSException with the C error text
             raise RuntimeSelectionError(
                 f'cannot start Cyclone DDS on domain {domain_id} ({self.config} config): {exc}'
@@ -132,6 +180,10 @@ class DdsTransport:
         self.topic_types: dict[tuple[str, bool], type] = {}  # the message class of each
         self.readers: list[_DdsSubscription] = []
         self.writers: list = []
+        #: The node of each endpoint of this process: GUID -> (node name, namespace).
+        self.endpoint_nodes: dict = {}
+        #: Built-in readers of the domain's publications and subscriptions, made on first use.
+        self._graph_readers: dict = {}
 
     def _topic(self, name: str, msg_type: type, raw: bool = False):
         """The process's Topic of ``name`` (its raw twin's for raw subscriptions)."""
@@ -160,6 +212,7 @@ class DdsTransport:
         writer = DataWriter(self.participant, self._topic(name, msg_type),
                             _qos(profile, self._user_data(msg_type)))
         self.writers.append(writer)
+        self.endpoint_nodes[writer.guid] = (node.get_name(), node.get_namespace())
         return _DdsPublisher(self, writer)
 
     def create_subscription(self, node, subscription) -> _DdsSubscription:
@@ -173,6 +226,7 @@ class DdsTransport:
         topic = self._topic(subscription.topic_name, msg_type, subscription.raw)
         reader = DataReader(self.participant, topic,
                             _qos(subscription.qos_profile, self._user_data(msg_type)))
+        self.endpoint_nodes[reader.guid] = (node.get_name(), node.get_namespace())
         condition = ReadCondition(reader, SampleState.Any | ViewState.Any | InstanceState.Any)
         self.waitset.attach(condition)
         entry = _DdsSubscription(self, subscription, reader, condition)
@@ -213,11 +267,64 @@ class DdsTransport:
                 ready.append((entry.subscription, sample.data if raw else sample))
         return ready
 
-    def count(self, name: str, kind: str) -> int:
-        """Endpoints of this process on a topic (``kind``: publishers or subscriptions)."""
-        if kind == 'subscriptions':
-            return sum(1 for e in self.readers if e.subscription.topic_name == name)
-        return sum(1 for w in self.writers if w.topic.name == dds_topic_name(name))
+    def _discovered(self, kind) -> list:
+        """Every live endpoint of ``kind`` on the domain (this process's too), as Cyclone knows.
+
+        Read from the built-in DCPSPublication / DCPSSubscription topics; the samples of
+        endpoints gone (deleted, or their participant's lease ran out) are taken away.
+        """
+        from cyclonedds.builtin import (
+            BuiltinDataReader,
+            BuiltinTopicDcpsPublication,
+            BuiltinTopicDcpsSubscription,
+        )
+        from cyclonedds.core import InstanceState, ReadCondition, SampleState, ViewState
+
+        from gait_nodes.runtime.endpoints import TopicEndpointTypeEnum
+
+        entry = self._graph_readers.get(kind)
+        if entry is None:
+            topic = BuiltinTopicDcpsPublication if kind == TopicEndpointTypeEnum.PUBLISHER \
+                else BuiltinTopicDcpsSubscription
+            reader = BuiltinDataReader(self.participant, topic)
+            states = SampleState.Any | ViewState.Any
+            entry = self._graph_readers[kind] = (
+                reader, ReadCondition(reader, states | InstanceState.Alive),
+                ReadCondition(reader, states | InstanceState.NotAliveDisposed
+                              | InstanceState.NotAliveNoWriters))
+        reader, alive, gone = entry
+        reader.take(N=_GRAPH_BATCH, condition=gone)
+        return reader.read(N=_GRAPH_BATCH, condition=alive)
+
+    def count(self, name: str, kind) -> int:
+        """Endpoints (``kind``: TopicEndpointTypeEnum) of ROS topic ``name`` on the domain."""
+        dds_name = dds_topic_name(name)
+        return sum(1 for e in self._discovered(kind) if e.topic_name == dds_name)
+
+    def endpoints(self, name: str, kind) -> list:
+        """TopicEndpointInfo of the endpoints of ROS topic ``name`` on the domain.
+
+        The node of an endpoint of this process is known; of any other, not (rmw learns it
+        from ``ros_discovery_info``, which this runtime does not read): rmw's unknown names.
+        """
+        from gait_nodes.runtime.endpoints import (
+            UNKNOWN_NODE_NAME,
+            UNKNOWN_NODE_NAMESPACE,
+            TopicEndpointInfo,
+        )
+
+        dds_name = dds_topic_name(name)
+        infos = []
+        for endpoint in self._discovered(kind):
+            if endpoint.topic_name != dds_name:
+                continue
+            node, namespace = self.endpoint_nodes.get(
+                endpoint.key, (UNKNOWN_NODE_NAME, UNKNOWN_NODE_NAMESPACE))
+            infos.append(TopicEndpointInfo(
+                node_name=node, node_namespace=namespace,
+                topic_type=ros_type_name(endpoint.type_name or ''), endpoint_type=kind,
+                endpoint_gid=_gid(endpoint.key), qos_profile=_profile_of(endpoint.qos)))
+        return infos
 
     def notify(self) -> None:
         """Wake a waiting executor."""
@@ -228,6 +335,8 @@ class DdsTransport:
     def close(self) -> None:
         """Delete every entity of this process."""
         participant, self.participant = self.participant, None
+        self._graph_readers.clear()
+        self.endpoint_nodes.clear()
         self.readers.clear()
         self.writers.clear()
         self.topics.clear()

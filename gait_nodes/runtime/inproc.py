@@ -37,8 +37,10 @@ class _Topic:
 
 
 class _InprocPublisher:
-    def __init__(self, transport: InprocTransport, topic: _Topic, msg_type: type, profile):
+    def __init__(self, transport: InprocTransport, topic: _Topic, msg_type: type, profile,
+                 node=None):
         self.transport = transport
+        self.node = node
         self.topic = topic
         self.msg_type = msg_type
         self.profile = profile
@@ -131,7 +133,7 @@ class InprocTransport:
     def create_publisher(self, node, msg_type: type, name: str, profile) -> _InprocPublisher:
         """Publisher on a topic of this process."""
         topic = self._topic(name, msg_type)
-        publisher = _InprocPublisher(self, topic, msg_type, profile)
+        publisher = _InprocPublisher(self, topic, msg_type, profile, node)
         topic.publishers.append(publisher)
         return publisher
 
@@ -154,10 +156,36 @@ class InprocTransport:
         if matched:
             self.queue.append((msg, matched))
 
-    def count(self, name: str, kind: str) -> int:
-        """Endpoints on a topic (``kind``: publishers or subscriptions)."""
+    def count(self, name: str, kind) -> int:
+        """Endpoints (``kind``: TopicEndpointTypeEnum) of a topic: the process is the graph."""
+        from gait_nodes.runtime.endpoints import TopicEndpointTypeEnum
+
         topic = self.topics.get(name)
-        return len(getattr(topic, kind)) if topic else 0
+        if topic is None:
+            return 0
+        return len(topic.publishers if kind == TopicEndpointTypeEnum.PUBLISHER
+                   else topic.subscriptions)
+
+    def endpoints(self, name: str, kind) -> list:
+        """TopicEndpointInfo of a topic's publishers or subscriptions, with their nodes."""
+        from gait_nodes.runtime.endpoints import TopicEndpointInfo, TopicEndpointTypeEnum
+
+        topic = self.topics.get(name)
+        if topic is None:
+            return []
+        infos = []
+        if kind == TopicEndpointTypeEnum.PUBLISHER:
+            entries = [(p, p.node, p.msg_type, p.profile) for p in topic.publishers]
+        else:
+            entries = [(s, s._node, s.msg_type, s.qos_profile) for s in topic.subscriptions]
+        for endpoint, node, msg_type, profile in entries:
+            infos.append(TopicEndpointInfo(
+                node_name=node.get_name() if node is not None else '',
+                node_namespace=node.get_namespace() if node is not None else '',
+                topic_type=msg_type.__ros_type__, endpoint_type=kind,
+                endpoint_gid=list(id(endpoint).to_bytes(8, 'little')) + [0] * 16,
+                qos_profile=profile))
+        return infos
 
     def notify(self) -> None:
         """Nothing waits in inproc; present for the transport interface."""

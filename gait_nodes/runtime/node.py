@@ -15,7 +15,9 @@ from gait_nodes.interfaces import get_message, message_type_name
 from gait_nodes.runtime import context as context_module
 from gait_nodes.runtime.args import unknown_parameters_message
 from gait_nodes.runtime.clock import NS_PER_S, Clock, ClockType
+from gait_nodes.runtime.endpoints import TopicEndpointTypeEnum
 from gait_nodes.runtime.logging import RcutilsLogger
+from gait_nodes.runtime.names import expand_topic_name, fully_qualified_node_name
 from gait_nodes.runtime.parameters import (
     Parameter,
     ParameterDescriptor,
@@ -36,20 +38,6 @@ def _rclpy_forward(method):
         return method(self, *args, **kwargs)
 
     return wrapper
-
-
-def expand_topic_name(topic: str, node_name: str, namespace: str) -> str:
-    """Fully qualified topic name: relative names go under the namespace, ``~`` is the node."""
-    if not topic:
-        raise GaitNodesError('topic name must not be empty')
-    if topic.startswith('~'):
-        base = namespace.rstrip('/') + '/' + node_name
-        topic = base + topic[1:]
-    elif not topic.startswith('/'):
-        topic = namespace.rstrip('/') + '/' + topic
-    if topic.endswith('/') and topic != '/' or '//' in topic:
-        raise GaitNodesError(f'invalid topic name {topic!r}')
-    return topic
 
 
 class Publisher:
@@ -201,7 +189,7 @@ class Node:
 
             ros_args = RosArguments()
         self._name = ros_args.node_name(node_name)
-        self._namespace = ros_args.namespace(namespace)
+        self._namespace = ros_args.namespace(namespace, node_name)
         # rcl expands both sides of a rule in the node's namespace before matching, so that
         # `chatter:=other` also remaps `/chatter` and always yields an absolute name.
         self._remaps = {
@@ -247,7 +235,7 @@ class Node:
     @_rclpy_forward
     def get_fully_qualified_name(self) -> str:
         """``/namespace/name``."""
-        return ('' if self._namespace == '/' else self._namespace) + '/' + self._name
+        return fully_qualified_node_name(self._name, self._namespace)
 
     @_rclpy_forward
     def get_logger(self) -> RcutilsLogger:
@@ -293,6 +281,13 @@ class Node:
     def _resolve(self, topic: str) -> str:
         name = expand_topic_name(topic, self._name, self._namespace)
         return self._remaps.get(name, name)
+
+    @_rclpy_forward
+    def resolve_topic_name(self, topic: str, *, only_expand: bool = False) -> str:
+        """``topic`` expanded in the node's namespace and, unless ``only_expand``, remapped."""
+        if only_expand:
+            return expand_topic_name(topic, self._name, self._namespace)
+        return self._resolve(topic)
 
     def create_publisher(self, msg_type, topic: str, qos_profile, *, callback_group=None,
                          event_callbacks=None, qos_overriding_options=None,
@@ -398,13 +393,41 @@ class Node:
 
     @_rclpy_forward
     def count_subscribers(self, topic_name: str) -> int:
-        """Subscriptions on ``topic_name`` known to this process's runtime."""
-        return self._transport.count(self._resolve(topic_name), 'subscriptions')
+        """Subscriptions on ``topic_name`` in the graph (expanded, not remapped, as rclpy)."""
+        return self._transport.count(self.resolve_topic_name(topic_name, only_expand=True),
+                                     TopicEndpointTypeEnum.SUBSCRIPTION)
 
     @_rclpy_forward
     def count_publishers(self, topic_name: str) -> int:
-        """Publishers on ``topic_name`` known to this process's runtime."""
-        return self._transport.count(self._resolve(topic_name), 'publishers')
+        """Publishers on ``topic_name`` in the graph (expanded, not remapped, as rclpy).
+
+        Every runtime counts the whole graph: this process's endpoints and, over DDS, every
+        participant's on the domain (the built-in DCPSPublication topic), this node's own
+        publishers included.
+        """
+        return self._transport.count(self.resolve_topic_name(topic_name, only_expand=True),
+                                     TopicEndpointTypeEnum.PUBLISHER)
+
+    @_rclpy_forward
+    def get_publishers_info_by_topic(self, topic_name: str, no_mangle: bool = False) -> list:
+        """:class:`TopicEndpointInfo` of every publisher on ``topic_name`` (remapped, as rclpy).
+
+        ``no_mangle``: ``topic_name`` is a DDS topic name (``rt/...``) as it is.
+        """
+        return self._endpoints(topic_name, no_mangle, TopicEndpointTypeEnum.PUBLISHER)
+
+    @_rclpy_forward
+    def get_subscriptions_info_by_topic(self, topic_name: str, no_mangle: bool = False) -> list:
+        """:class:`TopicEndpointInfo` of every subscription on ``topic_name``."""
+        return self._endpoints(topic_name, no_mangle, TopicEndpointTypeEnum.SUBSCRIPTION)
+
+    def _endpoints(self, topic_name: str, no_mangle: bool, kind) -> list:
+        if not no_mangle:
+            return self._transport.endpoints(self._resolve(topic_name), kind)
+        # A DDS name: only the ROS convention's (rt/<name>) carries ROS topics here.
+        if not topic_name.startswith('rt/'):
+            return []
+        return self._transport.endpoints(topic_name[2:], kind)
 
     @_rclpy_forward
     def destroy_node(self) -> None:
