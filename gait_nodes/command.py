@@ -91,9 +91,9 @@ class GaitCommandClient(Node):
         self.sent = 0
         self.velocity_report: dict | None = None
         string, twist = get_message('std_msgs/msg/String'), get_message('geometry_msgs/msg/Twist')
-        self.command_publisher = self.create_publisher(string, '/gait/command', 10)
-        self.velocity_publisher = self.create_publisher(twist, '/cmd_vel', 10)
-        self.create_subscription(string, '/gait/command_status', self.on_status, 10)
+        self.command_publisher = self.create_publisher(string, 'gait/command', 10)
+        self.velocity_publisher = self.create_publisher(twist, 'cmd_vel', 10)
+        self.create_subscription(string, 'gait/command_status', self.on_status, 10)
         self.create_subscription(get_message('diagnostic_msgs/msg/DiagnosticArray'),
                                  '/diagnostics', self.on_diagnostics, 10)
 

@@ -120,6 +120,7 @@ from gait_nodes.planning.online import (
 from gait_nodes.planning.terrain import STAIRS_DEFAULTS, Staircase, check_walkable
 from gait_nodes.robot.description import load_robot_description
 from gait_nodes.runtime import Parameter, SetParametersResult, qos_profile_latched
+from gait_nodes.single_source import SingleSource
 from gait_nodes.watchdog import InputWatchdog
 
 NODE_NAME = 'footstep_planner'
@@ -324,6 +325,8 @@ class FootstepPlanner(GuardedNode):
         self.inputs = InputWatchdog(['/cmd_vel'], self.settings['cmd_vel_timeout_s'] or 1.0,
                                     self.origin_ns, holding='stopping (zero velocity from the '
                                     'next step boundary)')
+        self.sources = SingleSource(self, ['/joint_states', '/tf'], 'not reading the robot',
+                                    watchdog=self.inputs, on_change=self._on_sources_changed)
         # Under inproc every node starts together; elsewhere the robot may be somewhere already.
         self._joined = self.context.runtime == 'inproc'
         self._base_pose: tuple[float, float, float] | None = None
@@ -355,18 +358,18 @@ class FootstepPlanner(GuardedNode):
         self._zmp_messages = ZmpReferenceMessages()
         self._last_velocity_notes: list[str] = []
         self.footsteps_publisher = self.create_publisher(
-            get_message('trajectory_msgs/msg/MultiDOFJointTrajectory'), '/gait/footsteps',
+            get_message('trajectory_msgs/msg/MultiDOFJointTrajectory'), 'gait/footsteps',
             qos_profile_latched)
         self.zmp_publisher = self.create_publisher(get_message('nav_msgs/msg/Path'),
-                                                   '/gait/zmp_reference', 10)
+                                                   'gait/zmp_reference', 10)
         self.status_publisher = self.create_publisher(get_message('std_msgs/msg/String'),
-                                                      '/gait/command_status', 10)
-        self.create_subscription(get_message('geometry_msgs/msg/Twist'), '/cmd_vel',
+                                                      'gait/command_status', 10)
+        self.create_subscription(get_message('geometry_msgs/msg/Twist'), 'cmd_vel',
                                  self.on_cmd_vel, 10)
-        self.create_subscription(get_message('std_msgs/msg/String'), '/gait/command',
+        self.create_subscription(get_message('std_msgs/msg/String'), 'gait/command',
                                  self.on_command, COMMAND_DEPTH)
         self.create_subscription(get_message('trajectory_msgs/msg/MultiDOFJointTrajectory'),
-                                 SWING_TOPIC, self.on_swing, 10)
+                                 SWING_TOPIC.lstrip('/'), self.on_swing, 10)
         if self.context.runtime != 'inproc':
             self.create_subscription(get_message('diagnostic_msgs/msg/DiagnosticArray'),
                                      '/diagnostics', self.on_diagnostics, 50)
@@ -562,8 +565,16 @@ class FootstepPlanner(GuardedNode):
              'applied_twist': event.applied.as_tuple(),
              'takes_effect_s': (event.takes_effect_ns - self.origin_ns) * 1e-9})
 
+    def _on_sources_changed(self) -> None:
+        """Report at once that the robot's state is refused (two robots) or read again."""
+        now_ns = self.get_clock().now().nanoseconds
+        self.inputs.update(now_ns)
+        self.diagnostics.publish([self.inputs.status(now_ns)])
+
     def on_tf(self, msg) -> None:
         """Keep the robot's base pose (joining or paused: the measured state)."""
+        if self.sources.refused:
+            return
         for transform in msg.transforms:
             if transform.header.frame_id.lstrip('/') == WORLD_FRAME and \
                     transform.child_frame_id.lstrip('/') == 'base_link':
@@ -580,6 +591,8 @@ class FootstepPlanner(GuardedNode):
 
     def on_joint_states(self, msg) -> None:
         """Keep the robot's joint positions (joining or paused: the measured state)."""
+        if self.sources.refused:
+            return
         if self._measured is None:
             return
         positions = np.array(msg.position, dtype=float)
@@ -613,7 +626,7 @@ class FootstepPlanner(GuardedNode):
                 self.create_subscription(get_message('tf2_msgs/msg/TFMessage'), '/tf',
                                          self.on_tf, 100),
                 self.create_subscription(get_message('sensor_msgs/msg/JointState'),
-                                         '/joint_states', self.on_joint_states, 10)]
+                                         'joint_states', self.on_joint_states, 10)]
         elif not on:
             for subscription in self._measured_subscriptions:
                 self.destroy_subscription(subscription)
