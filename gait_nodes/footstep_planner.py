@@ -82,7 +82,6 @@ from gait_nodes.planning.gait_params import (
 from gait_nodes.planning.online import (
     ACCEPTED,
     REJECTED,
-    UNCHANGED,
     Answer,
     Changed,
     ChangeRefused,
@@ -100,6 +99,7 @@ from gait_nodes.planning.supervisor import (
 )
 from gait_nodes.planning.supervisor import HorizonCut as _HorizonCut  # noqa: F401 (as above)
 from gait_nodes.planning.terrain import STAIRS_DEFAULTS, Staircase, check_walkable
+from gait_nodes.planning.timing_models import TimingModels, describe_plan
 from gait_nodes.robot.description import load_robot_description
 from gait_nodes.runtime import Parameter, SetParametersResult, qos_profile_latched
 from gait_nodes.single_source import SingleSource
@@ -190,9 +190,8 @@ class FootstepPlanner(GuardedNode):
         self.faults = FaultGuard(self, self.diagnostics,
                                  hold=lambda exc: self.core.hold(self._now_ns()),
                                  recovered=lambda: self.core.recovered())
-        self._robot_model = None
-        self._timings: dict = {}  # (swing, step height) -> (model, reason, final): the worker's
-        timing, self._timing_reason, self._timing_final = self._swing_timing(params)
+        self.timings = TimingModels(self.robot, warn=self.get_logger().warning)
+        timing, self._timing_reason, self._timing_final = self.timings.timing(params)
         planner = GaitPlanner(self.robot, params, swing_timing=timing, terrain=terrain)
         self.diagnostics.report('timing', OK if self._timing_final else WARN,
                                 self._timing_reason)
@@ -203,12 +202,12 @@ class FootstepPlanner(GuardedNode):
             cover_s=self._cover_s(params), lead_s=self.settings['zmp_horizon_s'],
             standing_lead_s=STANDING_LEAD_S,
             threaded=self.context.runtime != 'inproc',
-            describe=self._describe_plan,
+            describe=functools.partial(describe_plan, self.robot),
             failure_hold_s=lambda p: (self.settings['zmp_horizon_s'] + p.params.step_period_s
                                       + RETRY_AFTER_S),
             job_done=lambda kind, seconds: callback_times.record(self.get_name(),
                                                                  f'worker {kind}', seconds),
-            check=self._check_joint_speeds)
+            check=self.timings.check_joint_speeds)
         # Under inproc every node starts together; elsewhere the robot may be somewhere already.
         self.core = PlannerSupervisor(self.robot, self.worker, self.faults,
                                       supervisor_settings(self.settings), start_ns,
@@ -283,77 +282,6 @@ class FootstepPlanner(GuardedNode):
             worker.stop()
         return super().destroy_node()
 
-    # --- swing timing --------------------------------------------------------------------------
-
-    def _swing_timing(self, params: GaitParameters) -> tuple[object, str, bool]:
-        """(model, reason, final): the swing timing model for ``params`` (None: fixed timing).
-
-        Runs in the planning worker (and at start). With ``swing: value_table`` and the table
-        not built yet (swing_leg_policy builds it on first use), the polynomial swing's longer
-        times stand in (final False) and the table is looked for again once a second
-        (:meth:`report_state`).
-        """
-        if params.timing != 'joint_limit' or self.robot.extra.get('limb_ik') is None:
-            return None, ('fixed timing' if params.timing == 'fixed' else
-                          f'{self.robot.name} has no closed-form limb IK: fixed timing'), True
-        key = (params.swing, params.step_height_m)
-        known = self._timings.get(key)
-        if known is not None and known[2]:
-            return known
-        from gait_nodes.robot.model import load_robot_model
-        from gait_nodes.swing.timing import TableSwingTiming, swing_timing
-
-        if self._robot_model is None:
-            self._robot_model = load_robot_model(str(self.robot.path))
-        model, reason = swing_timing(self._robot_model, params.swing, params.step_height_m)
-        final = params.swing != 'value_table' or isinstance(model, TableSwingTiming)
-        if known is not None and not final:
-            return known  # still the stand-in: keep the same one
-        self._timings[key] = (model, reason, final)
-        return model, reason, final
-
-    def _check_joint_speeds(self, fork: GaitPlanner, from_s: float) -> None:
-        """Worker: refuse a plan with fixed timing whose swings the joints cannot follow.
-
-        A plan timed at the joint limit (``timing: joint_limit`` with a model) is re-timed by
-        its probes already; any other is probed here, with the swing timing model of its
-        swing (closed-form limb IK) or the polynomial swing through the whole-body IK.
-        """
-        params = fork.params
-        if params.timing == 'joint_limit' and fork.swing_timing is not None:
-            return
-        probe = self._probe(params)
-        if probe is not None:
-            fork.check_joint_speeds(probe, from_s)
-
-    def _probe(self, params: GaitParameters):
-        """Worker: the joint-speed probe of ``params``' swings (None: no robot model)."""
-        if self.robot.extra.get('limb_ik') is not None:
-            return self._swing_timing(params.replace(timing='joint_limit'))[0]
-        key = ('probe', params.step_height_m)
-        if key not in self._timings:
-            from gait_nodes.robot.model import load_robot_model
-            from gait_nodes.swing.timing import PolynomialSwingTiming
-
-            try:
-                if self._robot_model is None:
-                    self._robot_model = load_robot_model(str(self.robot.path))
-                self._timings[key] = PolynomialSwingTiming(
-                    self._robot_model, None, self.robot.joint_velocity_limit_rad_s,
-                    params.step_height_m)
-            except GaitNodesError as exc:
-                self.get_logger().warning(f'no joint-speed check of gait commands: {exc}')
-                self._timings[key] = None
-        return self._timings[key]
-
-    def _retime(self, fork: GaitPlanner, at_s: float):
-        """Worker: time ``fork`` with the table once it exists (UNCHANGED while it does not)."""
-        model, reason, final = self._swing_timing(fork.params)
-        if model is fork.swing_timing:
-            return UNCHANGED
-        fork.set_swing_timing(model, at_s)
-        return ('timing', reason, final)
-
     # --- inputs --------------------------------------------------------------------------------
 
     def on_cmd_vel(self, msg) -> None:
@@ -427,16 +355,12 @@ class FootstepPlanner(GuardedNode):
 
     def _model(self):
         """The robot model for forward kinematics, or None (a robot without one)."""
-        if self._robot_model is None:
-            from gait_nodes.robot.model import load_robot_model
-
-            try:
-                self._robot_model = load_robot_model(str(self.robot.path))
-            except GaitNodesError as exc:
-                self.get_logger().warning(f'no forward kinematics ({exc}): a rejoining planner '
-                                          f'starts the feet at their nominal places')
-                return None
-        return self._robot_model
+        try:
+            return self.timings.robot_model()
+        except GaitNodesError as exc:
+            self.get_logger().warning(f'no forward kinematics ({exc}): a rejoining planner '
+                                      f'starts the feet at their nominal places')
+            return None
 
     # --- outputs -------------------------------------------------------------------------------
 
@@ -503,23 +427,13 @@ class FootstepPlanner(GuardedNode):
                                 self.planner.params.to_dict()))
             return
         repeated = self.worker.submit_command(
-            command_id, msg.data, functools.partial(self._apply_changes, changes, None))
+            command_id, msg.data, functools.partial(self.timings.apply_changes, changes, None))
         if repeated is None:
             self.worker.run_pending()
         self._publish(self.core.poll(self._now_ns()))
 
     def _new_id(self) -> str:
         return f'{self.get_name()}-{next(self._commands)}'
-
-    def _apply_changes(self, changes: dict, terrain: Staircase | None, fork: GaitPlanner,
-                       at_s: float):
-        """Worker: plan gait ``changes`` (and ``terrain``) on ``fork`` from ``at_s`` on."""
-        params = parameters_from_mapping(fork.params, changes, self.robot)
-        model, reason, final = self._swing_timing(params)
-        if terrain is not None and terrain != fork.terrain:
-            fork.set_terrain(terrain, at_s, params)
-        fork.set_parameters(params, at_s, swing_timing=model)
-        return ('timing', reason, final)
 
     def _answer(self, answer: Answer) -> None:
         """Publish ``answer`` on /gait/command_status and report it on /diagnostics."""
@@ -606,7 +520,7 @@ class FootstepPlanner(GuardedNode):
                                                   if terrain is not None else {})})
             self.worker.submit_command(
                 f'{PARAMETER_ID}{next(self._commands)}', text,
-                functools.partial(self._apply_changes, gait_changes, terrain))
+                functools.partial(self.timings.apply_changes, gait_changes, terrain))
         if settings['rate_hz'] != self.settings['rate_hz']:
             self.destroy_timer(self.timer)
             self.timer = self.create_timer(1.0 / settings['rate_hz'], self.tick)
@@ -621,7 +535,7 @@ class FootstepPlanner(GuardedNode):
     def report_state(self) -> None:
         """Once a second: the gait, the twist, the rhythm and the margin of the planned ZMP."""
         if not self._timing_final:
-            self.worker.submit_change(self._retime, key='timing')
+            self.worker.submit_change(self.timings.retime, key='timing')
             self.worker.run_pending()
         snapshot = self.worker.snapshot
         report = snapshot.report
@@ -631,36 +545,6 @@ class FootstepPlanner(GuardedNode):
         self.diagnostics.report('gait', level, f'{report["resolved_gait"]}, {report["mode"]}',
                                 {**report, 'requested_twist': self.core.requested_twist.as_tuple(),
                                  'timing_source': self._timing_reason})
-
-    def _describe_plan(self, planner: GaitPlanner) -> dict:
-        """Worker: what :meth:`report_state` reports of ``planner``."""
-        params = planner.params
-        steps = planner.steps
-        kept = min((step.zmp_margin_kept_m for step in steps), default=math.inf)
-        return {
-            'gait': params.gait, 'resolved_gait': params.resolved_gait(self.robot),
-            'mode': steps[-1].state_after.mode if steps else 'standing',
-            'applied_twist': planner.twist.as_tuple(),
-            'zmp_margin_kept_m': kept, 'zmp_margin_m': params.zmp_margin_m,
-            'planned_steps': len(steps), 'timing': params.timing,
-            'stairs_count': planner.terrain.count,
-            'stairs_total_rise_m': planner.terrain.total_rise_m,
-            **self._rhythm_values(planner)}
-
-    def _rhythm_values(self, planner: GaitPlanner) -> dict:
-        """The walked rhythm (step period, swing, transfer, duty factor, speed) for reports."""
-        try:
-            rhythm = planner.rhythm()
-        except GaitParameterError:
-            return {}
-        params = planner.params
-        if rhythm is None:
-            return {'step_period_s': params.step_period_s, 'swing_s': params.swing_s,
-                    'duty_factor': params.duty_factor}
-        twist = planner.twist
-        return {'step_period_s': rhythm.step_period_s, 'swing_s': rhythm.swing_s,
-                'transfer_s': rhythm.transfer_s, 'duty_factor': rhythm.duty_factor,
-                'stride_m': math.hypot(twist.vx_m_s, twist.vy_m_s) * rhythm.cycle_s}
 
 
 def _shortened(text: str) -> str:
