@@ -41,10 +41,11 @@ With ``timing: joint_limit`` (the shipped default) on a robot with closed-form l
 rhythm follows from the joint velocity limit and the swing method
 (:mod:`gait_nodes.swing.timing`): the value table's swings (the cached table of
 :mod:`gait_nodes.swing.cache`; until swing_leg_policy has built it, the polynomial swing's longer
-times stand in and the table is looked for again every second) or the polynomial swing's. The
-'timing' diagnostic says which; the 'gait' diagnostic reports the walked step period, swing,
-transfer, duty factor and stride; a velocity beyond the fastest feasible one is reduced with a
-WARN on the 'velocity' diagnostic.
+times stand in and the table is looked for again every second) or the polynomial swing's
+(:mod:`gait_nodes.planning.timing_models`, made in the worker). The 'timing' diagnostic says
+which; the 'gait' diagnostic reports the walked step period, swing, transfer, duty factor and
+stride; a velocity beyond the fastest feasible one is reduced with a WARN on the 'velocity'
+diagnostic.
 """
 
 from __future__ import annotations
