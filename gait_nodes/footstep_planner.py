@@ -362,8 +362,9 @@ class FootstepPlanner(GuardedNode):
             qos_profile_latched)
         self.zmp_publisher = self.create_publisher(get_message('nav_msgs/msg/Path'),
                                                    'gait/zmp_reference', 10)
+        # As deep as the command subscription: the answers to a burst of commands all go out.
         self.status_publisher = self.create_publisher(get_message('std_msgs/msg/String'),
-                                                      'gait/command_status', 10)
+                                                      'gait/command_status', COMMAND_DEPTH)
         self.create_subscription(get_message('geometry_msgs/msg/Twist'), 'cmd_vel',
                                  self.on_cmd_vel, 10)
         self.create_subscription(get_message('std_msgs/msg/String'), 'gait/command',
@@ -522,11 +523,11 @@ class FootstepPlanner(GuardedNode):
         pose = state.rest_pose if state is not None else (0.0, 0.0, 0.0)
         twist = self._requested_twist
 
-        def restart(at_ns):
+        def restart():
             fresh = GaitPlanner(self.robot, planner.params, base_pose=pose,
                                 swing_timing=planner.swing_timing, terrain=planner.terrain)
             fresh.set_velocity(twist, 0.0)
-            return fresh, at_ns
+            return fresh
 
         self._replace(restart, 'clock')
         return True
@@ -678,12 +679,12 @@ class FootstepPlanner(GuardedNode):
                 pose[2]))
         planner = self.planner
 
-        def plan(at_ns):
+        def plan():
             fresh = GaitPlanner(self.robot, planner.params, base_pose=pose,
                                 swing_timing=planner.swing_timing, start=start,
                                 terrain=planner.terrain)
             fresh.set_velocity(twist, 0.0)
-            return fresh, now_ns
+            return fresh
 
         self._replace(plan, token)
         where = 'its nominal stance' if start is None else (

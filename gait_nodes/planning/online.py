@@ -272,10 +272,11 @@ class OnlinePlanner:
         """
         self._submit(_Job('change', apply, command_id=key), replaces=('change', key))
 
-    def submit_replace(self, make: Callable[[int], tuple[GaitPlanner, int]],
-                       token: object = None) -> None:
-        """Replace the live plan by ``make(now_ns) -> (planner, origin_ns)`` (a plan from scratch).
+    def submit_replace(self, make: Callable[[], GaitPlanner], token: object = None) -> None:
+        """Replace the live plan by ``make()`` (a plan from scratch, from a robot at rest).
 
+        The new plan is made and planned ``cover_s`` ahead first; its 0 s is then the moment it
+        is handed over (the robot stood, or was held, meanwhile: it starts where it was).
         Every job waiting is dropped but gait commands (answered as usual, planned on the new
         plan). A :class:`Replaced` event with ``token`` says when it is live or that it failed.
         """
@@ -368,11 +369,12 @@ class OnlinePlanner:
         if job.kind == 'replace':
             make, token = job.payload
             try:
-                planner, origin_ns = make(self._clock_ns())
+                planner = make()
+                planner.advance(self.cover_s)
             except Exception as exc:  # noqa: BLE001 (reported: the live plan goes on)
                 self._emit(Replaced(token, exc))
                 return
-            self._live, self._origin_ns = planner, int(origin_ns)
+            self._live, self._origin_ns = planner, self._clock_ns()
             self._generation += 1
             self._emit(Replaced(token, None))
         elif job.kind == 'stand':
