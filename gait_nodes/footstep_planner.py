@@ -406,6 +406,7 @@ class FootstepPlanner(GuardedNode):
                                                                  f'worker {kind}', seconds),
             check=self._check_joint_speeds)
         self.worker.start()
+        parse_gait_command('{}')  # the schema's validator made now, not at the first command
 
     @property
     def planner(self) -> GaitPlanner:
@@ -444,6 +445,8 @@ class FootstepPlanner(GuardedNode):
 
         if self._robot_model is None:
             self._robot_model = load_robot_model(str(self.robot.path))
+        if known is not None and not self._table_file(params).is_file():
+            return known  # still the stand-in: looked for again in a second
         model, reason = swing_timing(self._robot_model, params.swing, params.step_height_m)
         final = params.swing != 'value_table' or isinstance(model, TableSwingTiming)
         if known is not None and not final:
@@ -485,6 +488,15 @@ class FootstepPlanner(GuardedNode):
                 self._timings[key] = None
         return self._timings[key]
 
+    def _table_file(self, params: GaitParameters):
+        """Where the swing value table of ``params`` is cached (built or not)."""
+        from gait_nodes.robot.whole_body_ik import limb_ik_family
+        from gait_nodes.swing.cache import default_table_path
+
+        return default_table_path(self._robot_model, limb_ik_family(self._robot_model),
+                                  params.step_height_m,
+                                  self._robot_model.description.joint_velocity_limit_rad_s)
+
     def _retime(self, fork: GaitPlanner, at_s: float):
         """Worker: time ``fork`` with the table once it exists (UNCHANGED while it does not)."""
         model, reason, final = self._swing_timing(fork.params)
@@ -523,9 +535,9 @@ class FootstepPlanner(GuardedNode):
         pose = state.rest_pose if state is not None else (0.0, 0.0, 0.0)
         twist = self._requested_twist
 
-        def restart():
-            fresh = GaitPlanner(self.robot, planner.params, base_pose=pose,
-                                swing_timing=planner.swing_timing, terrain=planner.terrain)
+        def restart(live):
+            fresh = GaitPlanner(self.robot, live.params, base_pose=pose,
+                                swing_timing=live.swing_timing, terrain=live.terrain)
             fresh.set_velocity(twist, 0.0)
             return fresh
 
@@ -677,12 +689,11 @@ class FootstepPlanner(GuardedNode):
             pose = tuple(float(v) for v in centred_pose(
                 start.feet_in_world, self.planner.layout.offsets(self.planner.params.step_width_m),
                 pose[2]))
-        planner = self.planner
 
-        def plan():
-            fresh = GaitPlanner(self.robot, planner.params, base_pose=pose,
-                                swing_timing=planner.swing_timing, start=start,
-                                terrain=planner.terrain)
+        def plan(live):
+            fresh = GaitPlanner(self.robot, live.params, base_pose=pose,
+                                swing_timing=live.swing_timing, start=start,
+                                terrain=live.terrain)
             fresh.set_velocity(twist, 0.0)
             return fresh
 

@@ -229,9 +229,9 @@ def test_a_plan_from_scratch_starts_when_it_is_handed_over():
     worker = walking(clock)
     clock.advance(7.0)
 
-    def make():
+    def make(live):
         clock.advance(1.5)  # the worker's time making it: the robot stands meanwhile
-        return GaitPlanner(QUADRUPED, base_pose=(1.0, 0.0, 0.0))
+        return GaitPlanner(QUADRUPED, live.params, base_pose=(1.0, 0.0, 0.0))
 
     worker.submit_replace(make, 'restart')
     worker.run_pending()
@@ -241,7 +241,7 @@ def test_a_plan_from_scratch_starts_when_it_is_handed_over():
     assert snapshot.generation == 1 and snapshot.origin_ns == clock.now_ns
     assert snapshot.planned_until_s >= 6.0  # planned cover_s ahead before the handover
 
-    def broken():
+    def broken(live):
         raise GaitParameterError('no plan')
 
     worker.submit_replace(broken, 'again')

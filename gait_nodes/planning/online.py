@@ -272,8 +272,12 @@ class OnlinePlanner:
         """
         self._submit(_Job('change', apply, command_id=key), replaces=('change', key))
 
-    def submit_replace(self, make: Callable[[], GaitPlanner], token: object = None) -> None:
-        """Replace the live plan by ``make()`` (a plan from scratch, from a robot at rest).
+    def submit_replace(self, make: Callable[[GaitPlanner], GaitPlanner],
+                       token: object = None) -> None:
+        """Replace the live plan by ``make(live)`` (a plan from scratch, from a robot at rest).
+
+        ``make`` gets the live plan, to carry its settings (the parameters, the swing timing
+        and the terrain of every change accepted so far) into the new one.
 
         The new plan is made and planned ``cover_s`` ahead first; its 0 s is then the moment it
         is handed over (the robot stood, or was held, meanwhile: it starts where it was).
@@ -369,7 +373,7 @@ class OnlinePlanner:
         if job.kind == 'replace':
             make, token = job.payload
             try:
-                planner = make()
+                planner = make(self._live)
                 planner.advance(self.cover_s)
             except Exception as exc:  # noqa: BLE001 (reported: the live plan goes on)
                 self._emit(Replaced(token, exc))
