@@ -226,8 +226,9 @@ class FootstepPlanner(GuardedNode):
             qos_profile_latched)
         self.zmp_publisher = self.create_publisher(get_message('nav_msgs/msg/Path'),
                                                    'gait/zmp_reference', 10)
+        # As deep as the command subscription: the answers to a burst of commands all go out.
         self.status_publisher = self.create_publisher(get_message('std_msgs/msg/String'),
-                                                      'gait/command_status', 10)
+                                                      'gait/command_status', COMMAND_DEPTH)
         self.create_subscription(get_message('geometry_msgs/msg/Twist'), 'cmd_vel',
                                  self.on_cmd_vel, 10)
         self.create_subscription(get_message('std_msgs/msg/String'), 'gait/command',
@@ -243,6 +244,7 @@ class FootstepPlanner(GuardedNode):
         self.timer = self.create_timer(1.0 / self.settings['rate_hz'], self.tick)
         self.create_timer(1.0, self.report_state)
         self.worker.start()
+        parse_gait_command('{}')  # the schema's validator made now, not at the first command
 
     def _log_rhythm(self, planner: GaitPlanner, params: GaitParameters) -> None:
         """Log the gait and its rhythm (with joint-limit timing: the fastest forward walk)."""

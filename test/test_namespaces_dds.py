@@ -173,14 +173,6 @@ def test_two_iks_on_one_simulator_are_refused_until_one_is_left(tmp_path, monkey
         runtime.shutdown()
 
 
-def _planner_is_namespaced() -> bool:
-    """Whether the footstep planner names its topics relative (changed apart from this one)."""
-    source = (REPO / 'gait_nodes' / 'footstep_planner.py').read_text()
-    return "'/gait/footsteps'" not in source and "'/gait/zmp_reference'" not in source
-
-
-@pytest.mark.skipif(not _planner_is_namespaced(),
-                    reason='the footstep planner still names its topics absolute')
 def test_two_graphs_in_two_namespaces_on_one_domain_each_walk_their_own_walk(tmp_path):
     domain = next(DOMAINS)
     runs = {}

@@ -222,3 +222,30 @@ def test_in_a_thread_a_change_always_too_slow_is_rejected_as_busy():
         assert worker.snapshot.planner.params.step_length_m != 0.15
     finally:
         worker.stop()
+
+
+def test_a_plan_from_scratch_starts_when_it_is_handed_over():
+    clock = FakeClock()
+    worker = walking(clock)
+    clock.advance(7.0)
+
+    def make(live):
+        clock.advance(1.5)  # the worker's time making it: the robot stands meanwhile
+        return GaitPlanner(QUADRUPED, live.params, base_pose=(1.0, 0.0, 0.0))
+
+    worker.submit_replace(make, 'restart')
+    worker.run_pending()
+    (replaced,) = [e for e in worker.events() if isinstance(e, online.Replaced)]
+    assert replaced.token == 'restart' and replaced.error is None
+    snapshot = worker.snapshot
+    assert snapshot.generation == 1 and snapshot.origin_ns == clock.now_ns
+    assert snapshot.planned_until_s >= 6.0  # planned cover_s ahead before the handover
+
+    def broken(live):
+        raise GaitParameterError('no plan')
+
+    worker.submit_replace(broken, 'again')
+    worker.run_pending()
+    (failed,) = [e for e in worker.events() if isinstance(e, online.Replaced)]
+    assert isinstance(failed.error, GaitParameterError)
+    assert worker.snapshot.generation == 1  # the live plan goes on

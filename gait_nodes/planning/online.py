@@ -272,10 +272,15 @@ class OnlinePlanner:
         """
         self._submit(_Job('change', apply, command_id=key), replaces=('change', key))
 
-    def submit_replace(self, make: Callable[[int], tuple[GaitPlanner, int]],
+    def submit_replace(self, make: Callable[[GaitPlanner], GaitPlanner],
                        token: object = None) -> None:
-        """Replace the live plan by ``make(now_ns) -> (planner, origin_ns)`` (a plan from scratch).
+        """Replace the live plan by ``make(live)`` (a plan from scratch, from a robot at rest).
 
+        ``make`` gets the live plan, to carry its settings (the parameters, the swing timing
+        and the terrain of every change accepted so far) into the new one.
+
+        The new plan is made and planned ``cover_s`` ahead first; its 0 s is then the moment it
+        is handed over (the robot stood, or was held, meanwhile: it starts where it was).
         Every job waiting is dropped but gait commands (answered as usual, planned on the new
         plan). A :class:`Replaced` event with ``token`` says when it is live or that it failed.
         """
@@ -368,11 +373,12 @@ class OnlinePlanner:
         if job.kind == 'replace':
             make, token = job.payload
             try:
-                planner, origin_ns = make(self._clock_ns())
+                planner = make(self._live)
+                planner.advance(self.cover_s)
             except Exception as exc:  # noqa: BLE001 (reported: the live plan goes on)
                 self._emit(Replaced(token, exc))
                 return
-            self._live, self._origin_ns = planner, int(origin_ns)
+            self._live, self._origin_ns = planner, self._clock_ns()
             self._generation += 1
             self._emit(Replaced(token, None))
         elif job.kind == 'stand':

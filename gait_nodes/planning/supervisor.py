@@ -621,20 +621,19 @@ class PlannerSupervisor:
         twist = self._requested_twist
         start = self._start()
         pose = self._base_pose
-        planner = self.planner
         if start is not None:
             # The walk's path starts where the footholds are centred, with the base's yaw: the
             # base itself may lean off them (the IK keeps the COM where the reference was).
             pose = tuple(float(v) for v in centred_pose(
-                start.feet_in_world, planner.layout.offsets(planner.params.step_width_m),
-                pose[2]))
+                start.feet_in_world,
+                self.planner.layout.offsets(self.planner.params.step_width_m), pose[2]))
 
-        def plan(at_ns):
-            fresh = GaitPlanner(self.robot, planner.params, base_pose=pose,
-                                swing_timing=planner.swing_timing, start=start,
-                                terrain=planner.terrain)
+        def plan(live):
+            fresh = GaitPlanner(self.robot, live.params, base_pose=pose,
+                                swing_timing=live.swing_timing, start=start,
+                                terrain=live.terrain)
             fresh.set_velocity(twist, 0.0)
-            return fresh, now_ns
+            return fresh
 
         self._replace(plan, token, now_ns)
         where = 'its nominal stance' if start is None else (
@@ -686,11 +685,11 @@ class PlannerSupervisor:
         pose = state.rest_pose if state is not None else (0.0, 0.0, 0.0)
         twist = self._requested_twist
 
-        def restart(at_ns):
-            fresh = GaitPlanner(self.robot, planner.params, base_pose=pose,
-                                swing_timing=planner.swing_timing, terrain=planner.terrain)
+        def restart(live):
+            fresh = GaitPlanner(self.robot, live.params, base_pose=pose,
+                                swing_timing=live.swing_timing, terrain=live.terrain)
             fresh.set_velocity(twist, 0.0)
-            return fresh, at_ns
+            return fresh
 
         self._replace(restart, 'clock', now_ns)
         return True

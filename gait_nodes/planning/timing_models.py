@@ -64,12 +64,23 @@ class TimingModels:
             return known
         from gait_nodes.swing.timing import TableSwingTiming, swing_timing
 
+        if known is not None and not self._table_file(params).is_file():
+            return known  # still the stand-in: looked for again in a second
         model, reason = swing_timing(self.robot_model(), params.swing, params.step_height_m)
         final = params.swing != 'value_table' or isinstance(model, TableSwingTiming)
         if known is not None and not final:
             return known  # still the stand-in: keep the same one
         self._known[key] = (model, reason, final)
         return model, reason, final
+
+    def _table_file(self, params: GaitParameters):
+        """Where the swing value table of ``params`` is cached (built or not)."""
+        from gait_nodes.robot.whole_body_ik import limb_ik_family
+        from gait_nodes.swing.cache import default_table_path
+
+        model = self.robot_model()
+        return default_table_path(model, limb_ik_family(model), params.step_height_m,
+                                  model.description.joint_velocity_limit_rad_s)
 
     def check_joint_speeds(self, fork: GaitPlanner, from_s: float) -> None:
         """Refuse a plan with fixed timing whose swings the joints cannot follow.
