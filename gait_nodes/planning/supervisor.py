@@ -323,7 +323,8 @@ class PlannerSupervisor:
         start_ns: The node's start [ns]: an input never heard is as old as that.
         joining: Started into a running graph: plan from the robot's measured state first.
         load_model: ``load_model() -> RobotModel | None``: the model for forward kinematics,
-            asked once, when the robot's state is first needed (None: no kinematics).
+            asked when the robot's state is first needed (None: no kinematics; asked again
+            the next time).
     """
 
     def __init__(self, robot, worker: OnlinePlanner, faults, settings: SupervisorSettings,
