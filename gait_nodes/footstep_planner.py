@@ -536,18 +536,23 @@ class FootstepPlanner(GuardedNode):
         twist = self._requested_twist
 
         def restart(live):
-            fresh = GaitPlanner(self.robot, live.params, base_pose=pose,
-                                swing_timing=live.swing_timing, terrain=live.terrain)
-            fresh.set_velocity(twist, 0.0)
-            return fresh
+            return GaitPlanner(self.robot, live.params, base_pose=pose,
+                               swing_timing=live.swing_timing, terrain=live.terrain)
 
-        self._replace(restart, 'clock')
+        self._replace(restart, 'clock', twist)
         return True
 
-    def _replace(self, make, token) -> None:
-        """Have the worker plan from scratch; the tick waits for it (see :meth:`_on_replaced`)."""
+    def _replace(self, make, token, twist: Twist2D) -> None:
+        """Have the worker plan from scratch; the tick waits for it (see :meth:`_on_replaced`).
+
+        The new plan starts standing where the robot is; ``twist`` is then walked as any new
+        velocity is, from a step boundary the worker can join (the walk's start, with the COM
+        controller holding the robot's measured COM until then).
+        """
         self._replacing = (token, next(self._commands))
         self.worker.submit_replace(make, self._replacing)
+        if not twist.is_zero():
+            self.worker.submit_velocity(twist)
         self.worker.run_pending()
         self._handle_events()
 
@@ -691,13 +696,11 @@ class FootstepPlanner(GuardedNode):
                 pose[2]))
 
         def plan(live):
-            fresh = GaitPlanner(self.robot, live.params, base_pose=pose,
-                                swing_timing=live.swing_timing, start=start,
-                                terrain=live.terrain)
-            fresh.set_velocity(twist, 0.0)
-            return fresh
+            return GaitPlanner(self.robot, live.params, base_pose=pose,
+                               swing_timing=live.swing_timing, start=start,
+                               terrain=live.terrain)
 
-        self._replace(plan, token)
+        self._replace(plan, token, twist)
         where = 'its nominal stance' if start is None else (
             f'the measured footholds, ZMP at {np.round(start.zmp_in_world, 4).tolist()}'
             + (f', landing {[self.robot.foot_names[f] for f in np.flatnonzero(start.airborne())]}'
