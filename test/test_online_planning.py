@@ -249,3 +249,30 @@ def test_a_plan_from_scratch_starts_when_it_is_handed_over():
     (failed,) = [e for e in worker.events() if isinstance(e, online.Replaced)]
     assert isinstance(failed.error, GaitParameterError)
     assert worker.snapshot.generation == 1  # the live plan goes on
+
+
+@pytest.mark.parametrize('first, then', [
+    (Twist2D(0.1), Twist2D(0.05, 0.0, 0.1)),   # walking: a turn
+    (Twist2D(0.1), Twist2D()),                 # walking: stop
+    (Twist2D(), Twist2D(0.1)),                 # standing, stopping: go
+])
+def test_a_change_from_any_time_leaves_the_plan_before_it_as_it_was(first, then):
+    # The worker's join rests on this: a change planned from at_s keeps everything before
+    # at_s (the ZMP reference and the footholds), whatever the step under way then.
+    planner = GaitPlanner(QUADRUPED)
+    planner.set_velocity(Twist2D(0.1), 0.0)
+    planner.advance(6.0)
+    planner.set_velocity(first, 6.0)
+    planner.advance(30.0)
+    before_plan = planner.footstep_plan()
+    for at_s in np.arange(6.0, 16.0, 0.37):
+        fork = planner.fork()
+        fork.set_velocity(then, float(at_s))
+        fork.advance(30.0)
+        times = np.linspace(0.0, at_s, 400)
+        np.testing.assert_allclose(fork.zmp(times), planner.zmp(times), atol=1e-12,
+                                   err_msg=f'the ZMP before {at_s:.2f} s changed')
+        plan = fork.footstep_plan()
+        kept = plan.times_s <= at_s
+        np.testing.assert_allclose(plan.positions_in_world[kept],
+                                   before_plan.positions_in_world[:kept.sum()], atol=1e-12)

@@ -310,6 +310,8 @@ def test_a_paused_walk_resumes_after_resume_after_s_of_fresh_reports_from_the_me
     first = min(output.footsteps.swings(), key=lambda swing: swing.lift_off_s)
     assert first.foot == 'rear_left' and abs(first.end_in_world[2]) < 1e-9
     np.testing.assert_allclose(output.zmp_reference.zmp_in_world[0], com[:2], atol=1e-9)
+    harness.run(4.6, 8.0)  # and walks on at the asked velocity
+    assert harness.core.planner.twist == Twist2D(0.05)
 
 
 def test_a_paused_walk_resumes_only_from_a_state_measured_after_the_reports_are_fresh():

@@ -608,8 +608,11 @@ class GaitPlanner:
         if step.kind == 'stand' or unlifted_stop:
             cut = max(now_s, step.start_s)
             zmp = zmp_reference.sample(step.zmp_times_s, step.zmp_points, np.array([cut]))[0]
-            times = np.array([step.start_s, cut]) if cut > step.start_s else np.array([cut])
-            points = np.array([step.zmp_points[0], zmp]) if cut > step.start_s else zmp[None]
+            # The reference up to the cut as it was planned (and published: a change joins
+            # ahead of what the consumers have), every knot before the cut kept.
+            before = step.zmp_times_s < cut
+            times = np.append(step.zmp_times_s[before], cut)
+            points = np.vstack([step.zmp_points[before], zmp])
             if unlifted_stop:
                 before = self._steps[-2].state_after if len(self._steps) > 1 else self._initial
                 after = dataclasses.replace(before, time_s=cut, zmp=zmp)

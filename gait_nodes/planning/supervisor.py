@@ -575,10 +575,17 @@ class PlannerSupervisor:
         elif token == 'resume' and self._pause is not None:
             self._resumed(now_ns)
 
-    def _replace(self, make, token: str, now_ns: int) -> None:
-        """Have the worker plan from scratch; the tick waits for it (see :meth:`_on_replaced`)."""
+    def _replace(self, make, token: str, twist: Twist2D, now_ns: int) -> None:
+        """Have the worker plan from scratch; the tick waits for it (see :meth:`_on_replaced`).
+
+        The new plan starts standing where the robot is; ``twist`` is then walked as any new
+        velocity is, from a step boundary the worker can join (the walk's start, with the COM
+        controller holding the robot's measured COM until then).
+        """
         self._replacing = (token, next(self._tokens))
         self.worker.submit_replace(make, self._replacing)
+        if not twist.is_zero():
+            self.worker.submit_velocity(twist)
         self.worker.run_pending()
         self._drain(now_ns)
 
@@ -630,13 +637,11 @@ class PlannerSupervisor:
                 self.planner.layout.offsets(self.planner.params.step_width_m), pose[2]))
 
         def plan(live):
-            fresh = GaitPlanner(self.robot, live.params, base_pose=pose,
-                                swing_timing=live.swing_timing, start=start,
-                                terrain=live.terrain)
-            fresh.set_velocity(twist, 0.0)
-            return fresh
+            return GaitPlanner(self.robot, live.params, base_pose=pose,
+                               swing_timing=live.swing_timing, start=start,
+                               terrain=live.terrain)
 
-        self._replace(plan, token, now_ns)
+        self._replace(plan, token, twist, now_ns)
         where = 'its nominal stance' if start is None else (
             f'the measured footholds, ZMP at {np.round(start.zmp_in_world, 4).tolist()}'
             + (f', landing {[self.robot.foot_names[f] for f in np.flatnonzero(start.airborne())]}'
@@ -687,12 +692,10 @@ class PlannerSupervisor:
         twist = self._requested_twist
 
         def restart(live):
-            fresh = GaitPlanner(self.robot, live.params, base_pose=pose,
-                                swing_timing=live.swing_timing, terrain=live.terrain)
-            fresh.set_velocity(twist, 0.0)
-            return fresh
+            return GaitPlanner(self.robot, live.params, base_pose=pose,
+                               swing_timing=live.swing_timing, terrain=live.terrain)
 
-        self._replace(restart, 'clock', now_ns)
+        self._replace(restart, 'clock', twist, now_ns)
         return True
 
     # --- pause while the robot is held ----------------------------------------------------
