@@ -9,11 +9,11 @@ on /gait/command_status are known. It is published once footstep_planner's subsc
 matched (a DDS reader that joins late would miss an earlier sample), and again, with the same
 id, only if no answer came within ``RESEND_S``: the planner applies an id once and answers a
 repeat with the decision it made. ``--vel`` publishes a geometry_msgs/Twist on /cmd_vel. The
-answer is printed as one JSON line: the decision on the command (accepted, rejected or
-superseded, with when it takes effect), with ``--applied`` the second answer when it took
+answer is printed as one JSON line: the decision on the command (accepted or rejected, with
+when it takes effect), with ``--applied`` the second answer when it took
 effect, and for ``--vel`` the velocity the planner reports on /diagnostics.
 
-Exit status: 0 accepted, 1 rejected or superseded, 2 bad command line or no answer within
+Exit status: 0 accepted, 1 rejected, 2 bad command line or no answer within
 ``--timeout``.
 """
 

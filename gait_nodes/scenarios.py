@@ -69,7 +69,7 @@ SCENARIOS: dict[str, Scenario] = {s.name: s for s in (
              'small humanoid on flat ground: start, walk (Lucy\'s sixth-order swing), stop',
              'biped', {'gait': 'biped', 'swing': 'polynomial', 'com_method': 'preview',
                        'step_height_m': 0.1, 'step_period_s': 1.5, 'duty_factor': 0.72},
-             (_vel(0.0, 0.1), _vel(10.0, 0.0)), 16.0),
+             (_vel(0.0, 0.1), _vel(10.0, 0.0)), 21.0),
     # Stride 0.3 m = tread: every other footstep climbs a stair (Lucy's step height delta), and
     # the footholds fall 0.075 m before and after the risers, outside their keep-out zones
     # (foot radius + the swing's toe distance, which the 0.18 m via height keeps short). 0.08 m
@@ -81,7 +81,7 @@ SCENARIOS: dict[str, Scenario] = {s.name: s for s in (
                        'step_height_m': 0.18, 'step_period_s': 2.0, 'duty_factor': 0.72,
                        'stairs_start_x_m': 0.25, 'stairs_rise_m': 0.07, 'stairs_tread_m': 0.3,
                        'stairs_count': 3},
-             (_vel(0.0, 0.075), _vel(12.0, 0.0)), 20.0),
+             (_vel(0.0, 0.075), _vel(12.0, 0.0)), 24.0),
     Scenario('go2_trot',
              'Unitree Go2 (example-robot-data), trot with sway compensation',
              'go2', {'gait': 'trot', 'swing': 'polynomial', 'com_method': 'sway',

@@ -162,3 +162,22 @@ def test_a_flood_of_commands_is_answered_every_one():
         assert decisions['flood-299'] == ['accepted']
     finally:
         runtime.shutdown()
+
+
+def test_a_fixed_timing_the_bipeds_joints_cannot_follow_is_refused():
+    # The biped has no closed-form limb IK: its swings are probed through the whole-body IK
+    # (velocity and acceleration limits). A 0.48 s swing of a 0.24 m stride is too fast.
+    graph = Graph('biped', gait='biped', swing='polynomial', step_period_s=1.5,
+                  duty_factor=0.72, max_vx_m_s=0.1)
+    try:
+        graph.cmd_vel.publish(twist_msg(0.1))
+        graph.spin(4.0)
+        decision = graph.command(json.dumps({'id': 'fast', 'step_period_s': 1.2,
+                                             'duty_factor': 0.8}))
+        assert decision['state'] == 'rejected', decision
+        assert 'the joints cannot follow the swing' in decision['reason']
+        assert decision['params']['step_period_s'] == 1.5
+        ok = graph.command(json.dumps({'id': 'slower', 'step_period_s': 1.7}))
+        assert ok['state'] == 'accepted', ok
+    finally:
+        runtime.shutdown()

@@ -21,7 +21,6 @@ from gait_nodes.planning.online import (
     ACCEPTED,
     APPLIED,
     REJECTED,
-    SUPERSEDED,
     Answer,
     OnlinePlanner,
     VelocityApplied,
@@ -119,7 +118,7 @@ def test_a_change_that_cannot_be_walked_changes_nothing():
     assert all(a is b for a, b in zip(after.steps, before.steps, strict=False))
 
 
-def test_a_waiting_command_is_superseded_and_every_command_is_answered_once():
+def test_commands_waiting_together_are_planned_together_and_each_answered_once():
     clock = FakeClock()
     worker = walking(clock)
     ids = [f'c{k}' for k in range(1000)]
@@ -129,8 +128,9 @@ def test_a_waiting_command_is_superseded_and_every_command_is_answered_once():
     decisions = answers(worker)
     assert sorted(a.command_id for a in decisions) == sorted(ids)
     states = {a.command_id: a.state for a in decisions}
-    assert all(states[i] == SUPERSEDED for i in ids[:-1])
-    assert states[ids[-1]] == ACCEPTED
+    assert all(state == ACCEPTED for state in states.values())
+    assert len({a.takes_effect_ns for a in decisions}) == 1  # one plan for all of them
+    assert 'planned together with' in decisions[0].reason
     assert worker.snapshot.planner.params.step_length_m == pytest.approx(0.1 + 0.0001 * 99)
 
 

@@ -37,7 +37,7 @@ SIM_RATE_HZ = simulator_defaults()['rate_hz']
 
 ROOT = Path(__file__).resolve().parents[1]
 #: Scenario -> (run duration [s], commanded forward speed [m/s], window of steady walking [s]).
-RUNS = {'biped_walk': (16.0, 0.1, (4.5, 9.0)), 'go2_trot': (10.0, 0.1, (3.0, 10.0))}
+RUNS = {'biped_walk': (21.0, 0.1, (4.5, 9.0)), 'go2_trot': (10.0, 0.1, (3.0, 10.0))}
 #: A stance foot's forward kinematics within this of its footstep [m].
 FOOT_TOLERANCE_M = 0.002
 #: The monitor's COM within this of the COM reference [m].
@@ -123,7 +123,9 @@ def test_the_biped_stops_and_stands(inspected, raw):
     series = inspected['biped_walk'].series
     base = np.array(sorted(series.base))
     t = base[:, 0] * 1e-9
-    last = t >= 15.0  # the stop was commanded at 10 s: closing step, then the COM settles
+    # The stop was commanded at 10 s: it joins at a step boundary beyond the published 2.5 s
+    # horizon, then the closing step, then the COM settles.
+    last = t >= 19.0
     assert np.ptp(base[last, 1]) < 1e-3 and np.ptp(base[last, 2]) < 1e-3
     plan = raw['biped_walk']['plans'][-1]
     end_s = (base[-1, 0] - plan.start_ns) * 1e-9

@@ -883,21 +883,19 @@ class GaitPlanner:
                                                       probe, True)
             names = [self.layout.names[f] for f in step.slots[0].feet]
             params = step.params
-            timing = (f'(step_period_s {params.step_period_s:g} s, duty_factor '
-                      f'{params.duty_factor:g}: ')
-            if needed > swing_s * (1.0 + 1e-9):
-                raise GaitParameterError(
-                    f'the joints cannot follow the swing of {names} at '
-                    f'{step.slots[0].lift_off_s:.2f} s: it needs {needed:.3f} s at the joint '
-                    f'velocity and acceleration limits, the plan gives {swing_s:.3f} s {timing}'
-                    f'a longer period or a lower duty factor gives the swings more time, a '
-                    f'shorter stride needs less)')
-            if needed_transfer > transfer_s * (1.0 + 1e-9):
-                raise GaitParameterError(
-                    f'the joints cannot follow the body\'s move before the swing of {names} '
-                    f'at {step.start_s:.2f} s: it needs {needed_transfer:.3f} s at the joint '
-                    f'velocity and acceleration limits, the plan gives {transfer_s:.3f} s '
-                    f'{timing}a longer period or a higher duty factor gives the body more time)')
+            for what, at_s, needed_s, planned_s, more in (
+                    (f'the swing of {names}', step.slots[0].lift_off_s, needed, swing_s,
+                     'a longer period or a lower duty factor gives the swings more time, a '
+                     'shorter stride needs less'),
+                    (f'the body\'s move before the swing of {names}', step.start_s,
+                     needed_transfer, transfer_s,
+                     'a longer period or a higher duty factor gives the body more time')):
+                if needed_s > planned_s * (1.0 + 1e-9):
+                    raise GaitParameterError(
+                        f'the joints cannot follow {what} at {at_s:.2f} s: it needs '
+                        f'{needed_s:.3f} s at the joint velocity and acceleration limits, the '
+                        f'plan gives {planned_s:.3f} s (step_period_s {params.step_period_s:g} '
+                        f's, duty_factor {params.duty_factor:g}: {more})')
 
     def _needed_swing_s(self, gait: str, state: _State, slots: Sequence[SwingSlot],
                         zmp_points: np.ndarray, com_height_m: float, probe=None,

@@ -22,10 +22,12 @@ still be ``lead_s`` ahead of the clock, so that nothing already published change
 that was too slow plans it again from a later ``at_s``, up to :data:`MAX_ATTEMPTS` times, then
 rejects the command as busy.
 
-Gait commands carry an id. Each gets exactly one decision (accepted, rejected, or superseded:
-a newer command arrived before the worker started on it) and, once accepted, a second answer
-when it took effect. A command whose id was already seen is not applied again: it gets the
-decision the first one got (or, still pending, the one it will get).
+Gait commands carry an id. Each gets exactly one decision (accepted or rejected) and, once
+accepted, a second answer when it took effect. Commands that arrive while another waits for the
+worker join it: they are planned together, in the order they came (each a partial change of
+the parameters, the later ones on top), and each is answered with the decision on the whole.
+A command whose id was already seen is not applied again: it gets the decision the first one
+got (or, still pending, the one it will get).
 """
 
 from __future__ import annotations
@@ -55,7 +57,7 @@ CHECK_CYCLES = 2.0
 #: Decisions remembered for repeated ids.
 REMEMBERED_IDS = 1000
 
-ACCEPTED, REJECTED, SUPERSEDED, APPLIED = 'accepted', 'rejected', 'superseded', 'applied'
+ACCEPTED, REJECTED, APPLIED = 'accepted', 'rejected', 'applied'
 #: What a change's ``apply`` returns when it leaves the plan as it is (nothing handed over).
 UNCHANGED = object()
 
@@ -66,9 +68,9 @@ class Answer:
 
     Attributes:
         command_id: The command's id.
-        state: ``accepted``, ``rejected``, ``superseded`` (all three the decision) or
-            ``applied`` (the accepted change took effect).
-        reason: Why (rejected, superseded), or what was accepted.
+        state: ``accepted``, ``rejected`` (the decision) or ``applied`` (the accepted change
+            took effect).
+        reason: Why it was rejected, or when it takes effect.
         text: The command as received.
         params: The gait parameters after the change (accepted, applied) or as they stay.
         takes_effect_ns: ROS time of the step boundary the change takes effect at [ns]
@@ -156,9 +158,8 @@ class Snapshot:
 class _Job:
     kind: str  # 'command' | 'velocity' | 'change' | 'replace' | 'stand'
     payload: object
-    command_id: str = ''
-    text: str = ''
-    submitted_ns: int = 0
+    command_id: str = ''  # a change's key
+    commands: list[tuple[str, str]] = dataclasses.field(default_factory=list)  # (id, text)
 
 
 class OnlinePlanner:
@@ -239,7 +240,8 @@ class OnlinePlanner:
 
         ``apply`` changes the fork of the live plan from ``at_s`` on (e.g.
         ``fork.set_parameters(params, at_s)``) and raises :class:`GaitNodesError` if the change
-        cannot be walked. A command still waiting for the worker is superseded by this one.
+        cannot be walked. A command still waiting for the worker is planned together with this
+        one (this one's changes on top) and both get the decision on the whole.
 
         Returns:
             The answer at once for a repeated id (it is not planned again), else None.
@@ -251,12 +253,13 @@ class OnlinePlanner:
                 return answer
             if command_id in self._pending:
                 return None  # its answer is coming
-            for job in [j for j in self._jobs if j.kind == 'command']:
-                self._jobs.remove(job)
-                self._decide(job, SUPERSEDED, f'superseded by command {command_id!r}, which '
-                             f'came before this one was planned: nothing of it is applied')
             self._pending.add(command_id)
-            self._jobs.append(_Job('command', apply, command_id, text, self._clock_ns()))
+            waiting = next((job for job in self._jobs if job.kind == 'command'), None)
+            if waiting is not None:
+                waiting.payload.append(apply)
+                waiting.commands.append((command_id, text))
+            else:
+                self._jobs.append(_Job('command', [apply], commands=[(command_id, text)]))
         self._wake.set()
         return None
 
@@ -450,12 +453,17 @@ class OnlinePlanner:
                 return UNCHANGED
             applied, notes = fork.set_velocity(job.payload, at_s)
             return applied, tuple(notes)
+        if job.kind == 'command':  # the commands planned together, in the order they came
+            result = None
+            for apply in job.payload:
+                result = apply(fork, at_s)
+            return result
         return job.payload(fork, at_s)
 
     def _refuse(self, job: _Job, reason: str) -> None:
         if job.kind == 'command':
             with self._lock:
-                self._outbox.append(self._decide(job, REJECTED, reason, publish=False))
+                self._outbox.extend(self._decide(job, REJECTED, reason, publish=False))
         elif job.kind == 'velocity':
             self._emit(ChangeRefused('velocity', reason, job.payload))
         else:
@@ -464,10 +472,10 @@ class OnlinePlanner:
     def _handed_over(self, job: _Job, result, takes_effect_ns: int) -> None:
         if job.kind == 'command':
             with self._lock:
-                answer = self._decide(job, ACCEPTED, f'accepted: takes effect at the step '
-                                      f'boundary at {takes_effect_ns * 1e-9:.3f} s',
-                                      takes_effect_ns, publish=False)
-            self._outbox.append(answer)
+                answers = self._decide(job, ACCEPTED, f'accepted: takes effect at the step '
+                                       f'boundary at {takes_effect_ns * 1e-9:.3f} s',
+                                       takes_effect_ns, publish=False)
+            self._outbox.extend(answers)
         elif job.kind == 'velocity':
             applied, notes = result
             self._emit(VelocityApplied(job.payload, applied, notes, takes_effect_ns))
@@ -475,17 +483,28 @@ class OnlinePlanner:
             self._emit(Changed(result, takes_effect_ns))
 
     def _decide(self, job: _Job, state: str, reason: str, takes_effect_ns: int | None = None,
-                publish: bool = True) -> Answer:
-        """Record the decision on ``job`` and emit it unless told not to (the lock held)."""
-        answer = Answer(job.command_id, state, reason, job.text, self._live.params.to_dict(),
-                        takes_effect_ns)
-        self._pending.discard(job.command_id)
-        self._decided[job.command_id] = answer
+                publish: bool = True) -> list[Answer]:
+        """Record the decision on each command of ``job``; emit it unless told not to.
+
+        Called with the lock held.
+        """
+        answers = []
+        ids = [command_id for command_id, _ in job.commands]
+        for command_id, text in job.commands:
+            together = [other for other in ids if other != command_id]
+            note = f' (planned together with {together[:5]}' + (
+                f' and {len(together) - 5} more)' if len(together) > 5 else ')') \
+                if together else ''
+            answer = Answer(command_id, state, reason + note, text,
+                            self._live.params.to_dict(), takes_effect_ns)
+            self._pending.discard(command_id)
+            self._decided[command_id] = answer
+            answers.append(answer)
         while len(self._decided) > REMEMBERED_IDS:
             self._decided.popitem(last=False)
         if publish:
-            self._events.append(answer)
-        return answer
+            self._events.extend(answers)
+        return answers
 
     def _check_applied(self) -> None:
         """Emit APPLIED for the accepted commands whose step boundary has come (lock held)."""
