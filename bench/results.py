@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import subprocess
 import sys
 import tempfile
@@ -28,7 +29,11 @@ from pathlib import Path
 
 import numpy as np
 
-from gait_nodes.scenarios import SCENARIOS
+REPO = Path(__file__).resolve().parent.parent
+if str(REPO) not in sys.path:  # this tree's gait_nodes, not an installed one
+    sys.path.insert(0, str(REPO))
+
+from gait_nodes.scenarios import SCENARIOS  # noqa: E402
 
 
 def stepping_speed(bag: Path) -> float | None:
@@ -51,7 +56,9 @@ def run_scenario(name: str, folder: Path) -> dict:
     command = [sys.executable, '-m', 'gait_nodes', 'run', '--runtime', 'inproc', '--scenario',
                name, '--record', str(folder / name), '--no-plot', '--json']
     started = time.perf_counter()
-    result = subprocess.run(command, capture_output=True, text=True, check=False)
+    path = os.environ.get('PYTHONPATH')
+    env = dict(os.environ, PYTHONPATH=str(REPO) + (os.pathsep + path if path else ''))
+    result = subprocess.run(command, capture_output=True, text=True, env=env, check=False)
     if result.returncode != 0:
         raise SystemExit(f'{" ".join(command)} failed ({result.returncode}):\n{result.stderr}')
     summary = json.loads(result.stdout)
