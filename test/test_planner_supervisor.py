@@ -14,7 +14,6 @@ from planning_helpers import zmp_depths
 
 from gait_nodes.diagnostics import OK, WARN
 from gait_nodes.errors import GaitParameterError
-from gait_nodes.planning import supervisor
 from gait_nodes.planning.footsteps import GaitPlanner, Twist2D
 from gait_nodes.planning.gait_params import GaitParameters
 from gait_nodes.planning.online import OnlinePlanner
@@ -349,7 +348,8 @@ def test_a_resume_that_fails_keeps_the_walk_paused_and_is_tried_again(monkeypatc
         tries.append(harness.now_ns)
         raise GaitParameterError('no plan from there')
 
-    monkeypatch.setattr(supervisor, 'GaitPlanner', failing)
+    anew = GaitPlanner.anew
+    monkeypatch.setattr(GaitPlanner, 'anew', failing)
     harness.measure(state, 4.05)
     output = harness.tick(4.1)
     assert tries == [ns(4.1)] and harness.core.paused
@@ -359,7 +359,7 @@ def test_a_resume_that_fails_keeps_the_walk_paused_and_is_tried_again(monkeypatc
     com = forward_kinematics(*state)[2]
     np.testing.assert_allclose(output.zmp_reference.zmp_in_world, np.tile(com[:2], (2, 1)))
     # Tried again RESUME_AFTER_S after the failure, from a state measured since.
-    monkeypatch.setattr(supervisor, 'GaitPlanner', GaitPlanner)
+    monkeypatch.setattr(GaitPlanner, 'anew', anew)
     harness.measure(state, 4.15)
     harness.run(4.2, 4.1 + RESUME_AFTER_S - 0.1)
     assert harness.core.paused and harness.faults.failing

@@ -423,6 +423,20 @@ class GaitPlanner:
         self._twist, _ = self._clamp(self._requested, self._params)
         self._replan(now_s)
 
+    def anew(self, base_pose: Sequence[float], start: MeasuredStart | None = None
+             ) -> GaitPlanner:
+        """A plan from scratch at ``base_pose`` (from ``start``, if given), standing.
+
+        The robot, the parameters, the swing timing and the terrain are this plan's, and so are
+        the rhythm and velocity caches, which follow from those alone: the new plan walks a
+        velocity this one has walked without searching its fastest rhythm again.
+        """
+        fresh = GaitPlanner(self.robot, self._params, base_pose=base_pose,
+                            swing_timing=self._timing, start=start, terrain=self._terrain)
+        fresh._rhythms, fresh._sways = self._rhythms, self._sways
+        fresh._clamped, fresh._fastest = self._clamped, self._fastest
+        return fresh
+
     def fork(self) -> GaitPlanner:
         """A copy to plan a change on, or to read while this one plans on.
 

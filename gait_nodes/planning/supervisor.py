@@ -637,9 +637,7 @@ class PlannerSupervisor:
                 self.planner.layout.offsets(self.planner.params.step_width_m), pose[2]))
 
         def plan(live):
-            return GaitPlanner(self.robot, live.params, base_pose=pose,
-                               swing_timing=live.swing_timing, start=start,
-                               terrain=live.terrain)
+            return live.anew(pose, start)
 
         self._replace(plan, token, twist, now_ns)
         where = 'its nominal stance' if start is None else (
@@ -692,8 +690,7 @@ class PlannerSupervisor:
         twist = self._requested_twist
 
         def restart(live):
-            return GaitPlanner(self.robot, live.params, base_pose=pose,
-                               swing_timing=live.swing_timing, terrain=live.terrain)
+            return live.anew(pose)
 
         self._replace(restart, 'clock', twist, now_ns)
         return True
