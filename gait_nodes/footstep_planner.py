@@ -244,7 +244,10 @@ class FootstepPlanner(GuardedNode):
         self.timer = self.create_timer(1.0 / self.settings['rate_hz'], self.tick)
         self.create_timer(1.0, self.report_state)
         self.worker.start()
-        parse_gait_command('{}')  # the schema's validator made now, not at the first command
+        # The command checks' first calls made now (the schema's validator, the robot's checks:
+        # a third of a second), not in the first command's callback.
+        parse_gait_command('{}')
+        parameters_from_mapping(params, {}, self.robot)
 
     def _log_rhythm(self, planner: GaitPlanner, params: GaitParameters) -> None:
         """Log the gait and its rhythm (with joint-limit timing: the fastest forward walk)."""
