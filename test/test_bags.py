@@ -330,12 +330,13 @@ def publish_joint_states(seconds: float, until=None) -> list[int]:
     return sent
 
 
-def wait_for_matched_recorder(process, seconds=15.0):
+def wait_for_matched_recorder(*processes, seconds=15.0):
     # The recorder logs once it has subscribed; discovery then takes a moment more.
     deadline = time.monotonic() + seconds
     while time.monotonic() < deadline:
-        if process.poll() is not None:
-            pytest.fail(f'recorder exited early: {process.communicate()}')
+        for process in processes:
+            if process.poll() is not None:
+                pytest.fail(f'recorder exited early: {process.communicate()}')
         time.sleep(0.1)
         if time.monotonic() > deadline - seconds + 2.0:
             return
@@ -376,28 +377,32 @@ def test_recorder_killed_with_sigkill_loses_at_most_one_second(dds, tmp_path):
     assert sorted(independent) == sorted(data for _, _, _, data in reader.messages())
 
 
-@pytest.mark.parametrize('signum', [signal.SIGINT, signal.SIGTERM])
-def test_recorder_stopped_cleanly_writes_summary_and_metadata(dds, tmp_path, signum):
-    bag = tmp_path / 'clean'
-    recorder = start_recorder(bag, '/joint_states')
-    wait_for_matched_recorder(recorder)
-    sent = publish_joint_states(2.0)
-    time.sleep(0.3)
-    recorder.send_signal(signum)
-    _, stderr = recorder.communicate(timeout=15)
-    assert recorder.returncode == 0, stderr
-    report = inspect_bag(bag).report
-    assert report['complete'] and not report['damage']
-    assert report['metadata_check']['matches']
-    # Reliable QoS over loopback: everything published after the first message that arrived
-    # (discovery takes a moment) is in the bag, in order, up to the last one sent.
+def test_recorder_stopped_cleanly_writes_summary_and_metadata(dds, tmp_path):
+    # One stream, two recorders at once: one stopped with SIGINT, the other with SIGTERM.
     from gait_nodes.interfaces import deserialize_message
 
-    joint_state = get_message('sensor_msgs/msg/JointState')
-    indices = [int(deserialize_message(data, joint_state).position[0])
-               for _, _, _, data in BagReader(bag).messages()]
-    assert indices == list(range(indices[0], len(sent))), (indices[:3], len(sent))
-    assert report['message_count'] == len(indices) and indices[0] < len(sent) // 2
+    bags = {signum: tmp_path / f'clean_{signum.name}' for signum in (signal.SIGINT,
+                                                                     signal.SIGTERM)}
+    recorders = {signum: start_recorder(bag, '/joint_states') for signum, bag in bags.items()}
+    wait_for_matched_recorder(*recorders.values())
+    sent = publish_joint_states(2.0)
+    time.sleep(0.3)
+    for signum, recorder in recorders.items():
+        recorder.send_signal(signum)
+    for signum, recorder in recorders.items():
+        _, stderr = recorder.communicate(timeout=15)
+        assert recorder.returncode == 0, (signum.name, stderr)
+        report = inspect_bag(bags[signum]).report
+        assert report['complete'] and not report['damage'], signum.name
+        assert report['metadata_check']['matches'], signum.name
+        # Reliable QoS over loopback: everything published after the first message that
+        # arrived (discovery takes a moment) is in the bag, in order, up to the last one sent.
+        joint_state = get_message('sensor_msgs/msg/JointState')
+        indices = [int(deserialize_message(data, joint_state).position[0])
+                   for _, _, _, data in BagReader(bags[signum]).messages()]
+        assert indices == list(range(indices[0], len(sent))), (signum.name, indices[:3],
+                                                                len(sent))
+        assert report['message_count'] == len(indices) and indices[0] < len(sent) // 2
 
 
 # --- replay -------------------------------------------------------------------------------------

@@ -35,8 +35,13 @@ PARAMS = {'robot': 'robosimian', 'gait': 'crawl', 'swing': 'polynomial',
           'com_method': 'preview', 'step_period_s': 4.0, 'cmd_vel_timeout_s': 2.0}
 VELOCITY_M_S = 0.04
 START_TIMEOUT_S = 60.0
-#: Walking observed after a restart [s]: three crawl steps.
+#: Walking observed after a restart at most [s]: three crawl steps.
 RECOVERY_S = 20.0
+#: Watched on once the walk has gone on (the COM WALKS_ON_M ahead, a paused walk resumed) [s]:
+#: one crawl step, for a late swing back or fault guard. (Measured: the COM is WALKS_ON_M ahead
+#: 2-5 s after a restart, 12 s after the COM controller's, which restarts from standstill; its
+#: lowest point after a restart came within 9 s.)
+SETTLE_S = PARAMS['step_period_s']
 #: "It walks on": the COM at least this far in RECOVERY_S after a restart [m]. The crawl asked
 #: 0.04 m/s walks about 0.012 (RoboSimian's joint limit), its COM moving in the transfers, and
 #: restarts from standstill (weight shift and a 1.8 s transfer); a robot that does not walk on
@@ -257,7 +262,15 @@ def _kill_and_restart(graph: Graph, name: str, consumer: str | None, topic: str,
         ok = graph.spin_until(lambda: graph.statuses(name_of_status, warned, OK),
                               15.0, f'{consumer} to report its {status} OK again')
     plans_before = len(graph.plans)
-    graph.spin(RECOVERY_S)
+    # Until the walk has gone on, then SETTLE_S more, RECOVERY_S at most.
+    walked_from = com_restart if consumer is None else com_held
+    deadline = time.monotonic() + RECOVERY_S
+    while time.monotonic() < deadline and not (
+            graph.com_x() > walked_from + WALKS_ON_M
+            and (not graph.statuses('footstep_planner: walk', killed, WARN)
+                 or graph.statuses('footstep_planner: walk', killed, OK))):
+        graph.spin(0.05)
+    graph.spin(max(0.0, min(SETTLE_S, deadline - time.monotonic())))
     paused = graph.statuses('footstep_planner: walk', killed, WARN)
     resumed = graph.statuses('footstep_planner: walk', killed, OK)
     end = time.monotonic()

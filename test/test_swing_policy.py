@@ -19,7 +19,7 @@ from gait_nodes.swing.policy import SwingPolicy, limb_step, place_swing
 from gait_nodes.swing.polynomial import evaluate, polynomial_swing
 from gait_nodes.swing.sweep import perturbation_test, speed_curve
 from gait_nodes.swing.table import load_table
-from gait_nodes.swing.value_iteration import GridSpec, build_table
+from gait_nodes.swing.value_iteration import build_table
 
 
 @functools.lru_cache(maxsize=1)
@@ -95,9 +95,12 @@ def test_perturbed_paths_are_slower_on_average():
 
 
 def test_speed_curve_has_an_interior_optimum():
-    table, _ = build_table(robot(), FAMILY, STEP_HEIGHT_M, 1.0, goal=[0.7, -0.525, -0.55, 0.0],
-                           grid_spec=GridSpec(x_range_m=(-0.4, 1.1, 31)))
+    # The default table (the node's; its goal 0.75 m ahead, every start behind it reachable):
+    # eq. (2) peaks at a 0.45 m step and drops for the longer ones, which are still feasible,
+    # so the optimum is interior because of the swing times, not because of the grid's reach.
+    table = default_table()
     curve = speed_curve(table)
+    assert np.all(curve.speeds_m_s > 0)
     k = curve.best
     assert 0 < k < len(curve.steps_m) - 1
     assert curve.speeds_m_s[k] > curve.speeds_m_s[0] and curve.speeds_m_s[k] > curve.speeds_m_s[-1]
@@ -405,13 +408,25 @@ def test_interpolated_lookahead_finds_the_same_swing_times_as_the_exact_ik():
 
 
 def test_default_table_is_built_once_in_the_cache(tmp_path, monkeypatch):
+    from gait_nodes.swing import value_iteration
     from gait_nodes.swing.cache import load_or_build
 
+    # The build itself is the default_table() above (built once per process): here, that the
+    # cache asks for exactly that table once, stores it where it says and loads it back.
+    builds = []
+
+    def build_table_once(*args, **kwargs):
+        builds.append((args[1:], kwargs))
+        return default_table(), None
+
+    monkeypatch.setattr(value_iteration, 'build_table', build_table_once)
     monkeypatch.setenv('XDG_CACHE_HOME', str(tmp_path))
     messages = []
     table, path = load_or_build(robot(), FAMILY, STEP_HEIGHT_M, 1.0, log=messages.append)
+    assert builds == [((FAMILY, STEP_HEIGHT_M, 1.0), {})]  # the default grid and goal
     assert path.parent == tmp_path / 'gait_nodes' and path.is_file()
     assert len(messages) == 1 and 'building' in messages[0] and str(path) in messages[0]
     again, same = load_or_build(robot(), FAMILY, STEP_HEIGHT_M, 1.0, log=messages.append)
-    assert same == path and len(messages) == 1
+    assert same == path and len(messages) == 1 and len(builds) == 1
     assert np.array_equal(again.values_s, table.values_s)
+    assert np.array_equal(again.values_s, default_table().values_s)

@@ -330,9 +330,93 @@ def validate_message(msg, where: str | None = None) -> None:
     inproc publish (``GAIT_NODES_STRICT_MESSAGES=1``) so that node code working here also works
     on a real ROS 2 install.
 
+    A message whose every value has its field's plain Python type (``float``, ``int`` in range,
+    ``str``, ``bool``, the exact message class; lists and tuples of them) passes a quick check;
+    any other is checked field by field, value by value, which names the first wrong one.
+
     Raises:
         InterfaceError: Naming the field path, the expected type and the value.
     """
+    cls = type(msg)
+    quick = _quick_checks.get(cls)
+    if quick is None:
+        quick = _quick_check_of(cls)
+    if not quick(msg):
+        _validate_fields(msg, where)
+
+
+#: The quick check of each message class (see :func:`validate_message`).
+_quick_checks: dict[type, object] = {}
+
+
+def _quick_check_of(cls: type):
+    """``check(msg) -> bool``: True only if every field of ``msg`` would pass the full check."""
+    checks = tuple((field.name, _quick_value_check(field)) for field in cls.__msgdef__.fields)
+
+    def check(msg) -> bool:
+        for name, value_ok in checks:
+            if not value_ok(getattr(msg, name)):
+                return False
+        return True
+
+    _quick_checks[cls] = check
+    return check
+
+
+def _quick_value_check(field):
+    """``ok(value) -> bool`` of one field: True only if the full check would pass it."""
+    base = field.base_type
+    if base in ('float32', 'float64'):
+        one, plain = float, True
+    elif base == 'bool':
+        one, plain = bool, True
+    elif base in ('string', 'wstring'):
+        one, plain = str, True
+    elif base in _INT_RANGES:
+        one, plain = int, False
+        low, high = _INT_RANGES[base]
+    else:
+        one, plain = None, False
+        nested = []  # (class, its quick check), looked up on first use
+
+        def nested_ok(value) -> bool:
+            if not nested:
+                cls = generated_class(base)
+                nested.append((cls, _quick_checks.get(cls) or _quick_check_of(cls)))
+            cls, check = nested[0]
+            return type(value) is cls and check(value)
+
+    if field.container is None:
+        if plain:
+            return lambda value: type(value) is one
+        if one is int:
+            return lambda value: type(value) is int and low <= value <= high
+        return nested_ok
+
+    size, fixed = field.size, field.container == 'array'
+    # bytes hold ints in [0, 255]: fine for uint8, byte and char.
+    containers = (list, tuple, bytes, bytearray) if one is int and low <= 0 and high >= 255 \
+        else (list, tuple)
+
+    def sequence_ok(values) -> bool:
+        if type(values) not in containers:
+            return False
+        count = len(values)
+        if (count != size) if fixed else (size and count > size):
+            return False
+        if not count:
+            return True
+        if one is None:
+            return all(map(nested_ok, values))
+        if set(map(type, values)) != {one}:
+            return False
+        return plain or (low <= min(values) and max(values) <= high)
+
+    return sequence_ok
+
+
+def _validate_fields(msg, where: str | None = None) -> None:
+    """The full check of :func:`validate_message`, field by field and value by value."""
     definition = type(msg).__msgdef__
     where = where or definition.type_name
     for field in definition.fields:
