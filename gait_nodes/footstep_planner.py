@@ -267,13 +267,13 @@ class FootstepPlanner(GuardedNode):
 
     @property
     def planner(self) -> GaitPlanner:
-        """The newest finished plan (read it only: the worker changes the plan)."""
-        return self.worker.snapshot.planner
+        """The newest finished plan (:attr:`PlannerSupervisor.planner`)."""
+        return self.core.planner
 
     @property
     def origin_ns(self) -> int:
-        """ROS time of the plan's 0 s [ns]."""
-        return self.worker.snapshot.origin_ns
+        """ROS time of the plan's 0 s [ns] (:attr:`PlannerSupervisor.origin_ns`)."""
+        return self.core.origin_ns
 
     def _now_ns(self) -> int:
         return self.get_clock().now().nanoseconds
