@@ -5,3 +5,7 @@ import os
 # Every message published under inproc is checked as rclpy's setters would check it, so that node
 # code passing here also runs on a real ROS 2 install (see gait_nodes.interfaces.validate_message).
 os.environ.setdefault('GAIT_NODES_STRICT_MESSAGES', '1')
+# One BLAS thread per process (this one and the node processes the tests start). The matrices
+# are small; on two cores shared with a dds graph's processes, the OpenBLAS of Jazzy's numpy
+# 1.26 (0.3.23) spends its extra threads spinning: a fifth more CPU for the same results.
+os.environ.setdefault('OPENBLAS_NUM_THREADS', '1')

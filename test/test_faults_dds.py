@@ -38,7 +38,8 @@ START_TIMEOUT_S = 60.0
 #: Walking observed after a restart at most [s]: three crawl steps.
 RECOVERY_S = 20.0
 #: Watched on once the walk has gone on (the COM WALKS_ON_M ahead, a paused walk resumed) [s]:
-#: one crawl step, for a late swing back or fault guard. (Measured: the COM is WALKS_ON_M ahead
+#: one crawl step, for a late swing back or fault guard; the walk must still be on then (a COM
+#: that swayed just past the mark comes back behind it). (Measured: the COM is WALKS_ON_M ahead
 #: 2-5 s after a restart, 12 s after the COM controller's, which restarts from standstill; its
 #: lowest point after a restart came within 9 s.)
 SETTLE_S = PARAMS['step_period_s']
@@ -262,15 +263,22 @@ def _kill_and_restart(graph: Graph, name: str, consumer: str | None, topic: str,
         ok = graph.spin_until(lambda: graph.statuses(name_of_status, warned, OK),
                               15.0, f'{consumer} to report its {status} OK again')
     plans_before = len(graph.plans)
-    # Until the walk has gone on, then SETTLE_S more, RECOVERY_S at most.
+    # Until the walk has gone on and still has SETTLE_S later, RECOVERY_S at most.
     walked_from = com_restart if consumer is None else com_held
+
+    def walked_on() -> bool:
+        return graph.com_x() > walked_from + WALKS_ON_M and (
+            not graph.statuses('footstep_planner: walk', killed, WARN)
+            or bool(graph.statuses('footstep_planner: walk', killed, OK)))
+
     deadline = time.monotonic() + RECOVERY_S
-    while time.monotonic() < deadline and not (
-            graph.com_x() > walked_from + WALKS_ON_M
-            and (not graph.statuses('footstep_planner: walk', killed, WARN)
-                 or graph.statuses('footstep_planner: walk', killed, OK))):
-        graph.spin(0.05)
-    graph.spin(max(0.0, min(SETTLE_S, deadline - time.monotonic())))
+    while time.monotonic() < deadline:
+        if not walked_on():
+            graph.spin(0.05)
+            continue
+        graph.spin(max(0.0, min(SETTLE_S, deadline - time.monotonic())))
+        if walked_on():
+            break
     paused = graph.statuses('footstep_planner: walk', killed, WARN)
     resumed = graph.statuses('footstep_planner: walk', killed, OK)
     end = time.monotonic()
