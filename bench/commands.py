@@ -18,6 +18,8 @@ own inspection, :mod:`gait_nodes.bag.analysis`):
 - the gait commands: sent, answered, accepted, applied, rejected (with the reasons), superseded,
   the most decisions and 'applied' answers one command got (1: exactly once);
 - ERROR statuses by name, and whether the planner paused or stopped at a safe stand;
+- the whole-body IK's velocity saturation reports (WARN: joints it had to slow down; the plan
+  should never need it);
 - the distance walked.
 
 Then, per node and callback (``GAIT_NODES_CALLBACK_TIMES``: every timer and subscription
@@ -53,6 +55,8 @@ from gait_nodes.scenarios import COMMAND_SCENARIOS, get_scenario  # noqa: E402
 
 #: Seconds a run may take beyond its walk (start-up, a value table, the bag's inspection).
 EXTRA_S = 240.0
+#: The whole-body IK's report of joints it had to slow down.
+SATURATION = 'whole_body_ik: velocity saturation'
 
 
 def run_once(runtime: str, scenario: str, duration_s: float, busy: int, out: Path) -> dict:
@@ -73,12 +77,13 @@ def run_once(runtime: str, scenario: str, duration_s: float, busy: int, out: Pat
         data = json.loads(path.read_text())
         for callback, durations in data['callbacks'].items():
             result['callbacks'].setdefault((data['node'], callback), []).extend(durations)
-    result['errors'], result['pauses'] = bag_reports(bag)
+    result['errors'], result['pauses'], result['saturated'] = bag_reports(bag)
     return result
 
 
-def bag_reports(bag: Path) -> tuple[dict[str, int], int]:
-    """ERROR statuses by name and the planner's pause reports in ``bag``."""
+def bag_reports(bag: Path) -> tuple[dict[str, int], int, list[str]]:
+    """ERROR statuses by name, the planner's pause reports and the IK's saturation WARNs."""
+    from gait_nodes.diagnostics import WARN
     from gait_nodes.bag.reader import BagReader
     from gait_nodes.diagnostics import ERROR, level_value
     from gait_nodes.errors import GaitNodesError
@@ -87,6 +92,7 @@ def bag_reports(bag: Path) -> tuple[dict[str, int], int]:
     array = get_message('diagnostic_msgs/msg/DiagnosticArray')
     errors: dict[str, int] = {}
     statuses = []
+    saturated = []
     try:
         for _, log_ns, _, data in BagReader(bag).messages(topics=['/diagnostics']):
             for status in deserialize_message(data, array).status:
@@ -94,9 +100,11 @@ def bag_reports(bag: Path) -> tuple[dict[str, int], int]:
                 statuses.append((log_ns, status.name, level, status.message))
                 if level >= ERROR:
                     errors[status.name] = errors.get(status.name, 0) + 1
+                if status.name == SATURATION and level >= WARN:
+                    saturated.append(status.message)
     except GaitNodesError as exc:
         errors[f'unreadable bag: {exc}'] = 1
-    return errors, len(pause_reports(statuses))
+    return errors, len(pause_reports(statuses)), saturated
 
 
 def sent_commands(scenario: str) -> int:
@@ -124,6 +132,8 @@ def print_run(result: dict) -> None:
         print(f'    rejected: {reason[:160]}')
     print(f'  ERROR statuses: {result["errors"] or "none"}; planner paused '
           f'{result["pauses"]} time(s)')
+    print(f'  IK velocity saturation reports: {len(result["saturated"])}'
+          + ''.join(f'\n    {message[:160]}' for message in result['saturated'][:5]))
     print(f'  walked {base.get("displacement_m")} m net in {base.get("time_s")} s')
 
 

@@ -21,7 +21,8 @@ linearly, so at its own tick period the foot's velocity changes smoothly).
 
 The swing follows the footstep planner's gait commands: an accepted one on
 /gait/command_status that changes ``swing`` or ``step_height_m`` is walked by the swings that
-lift off from the step boundary it takes effect at (``takes_effect_ns``). A value table for a new
+lift off from the step boundary it takes effect at (``takes_effect_ns``; a ``rescheduled`` answer
+moves it, when a later stop or velocity re-planned the steps before it). A value table for a new
 step height is loaded, or built in a background thread (the walk goes on); until it is there the
 polynomial swing at that height stands in, as the footstep planner times it (the polynomial
 swing's longer times stand in there too until the table's file appears).
@@ -237,7 +238,7 @@ class SwingLegPolicy(GuardedNode):
         """Follow an accepted gait command's swing and step height from when it takes effect."""
         try:
             status = json.loads(msg.data)
-            if status.get('state') != 'accepted':
+            if status.get('state') not in ('accepted', 'rescheduled'):
                 return
             params, takes_effect_ns = status['params'], int(status['takes_effect_ns'])
             swing, height = str(params['swing']), float(params['step_height_m'])

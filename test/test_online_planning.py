@@ -21,6 +21,7 @@ from gait_nodes.planning.online import (
     ACCEPTED,
     APPLIED,
     REJECTED,
+    RESCHEDULED,
     Answer,
     OnlinePlanner,
     VelocityApplied,
@@ -276,3 +277,43 @@ def test_a_change_from_any_time_leaves_the_plan_before_it_as_it_was(first, then)
         kept = plan.times_s <= at_s
         np.testing.assert_allclose(plan.positions_in_world[kept],
                                    before_plan.positions_in_world[:kept.sum()], atol=1e-12)
+
+
+def test_a_stop_that_joins_before_a_commands_boundary_reschedules_it_and_says_so():
+    # A command walkable only from a later boundary; a stop then joins before that boundary:
+    # the stop's steps are planned with the command's settings, so the command takes effect
+    # where the stop joins, and a RESCHEDULED answer says so before that boundary comes.
+    clock = FakeClock()
+    worker = walking(clock)
+    clock.advance(3.3)
+    worker.run_pending()
+    later_than_s = None
+
+    def from_a_later_boundary(fork, at_s):
+        if at_s < later_than_s:
+            raise GaitParameterError('not from this boundary')
+        fork.set_parameters(fork.params.replace(step_length_m=0.15), at_s)
+
+    later_than_s = worker.snapshot.planner.next_boundary_s(3.3 + LEAD_S + online.LEAD_MARGIN_S)
+    worker.submit_command('late', '{}', from_a_later_boundary)
+    worker.run_pending()
+    (decision,) = answers(worker)
+    assert decision.state == ACCEPTED
+    announced_ns = decision.takes_effect_ns
+    worker.submit_velocity(Twist2D())  # stop, joining at the first boundary after its lead
+    worker.run_pending()
+    (moved,) = answers(worker)
+    assert moved.state == RESCHEDULED and moved.command_id == 'late' and moved.accepted
+    assert clock.now_ns + LEAD_S * NS <= moved.takes_effect_ns < announced_ns
+    plan = worker.snapshot.planner
+    new = [step.params.step_length_m == 0.15 for step in plan.steps]
+    first_new = plan.steps[new.index(True)]
+    assert first_new.start_s * NS == pytest.approx(moved.takes_effect_ns, abs=1e3)
+    assert all(new[new.index(True):]) and not any(new[:new.index(True)])
+    clock.advance((moved.takes_effect_ns - clock.now_ns) / NS)
+    worker.run_pending()
+    (applied,) = answers(worker)
+    assert applied.state == APPLIED and applied.takes_effect_ns == moved.takes_effect_ns
+    clock.advance(10.0)
+    worker.run_pending()
+    assert answers(worker) == []  # applied once, rescheduled once

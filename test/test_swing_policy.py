@@ -430,3 +430,31 @@ def test_default_table_is_built_once_in_the_cache(tmp_path, monkeypatch):
     assert same == path and len(messages) == 1 and len(builds) == 1
     assert np.array_equal(again.values_s, table.values_s)
     assert np.array_equal(again.values_s, default_table().values_s)
+
+
+def test_node_follows_a_commands_boundary_where_the_planner_says_and_where_it_moves_it(start):
+    """An accepted command's swing settings from its boundary; a 'rescheduled' answer moves it.
+
+    (A stop joining before the boundary re-plans the steps from there with the new settings:
+    swings lifting off from the new boundary must be the command's.)
+    """
+    import json
+
+    from gait_nodes.swing_leg_policy import SwingLegPolicy
+
+    start('-p', 'robot:=biped', '-p', 'swing:=polynomial', '-p', 'step_height_m:=0.1')
+    talker = runtime.Node('talker', use_global_arguments=False)
+    status = talker.create_publisher(get_message('std_msgs/msg/String'), '/gait/command_status',
+                                     QoSProfile(depth=10))
+    node = SwingLegPolicy()
+    executor = runtime.SingleThreadedExecutor()
+    executor.add_node(talker)
+    executor.add_node(node)
+    params = {'swing': 'polynomial', 'step_height_m': 0.08}
+    for state, at_ns in (('accepted', 30 * 10**9), ('rescheduled', 20 * 10**9)):
+        status.publish(get_message('std_msgs/msg/String')(data=json.dumps(
+            {'id': 'c', 'state': state, 'accepted': True, 'params': params,
+             'takes_effect_ns': at_ns})))
+        executor.spin_for(0.05)
+        assert node._swing_settings(at_ns - 1) == ('polynomial', 0.1)
+        assert node._swing_settings(at_ns) == ('polynomial', 0.08)

@@ -404,13 +404,14 @@ def command_answers(statuses: list[dict]) -> dict:
     ``answered``: commands answered (distinct ids; a status without an id, from an older bag,
     counts alone); ``accepted``, ``rejected``, ``superseded``: their decisions; ``applied``:
     accepted commands that said they took effect; ``repeated``: answers to a repeated id;
+    ``rescheduled``: answers moving an accepted command's boundary (a later stop re-planned it);
     ``most_decisions`` and ``most_applied``: the most decisions (and 'applied' answers) one
     command got, 1 when every command was decided (applied) once; ``rejections``: the
     rejected commands' reasons.
     """
     decisions: dict[object, list[dict]] = {}
     applied: dict[object, int] = {}
-    repeated = 0
+    repeated = rescheduled = 0
     for k, status in enumerate(statuses):
         key = status.get('id', ('no id', k))
         state = status.get('state') or ('accepted' if status.get('accepted') else 'rejected')
@@ -418,6 +419,8 @@ def command_answers(statuses: list[dict]) -> dict:
             repeated += 1
         elif state == 'applied':
             applied[key] = applied.get(key, 0) + 1
+        elif state == 'rescheduled':
+            rescheduled += 1
         else:
             decisions.setdefault(key, []).append({**status, 'state': state})
     first = [answers[0] for answers in decisions.values()]
@@ -426,7 +429,7 @@ def command_answers(statuses: list[dict]) -> dict:
             'accepted': sum(1 for s in first if s['state'] == 'accepted'),
             'rejected': len(rejected),
             'superseded': sum(1 for s in first if s['state'] == 'superseded'),
-            'applied': len(applied), 'repeated': repeated,
+            'applied': len(applied), 'repeated': repeated, 'rescheduled': rescheduled,
             'most_decisions': max((len(a) for a in decisions.values()), default=0),
             'most_applied': max(applied.values(), default=0),
             'rejections': [str(s.get('reason', '')) for s in rejected]}

@@ -264,6 +264,8 @@ class Step:
             i.e. the foot radius; crawl: its depth in the contact-point triangles plus that).
         params: Parameters the step was planned with.
         twist: Twist the step was planned with.
+        settings: Which settings (parameters, swing timing, terrain) the step was planned
+            with: :attr:`GaitPlanner.settings` then (see :meth:`GaitPlanner.settings_from_s`).
     """
 
     gait: str
@@ -279,6 +281,7 @@ class Step:
     params: GaitParameters
     twist: Twist2D
     state_after: _State = dataclasses.field(repr=False, compare=False)
+    settings: int = 0
 
     @property
     def positions_end(self) -> np.ndarray:
@@ -362,6 +365,7 @@ class GaitPlanner:
         params = params or GaitParameters.for_robot(robot)
         params.check_robot(robot)
         self._params = params
+        self._settings = 0  # counts the changes of parameters, timing and terrain
         self._terrain = terrain or FLAT
         self._keep_out_m = check_walkable(self._terrain, robot, params)
         self._timing = swing_timing
@@ -421,6 +425,7 @@ class GaitPlanner:
         # New caches, not emptied ones: a fork (see fork) shares them with the plan it came from.
         self._rhythms, self._clamped, self._fastest = {}, {}, {}
         self._twist, _ = self._clamp(self._requested, self._params)
+        self._settings += 1
         self._replan(now_s)
 
     def anew(self, base_pose: Sequence[float], start: MeasuredStart | None = None
@@ -435,7 +440,28 @@ class GaitPlanner:
                             swing_timing=self._timing, start=start, terrain=self._terrain)
         fresh._rhythms, fresh._sways = self._rhythms, self._sways
         fresh._clamped, fresh._fastest = self._clamped, self._fastest
+        fresh._settings = self._settings
         return fresh
+
+    @property
+    def settings(self) -> int:
+        """Counts the changes of the parameters, the swing timing and the terrain.
+
+        Each step records the count it was planned with (:attr:`Step.settings`).
+        """
+        return self._settings
+
+    def settings_from_s(self, settings: int) -> float | None:
+        """Start [s] of the first planned step with ``settings`` or later ones (None: none yet).
+
+        Where a change is walked from: its step boundary, or an earlier one when a later
+        change (a stop, a new velocity, a stand, a plan from scratch) re-planned the steps
+        before that boundary with the settings in force.
+        """
+        for step in self._steps:
+            if step.settings >= settings:
+                return step.start_s
+        return None
 
     def fork(self) -> GaitPlanner:
         """A copy to plan a change on, or to read while this one plans on.
@@ -517,6 +543,7 @@ class GaitPlanner:
         self._keep_out_m = keep_out_m
         twist, _ = self._clamp(self._requested, params)
         self._params, self._twist = params, twist
+        self._settings += 1
         self._replan(now_s)
 
     @property
@@ -554,6 +581,7 @@ class GaitPlanner:
         self._keep_out_m = check_walkable(terrain, self.robot, params)
         self._params = params
         self._twist, _ = self._clamp(self._requested, params)
+        self._settings += 1
         self._replan(now_s)
 
     def _check_footholds(self, terrain: Staircase, placed: Sequence[np.ndarray],
@@ -868,7 +896,7 @@ class GaitPlanner:
             times = np.concatenate([times[:1], [t0 + hold], times[1:]])
             points = np.concatenate([points[:1], points])
         return Step(gait, kind, t0, t_end, state.positions, state.yaws, tuple(slots), times,
-                    points, kept, params, twist, after_state)
+                    points, kept, params, twist, after_state, self._settings)
 
     def check_joint_speeds(self, probe, from_s: float) -> None:
         """Raise unless the joints can walk every step from ``from_s`` on in its planned time.
@@ -1060,7 +1088,8 @@ class GaitPlanner:
         self._airborne = (heights, touch_down)
         after = dataclasses.replace(state, time_s=touch_down)
         return Step(gait, 'walk', t0, touch_down, state.positions, state.yaws, (slot,),
-                    np.array([t0, touch_down]), points, kept, self._params, self._twist, after)
+                    np.array([t0, touch_down]), points, kept, self._params, self._twist, after,
+                    self._settings)
 
     @staticmethod
     def _start_shift_s(params: GaitParameters) -> float:
@@ -1077,7 +1106,7 @@ class GaitPlanner:
         points = np.array([state.zmp, settled])
         return Step(gait, 'stand', t0, t_end, state.positions, state.yaws, (),
                     np.array([t0, t_end]), points, self._all_down_margin(points, state.positions),
-                    self._params, self._twist, after)
+                    self._params, self._twist, after, self._settings)
 
     def _all_down_margin(self, points: np.ndarray, positions: np.ndarray) -> float:
         return min(support.support_margin(p, positions, self.robot.foot_radius_m)

@@ -54,10 +54,14 @@ JOIN_BOUNDARIES = 3
 BOUNDARY_EPSILON_S = 1e-6
 #: A candidate plan is checked over this many gait cycles after its join.
 CHECK_CYCLES = 2.0
+#: A command's step boundary is said again when the plan moves it by more than this [ns].
+RESCHEDULE_TOLERANCE_NS = 1_000_000
 #: Decisions remembered for repeated ids.
 REMEMBERED_IDS = 1000
 
 ACCEPTED, REJECTED, APPLIED = 'accepted', 'rejected', 'applied'
+#: An accepted command's step boundary moved: a later change re-planned the steps before it.
+RESCHEDULED = 'rescheduled'
 #: What a change's ``apply`` returns when it leaves the plan as it is (nothing handed over).
 UNCHANGED = object()
 
@@ -68,14 +72,16 @@ class Answer:
 
     Attributes:
         command_id: The command's id.
-        state: ``accepted``, ``rejected`` (the decision) or ``applied`` (the accepted change
-            took effect).
+        state: ``accepted``, ``rejected`` (the decision), ``rescheduled`` (the accepted change
+            takes effect at another boundary: a later change, such as a stop, re-planned the
+            steps before the one it was given) or ``applied`` (it took effect).
         reason: Why it was rejected, or when it takes effect.
         text: The command as received.
         params: The gait parameters after the change (accepted, applied) or as they stay.
         takes_effect_ns: ROS time of the step boundary the change takes effect at [ns]
             (accepted, applied), else None.
         repeated: The answer to a command whose id was already seen (not applied again).
+        settings: The plan's :attr:`GaitPlanner.settings` with the change (accepted).
     """
 
     command_id: str
@@ -85,11 +91,12 @@ class Answer:
     params: dict
     takes_effect_ns: int | None = None
     repeated: bool = False
+    settings: int | None = None
 
     @property
     def accepted(self) -> bool:
         """Whether the change is (or will be) walked."""
-        return self.state in (ACCEPTED, APPLIED)
+        return self.state in (ACCEPTED, RESCHEDULED, APPLIED)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -353,12 +360,12 @@ class OnlinePlanner:
             self._publish()
         if self._extend():
             self._publish()
-        if self._outbox:
-            with self._lock:
-                self._events.extend(self._outbox)
-                self._to_apply.extend(event for event in self._outbox
-                                      if isinstance(event, Answer) and event.state == ACCEPTED)
-            self._outbox = []
+        with self._lock:
+            self._events.extend(self._outbox)
+            self._to_apply.extend(event for event in self._outbox
+                                  if isinstance(event, Answer) and event.state == ACCEPTED)
+            self._reschedule()
+        self._outbox = []
 
     def _submit(self, job: _Job, replaces) -> None:
         with self._lock:
@@ -496,7 +503,8 @@ class OnlinePlanner:
                 f' and {len(together) - 5} more)' if len(together) > 5 else ')') \
                 if together else ''
             answer = Answer(command_id, state, reason + note, text,
-                            self._live.params.to_dict(), takes_effect_ns)
+                            self._live.params.to_dict(), takes_effect_ns,
+                            settings=self._live.settings if state == ACCEPTED else None)
             self._pending.discard(command_id)
             self._decided[command_id] = answer
             answers.append(answer)
@@ -505,6 +513,30 @@ class OnlinePlanner:
         if publish:
             self._events.extend(answers)
         return answers
+
+    def _reschedule(self) -> None:
+        """Answer RESCHEDULED for the accepted commands the live plan walks from elsewhere.
+
+        A stop, a velocity or a stand planned after a command may join before the command's
+        boundary: the steps from there are planned with the settings in force, the command's
+        among them, so it takes effect there (:meth:`GaitPlanner.settings_from_s`). Its new
+        boundary is said, and followed (the swing-leg policy), before it comes: the join keeps
+        the lead. Called with the lock held.
+        """
+        for k, answer in enumerate(self._to_apply):
+            from_s = self._live.settings_from_s(answer.settings)
+            if from_s is None:
+                continue
+            takes_effect_ns = self._origin_ns + int(round(from_s * NS_PER_S))
+            if abs(takes_effect_ns - answer.takes_effect_ns) < RESCHEDULE_TOLERANCE_NS:
+                continue
+            moved = dataclasses.replace(
+                answer, state=RESCHEDULED, takes_effect_ns=takes_effect_ns,
+                reason=f'rescheduled: a later change re-planned the steps before its boundary; '
+                       f'takes effect at the step boundary at {takes_effect_ns * 1e-9:.3f} s')
+            self._to_apply[k] = dataclasses.replace(moved, state=ACCEPTED)
+            self._decided[answer.command_id] = moved
+            self._events.append(moved)
 
     def _check_applied(self) -> None:
         """Emit APPLIED for the accepted commands whose step boundary has come (lock held)."""
