@@ -90,6 +90,7 @@ from gait_nodes.robot.whole_body_ik import (
     nominal_configuration,
     robosimian_limb_ik,
     seed_configuration,
+    walking_vertical,
 )
 from gait_nodes.runtime import QoSProfile, SetParametersResult, qos_profile_latched
 from gait_nodes.settings import checked_number as _number
@@ -160,12 +161,15 @@ class WholeBodyIkParams:
                                          low_open=True),
         )
 
-    def ik_settings(self) -> IkSettings:
-        """Solver settings from these parameters."""
+    def ik_settings(self, vertical: str) -> IkSettings:
+        """Solver settings from these parameters.
+
+        ``vertical``: the robot's (:func:`gait_nodes.robot.whole_body_ik.walking_vertical`).
+        """
         return IkSettings(max_iterations=self.max_iterations,
                           position_tolerance_m=self.position_tolerance_m,
                           orientation_tolerance_rad=self.position_tolerance_m,
-                          com_tolerance_m=self.com_tolerance_m)
+                          com_tolerance_m=self.com_tolerance_m, vertical=vertical)
 
 
 class _Window:
@@ -196,7 +200,8 @@ class WholeBodyIk(GuardedNode):
             {name: self.get_parameter(name).value for name in defaults})
         self.robot = load_robot_model(self.params.robot)
         self._family = self._checked_family(self.params.ik_family)
-        self.solver = WholeBodyIkSolver(self.robot, self.params.ik_settings())
+        self.solver = WholeBodyIkSolver(self.robot,
+                                        self.params.ik_settings(walking_vertical(self.robot)))
         self.q_nominal = nominal_configuration(self.robot, self._family)
         self._q_solution = self.q_nominal.copy()
         # The last knot's configuration (the posture held before motion): the next step's start.
@@ -278,7 +283,7 @@ class WholeBodyIk(GuardedNode):
                 raise ParameterError(f'robot is fixed at start ({self.params.robot}); restart '
                                      f'the node to change it')
             family = self._checked_family(params.ik_family)
-            settings = params.ik_settings()
+            settings = params.ik_settings(walking_vertical(self.robot))
         except GaitNodesError as exc:
             return SetParametersResult(successful=False, reason=str(exc))
         if params.rate_hz != self.params.rate_hz:

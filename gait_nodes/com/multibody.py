@@ -29,6 +29,7 @@ from gait_nodes.robot.whole_body_ik import (
     current_swing,
     fallback_swing_pose,
     seed_configuration,
+    walking_vertical,
 )
 
 #: Most IK solves spent on the first sample of a trajectory.
@@ -67,7 +68,7 @@ def robot_multibody_zmp(robot: RobotModel, plan: FootstepPlan, times_s: np.ndarr
         step_height_m: Swing apex height of the fallback swing [m].
     """
     feet, foot_yaws = planned_feet(robot, plan, times_s, step_height_m)
-    solver = WholeBodyIkSolver(robot, IkSettings())
+    solver = WholeBodyIkSolver(robot, IkSettings(vertical=walking_vertical(robot)))
 
     def multibody_zmp(body_in_world: np.ndarray) -> np.ndarray:
         configurations = np.zeros((len(times_s), robot.model.nq))

@@ -53,12 +53,18 @@ class IkSettings:
         position_tolerance_m: Foot position error below which a foot is on target [m].
         orientation_tolerance_rad: Sole orientation error below which it is on target [rad].
         com_tolerance_m: COM error below which the COM is on target [m].
+        vertical: What the COM target's height sets: ``'com'`` (default) the full-model COM's
+            height itself; ``'base'`` the body's height, ``com_z + body_height_m -
+            com_height_m`` (the robot YAML's heights: the base where it is at the nominal
+            stance when the COM is there), the horizontal COM still on its target. The walk
+            uses :func:`walking_vertical`'s choice for the robot.
     """
 
     max_iterations: int = 20
     position_tolerance_m: float = 1e-6
     orientation_tolerance_rad: float = 1e-6
     com_tolerance_m: float = 1e-6
+    vertical: str = 'com'
 
     def __post_init__(self):
         if isinstance(self.max_iterations, bool) or not isinstance(self.max_iterations, int) \
@@ -69,6 +75,21 @@ class IkSettings:
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and 1e-12 <= value <= 1e-2):
                 raise ParameterError(f'{name} must be in [1e-12, 1e-2], got {value!r}')
+        if self.vertical not in ('base', 'com'):
+            raise ParameterError(f"vertical must be 'base' or 'com', got {self.vertical!r}")
+
+
+def walking_vertical(robot: RobotModel) -> str:
+    """The vertical task of every solver of ``robot``'s walk (:attr:`IkSettings.vertical`).
+
+    The IK node, the planner's timing probes and the multi-mass correction use it, so that they
+    agree. A quadruped carries its body at a constant height (``'base'``; thesis III.B: the
+    COB's trajectory is planned, the cart-table COM at a constant height): holding the COM's
+    own height instead bobs the body against every lifted limb (a centimetre for RoboSimian's
+    15 % limbs), and its swinging limb's joints run faster by as much. A biped keeps its COM at
+    the linear inverted pendulum's height (``'com'``), as humanoid walkers do.
+    """
+    return 'base' if robot.description.kind == 'quadruped' else 'com'
 
 
 @dataclass(frozen=True)
@@ -168,6 +189,10 @@ class WholeBodyIkSolver:
         self._q_lower[self._q_idx] = self._lower
         self._q_upper[self._q_idx] = self._upper
         self._work: dict[bool, _Workspace] = {}
+        #: Base height minus the COM target's height with ``vertical: base`` (else None).
+        self._base_above_com = (float(robot.description.body_height_m
+                                      - robot.description.com_height_m)
+                                if self.settings.vertical == 'base' else None)
 
     def _workspace(self, free_base: bool) -> _Workspace:
         work = self._work.get(free_base)
@@ -259,6 +284,8 @@ class WholeBodyIkSolver:
         if orient:
             work.aim_soles(foot_yaws_rad, self._offsets)
         com_target = np.asarray(com_in_world, dtype=float) if free_base else None
+        base_height = (None if not free_base or self._base_above_com is None
+                       else float(com_target[2]) + self._base_above_com)
         error, full = work.error, work.full
         placements_flat, error_map, mapped = work.placements_flat, work.error_map, work.mapped
         traces, com_error = work.traces, work.com_error
@@ -286,6 +313,8 @@ class WholeBodyIkSolver:
             if free_base:
                 np.subtract(com_target, pin.centerOfMass(
                     model, data, pin.KinematicLevel.POSITION, False), out=com_error)
+                if base_height is not None:  # the body's height, not the COM's
+                    com_error[2] = base_height - q[2]
             squares = error * error
             # Every foot's and the COM's squared error over its squared tolerance (at most 1
             # each when converged), then the plain sum of squares (the damping).
@@ -300,6 +329,8 @@ class WholeBodyIkSolver:
                 view[...] = block[:3] if point_feet else block
             if free_base:
                 com_block[...] = pin.jacobianCenterOfMass(model, data, False)
+                if base_height is not None:
+                    com_block[2] = 0.0  # the row is the base's height: its column alone
             full.take(columns, 1, jacobian, 'clip')  # the unknowns' columns (all valid)
             # Levenberg-Marquardt step (J^T J + lambda I) dx = J^T e, by Cholesky.
             np.matmul(transposed, jacobian, out=normal)  # (matmul's syrk)
