@@ -83,9 +83,8 @@ def run_once(runtime: str, scenario: str, duration_s: float, busy: int, out: Pat
 
 def bag_reports(bag: Path) -> tuple[dict[str, int], int, list[str]]:
     """ERROR statuses by name, the planner's pause reports and the IK's saturation WARNs."""
-    from gait_nodes.diagnostics import WARN
     from gait_nodes.bag.reader import BagReader
-    from gait_nodes.diagnostics import ERROR, level_value
+    from gait_nodes.diagnostics import ERROR, WARN, level_value
     from gait_nodes.errors import GaitNodesError
     from gait_nodes.interfaces import deserialize_message, get_message
 

@@ -81,7 +81,8 @@ def build_parser() -> ArgumentParser:
     run.add_argument('--robot', default=None,
                      help="robot name in config/robots/ or a robot YAML (default: the "
                           "scenario's)")
-    run.add_argument('--gait', default=None, help='gait: biped | crawl | trot | auto')
+    run.add_argument('--gait', default=None,
+                     help='gait: biped | crawl | static_crawl | trot | auto')
     run.add_argument('--nodes', default=None,
                      help=f'comma-separated subset of {",".join(graph.NODES)}')
     run.add_argument('--namespace', metavar='NS', default=None,

@@ -26,7 +26,8 @@ from gait_nodes.robot.description import load_robot_description
 
 #: Simulated seconds per scenario: two crawl cycles (about 17 s each) after the first swing; the
 #: online scenario changes its walk until 28 s (each change joins beyond the published horizon).
-DURATIONS_S = {'robosimian_crawl': 38.0, 'robosimian_crawl_polynomial': 38.0, 'online': 38.0}
+DURATIONS_S = {'robosimian_crawl': 38.0, 'robosimian_crawl_polynomial': 38.0, 'online': 38.0,
+               'robosimian_static_crawl': 38.0, 'robosimian_gait_switch': 38.0}
 #: The first swing lifts off this soon after the first /cmd_vel [s]: the planner's lead from
 #: standstill (0.6 s, the COM states its controller has committed, and 0.3 s to reach it:
 #: gait_nodes.footstep_planner.STANDING_LEAD_S, gait_nodes.planning.online.LEAD_MARGIN_S), the
@@ -256,3 +257,45 @@ def test_online_commands_take_effect_and_invalid_ones_are_rejected(bags):
             trot.setdefault(swing['lift_off_ns'], set()).add(swing['foot'])
     assert any(feet in ({'front_left', 'rear_right'}, {'front_right', 'rear_left'})
                for feet in trot.values())
+
+
+def test_the_static_crawl_holds_the_body_still_under_every_swing_and_outwalks_the_zmp_crawl(
+        bags):
+    """Thesis eq. (2) walked: the body (/tf) still while a foot swings, moving only between.
+
+    Judged from the bag: the base's horizontal speed and height over every executed swing
+    (its lift-off and lowering excepted by a tick), and the net speed against the ZMP crawl's
+    on the same robot, joint limit and value table.
+    """
+    _, inspection = bags('robosimian_static_crawl')
+    base = np.array(sorted(inspection.series.base), dtype=float)  # stamp, x, y, z, yaw
+    t = base[:, 0] * 1e-9
+    speed = np.hypot(*np.gradient(base[:, 1:3], t, axis=0).T)
+    swings = executed(inspection.series.plans, int(base[-1, 0]))
+    assert len(swings) >= 12
+    swinging = np.zeros(len(t), bool)
+    for swing in swings:
+        inside = (t > swing['lift_off_ns'] * 1e-9 + 0.02) & (t < swing['touch_down_ns'] * 1e-9
+                                                              - 0.02)
+        drift = np.hypot(*(base[inside, 1:3] - base[inside][0, 1:3]).T)
+        assert drift.max() < 0.003, swing  # still: within 3 mm of where it was at lift-off
+        assert np.ptp(base[inside, 3]) < 0.001, swing  # at one height: within 1 mm
+        swinging |= inside
+    assert speed[~swinging].max() > 0.1  # the body does move, with every foot down
+    _, zmp_crawl = bags('robosimian_crawl')
+
+    def net_speed(report):
+        return report.report['gait']['base']['net_speed_m_s']
+
+    assert net_speed(inspection) > 1.8 * net_speed(zmp_crawl)
+
+
+def test_a_switch_to_the_static_crawl_and_back_is_applied_once_each_and_walked(bags):
+    path, inspection = bags('robosimian_gait_switch')
+    commands = inspection.report['gait']['commands']
+    assert commands['accepted'] == 2 and commands['applied'] == 2
+    assert commands['most_decisions'] == 1 and commands['most_applied'] == 1
+    # Each gait walked: the planner said so, from the boundary the command took effect at.
+    said = [d[3] for d in _diagnostic_values(path) if d[1] == 'footstep_planner: gait']
+    walked = [m.split(',')[0] for m in said if m.endswith('walking')]
+    assert walked.index('static_crawl') < len(walked) - 1 - walked[::-1].index('crawl')

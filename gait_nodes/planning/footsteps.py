@@ -57,6 +57,8 @@ RETIMING_ALLOWANCE = 0.02
 MAX_RETIMING = 4
 #: Time from a measured start with feet in the air to their landing swing's lift-off [s].
 LANDING_LEAD_S = 0.2
+#: Largest spacing of a static crawl's ZMP reference samples [s].
+STILL_SAMPLE_S = 0.05
 #: A measured foot on the ground further than this from it [m] is planned where it is (its
 #: measured height kept) until it first steps: a foothold put this much lower in one tick would
 #: jolt the stance.
@@ -266,6 +268,8 @@ class Step:
         twist: Twist the step was planned with.
         settings: Which settings (parameters, swing timing, terrain) the step was planned
             with: :attr:`GaitPlanner.settings` then (see :meth:`GaitPlanner.settings_from_s`).
+        bases: A static crawl's base positions (x, y, z) before its body move and during its
+            swings [m] (None for the other gaits).
     """
 
     gait: str
@@ -282,6 +286,8 @@ class Step:
     twist: Twist2D
     state_after: _State = dataclasses.field(repr=False, compare=False)
     settings: int = 0
+    bases: tuple[np.ndarray, np.ndarray] | None = dataclasses.field(default=None, repr=False,
+                                                                    compare=False)
 
     @property
     def positions_end(self) -> np.ndarray:
@@ -496,9 +502,9 @@ class GaitPlanner:
                 self._rhythms.clear()
             gait = params.resolved_gait(self.robot)
             try:
+                timing = self._still_body() if gait == 'static_crawl' else self._timing
                 self._rhythms[key] = rhythm_module.walking_rhythm(gait, self.layout, params,
-                                                                  twist, self._timing,
-                                                                  self._sways)
+                                                                  twist, timing, self._sways)
             except GaitParameterError as exc:
                 self._rhythms[key] = exc
         result = self._rhythms[key]
@@ -876,9 +882,16 @@ class GaitPlanner:
             next_group=group_index + 1, rest_pose=rest, last_anchor=last_anchor,
             measured=(state.measured.difference(*(slot.feet for slot in slots))
                       if mode == 'walking' else frozenset()), **path)
-        needed = self._needed_swing_s(gait, state, slots, points, params.com_height_m)
+        bases = (self._still_bases(state, slots, points[1])
+                 if gait == 'static_crawl' and slots else None)
+        # (A static crawl is timed for the joints' acceleration limits too: its swings and
+        # moves run at the limits, the limb's own, with nothing else to slow them.)
+        still = bases is not None
+        needed = self._needed_swing_s(gait, state, slots, points, params.com_height_m,
+                                      with_acceleration=still, bases=bases)
         transfer = params.transfer_s(gait)
-        needed_transfer = self._needed_transfer_s(state, points, params.com_height_m)
+        needed_transfer = self._needed_transfer_s(state, points, params.com_height_m,
+                                                  with_acceleration=still, bases=bases)
         if (needed > swing * (1.0 + 1e-9) or needed_transfer > transfer * (1.0 + 1e-9)) \
                 and retimed < MAX_RETIMING:
             swing = max(swing, needed * (1.0 + RETIMING_ALLOWANCE))
@@ -888,15 +901,21 @@ class GaitPlanner:
                            needed_transfer * (1.0 + RETIMING_ALLOWANCE))
             return self._next_step(state, (swing, transfer), retimed + 1,
                                    planned or (chosen, t_end))
-        if extra > 0.0 and kind == 'walk':
+        hold = START_HOLD_FRACTION * extra if kind == 'walk' else 0.0
+        if bases is not None:
+            times, points, kept = self._still_body_zmp(state, slots, bases, t0 + hold, t1)
+            if hold > 0.0:
+                times, points = np.concatenate([[t0], times]), np.concatenate([points[:1],
+                                                                               points])
+            after_state = dataclasses.replace(after_state, zmp=points[-1])
+        elif hold > 0.0:
             # From standstill the ZMP stays put for part of the weight shift: the plan reaches
             # the COM controller when the command comes, and a ZMP that starts moving at once
             # leaves it no preview for the pendulum's initial counter-move.
-            hold = START_HOLD_FRACTION * extra
             times = np.concatenate([times[:1], [t0 + hold], times[1:]])
             points = np.concatenate([points[:1], points])
         return Step(gait, kind, t0, t_end, state.positions, state.yaws, tuple(slots), times,
-                    points, kept, params, twist, after_state, self._settings)
+                    points, kept, params, twist, after_state, self._settings, bases)
 
     def check_joint_speeds(self, probe, from_s: float) -> None:
         """Raise unless the joints can walk every step from ``from_s`` on in its planned time.
@@ -919,10 +938,10 @@ class GaitPlanner:
             points = step.zmp_points[-3:] if len(step.zmp_points) > 3 else step.zmp_points
             swing_s = min(slot.touch_down_s - slot.lift_off_s for slot in step.slots)
             needed = self._needed_swing_s(step.gait, before, step.slots, points,
-                                          step.params.com_height_m, probe, True)
+                                          step.params.com_height_m, probe, True, step.bases)
             transfer_s = step.slots[0].lift_off_s - step.start_s
             needed_transfer = self._needed_transfer_s(before, points, step.params.com_height_m,
-                                                      probe, True)
+                                                      probe, True, step.bases)
             names = [self.layout.names[f] for f in step.slots[0].feet]
             params = step.params
             for what, at_s, needed_s, planned_s, more in (
@@ -941,48 +960,141 @@ class GaitPlanner:
 
     def _needed_swing_s(self, gait: str, state: _State, slots: Sequence[SwingSlot],
                         zmp_points: np.ndarray, com_height_m: float, probe=None,
-                        with_acceleration: bool = False) -> float:
+                        with_acceleration: bool = False, bases=None) -> float:
         """Longest time [s] the swings of ``slots`` need at the joint limit (0: no model).
 
         Each swing is probed where it happens (:meth:`gait_nodes.swing.timing.SwingTiming.
         step_s`): the other feet where they stand, the COM over the ZMP reference of the swing
-        (held at the step's knot in a crawl or biped step, moving along the diagonal in a trot).
+        (held at the step's knot in a crawl or biped step, moving along the diagonal in a trot);
+        in a static crawl (``bases`` given), the body still at ``bases[1]``
+        (:meth:`gait_nodes.swing.still_body.StillBody.step_s`).
         """
         if probe is None and (self._params.timing != 'joint_limit' or self._timing is None) \
                 or not slots:
             return 0.0
         probe = probe or self._timing
-        from gait_nodes.contract import Swing
-
         centre = zmp_points[1] if gait != 'trot' else 0.5 * (zmp_points[1] + zmp_points[2])
         needed = 0.0
+        for feet, yaws, swings in self._slot_swings(state, slots):
+            body_yaw = float(np.angle(np.exp(1j * yaws).sum()))
+            if bases is not None:  # a static crawl: the body still at its base
+                time_s = self._still_body(probe).step_s(swings, feet, yaws, body_yaw,
+                                                        bases[1], with_acceleration)
+            else:
+                com = np.array([centre[0], centre[1], com_height_m + feet[:, 2].min()])
+                time_s = probe.step_s(swings, feet, yaws, body_yaw, com, with_acceleration)
+            needed = max(needed, time_s)
+        return needed
+
+    def _slot_swings(self, state: _State, slots: Sequence[SwingSlot]):
+        """Per slot: the feet (F, 3) and yaws (F,) before it and its swings (foot -> Swing)."""
+        from gait_nodes.contract import Swing
+
         positions, yaws = state.positions, state.yaws
         for slot in slots:
-            body_yaw = float(np.angle(np.exp(1j * yaws).sum()))
             feet = self._with_heights(positions)
             landing = self._with_heights(slot.positions_after)
-            com = np.array([centre[0], centre[1], com_height_m + feet[:, 2].min()])
-            swings = {foot: Swing(self.layout.names[foot], slot.lift_off_s, slot.touch_down_s,
-                                  feet[foot], landing[foot],
-                                  float(yaws[foot]), float(slot.yaws_after[foot]))
-                      for foot in slot.feet}
-            needed = max(needed, probe.step_s(swings, feet, yaws, body_yaw, com,
-                                              with_acceleration))
+            yield feet, yaws, {foot: Swing(self.layout.names[foot], slot.lift_off_s,
+                                           slot.touch_down_s, feet[foot], landing[foot],
+                                           float(yaws[foot]), float(slot.yaws_after[foot]))
+                               for foot in slot.feet}
             positions, yaws = slot.positions_after, slot.yaws_after
-        return needed
+
+    def _still_body(self, probe=None):
+        """The body-still view of the swing timing model (the static crawl's).
+
+        Raises:
+            GaitParameterError: No swing timing model (the static crawl needs one).
+        """
+        from gait_nodes.swing.still_body import still_body_of
+
+        probe = probe or self._timing
+        if probe is None:
+            raise GaitParameterError('gait static_crawl needs a swing timing model (closed-form '
+                                     'limb IK): the body is placed under each swing')
+        return still_body_of(probe)
+
+    def _still_bases(self, state: _State, slots: Sequence[SwingSlot], knot: np.ndarray
+                     ) -> tuple[np.ndarray, np.ndarray]:
+        """(base before the body's move, base during the swings) of a static-crawl step [m].
+
+        The full-model COM is over the step's first ZMP point with the feet where the step
+        starts, and over its knot (:func:`zmp_reference.crawl_knots`, the thesis' ZMP) with the
+        feet between the swings.
+        """
+        still = self._still_body()
+        feet = self._with_heights(state.positions)
+        height = self.robot.body_height_m + feet[:, 2].min()
+        yaw = float(np.angle(np.exp(1j * state.yaws).sum()))
+        before = still.base_for_com(state.zmp, height, yaw, feet, state.yaws)
+        between = still.base_for_com(knot, height, yaw,
+                                     self._with_heights(slots[0].positions_after),
+                                     slots[0].yaws_after)
+        return before, between
+
+    def _still_body_zmp(self, state: _State, slots: Sequence[SwingSlot],
+                        bases: tuple[np.ndarray, np.ndarray], move_from_s: float,
+                        move_to_s: float) -> tuple[np.ndarray, np.ndarray, float]:
+        """(times, points, margin) of a static-crawl step's ZMP reference.
+
+        The base moves from ``bases[0]`` to ``bases[1]`` between ``move_from_s`` and
+        ``move_to_s`` (:func:`gait_nodes.swing.still_body.body_move`, every foot down) and
+        stands still through the swings; the COM of the full model follows (the swinging
+        limbs' mass included,
+        :meth:`gait_nodes.swing.still_body.StillBody.com`) and the reference is its cart-table
+        ZMP, sampled every :data:`STILL_SAMPLE_S` or so. The margin is the least over the
+        samples of the distance inside the support polygon of the feet down then (foot discs).
+        """
+        from gait_nodes.swing.still_body import body_move, cart_table_zmp
+
+        still = self._still_body()
+        yaw = float(np.angle(np.exp(1j * state.yaws).sum()))
+        feet = self._with_heights(state.positions)
+        count = max(int(math.ceil((move_to_s - move_from_s) / STILL_SAMPLE_S)), 2)
+        times = [np.linspace(move_from_s, move_to_s, count + 1)]
+        fraction = body_move((times[0] - move_from_s) / (move_to_s - move_from_s))
+        base = bases[0] + fraction[:, None] * (bases[1] - bases[0])
+        coms = [still.com(base, yaw, np.repeat(feet[None], count + 1, axis=0),
+                          np.repeat(state.yaws[None], count + 1, axis=0))]
+        stances = [(count + 1) * [state.positions]]
+        for (before, yaws, swings), slot in zip(self._slot_swings(state, slots), slots,
+                                                strict=True):
+            count = max(int(math.ceil((slot.touch_down_s - slot.lift_off_s) / STILL_SAMPLE_S)),
+                        2)
+            t = np.linspace(slot.lift_off_s, slot.touch_down_s, count + 1)[1:]
+            u = (t - slot.lift_off_s) / (slot.touch_down_s - slot.lift_off_s)
+            placed, placed_yaws = still.swing_feet(swings, before, yaws, yaw, u)
+            times.append(t)
+            coms.append(still.com(np.repeat(bases[1][None], len(t), axis=0), yaw, placed,
+                                  placed_yaws))
+            stance = [f for f in range(self.layout.count) if f not in slot.feet]
+            stances.append(len(t) * [before[stance, :2]])
+        times, com = np.concatenate(times), np.concatenate(coms)
+        points = cart_table_zmp(times, com, float(com[:, 2].mean() - feet[:, 2].min()))
+        stances = [positions for group in stances for positions in group]
+        margin = min(support.support_margin(p, positions, self.robot.foot_radius_m)
+                     for p, positions in zip(points, stances, strict=True))
+        return times, points, margin
 
     def _needed_transfer_s(self, state: _State, zmp_points: np.ndarray,
                            com_height_m: float, probe=None,
-                           with_acceleration: bool = False) -> float:
+                           with_acceleration: bool = False, bases=None) -> float:
         """Least time [s] of the step's transfer, the COM following the ZMP's move (0: none).
 
         :meth:`gait_nodes.swing.timing.SwingTiming.transfer_s` with the feet where they stand
-        and the COM moved from the first ZMP knot to the second (the end of the transfer).
+        and the COM moved from the first ZMP knot to the second (the end of the transfer); in a
+        static crawl (``bases`` given) the base moved from ``bases[0]`` to ``bases[1]``
+        (:meth:`gait_nodes.swing.still_body.StillBody.transfer_s`).
         """
         if probe is None and (self._params.timing != 'joint_limit' or self._timing is None) \
                 or len(zmp_points) < 3:
             return 0.0
         probe = probe or self._timing
+        if bases is not None:
+            return self._still_body(probe).transfer_s(
+                self._with_heights(state.positions), state.yaws,
+                float(np.angle(np.exp(1j * state.yaws).sum())), bases[0], bases[1],
+                with_acceleration)
         feet = self._with_heights(state.positions)
         height = com_height_m + feet[:, 2].min()
         com_from, com_to = (np.array([*point, height]) for point in zmp_points[:2])
@@ -1124,6 +1236,17 @@ class GaitPlanner:
                     self.robot.foot_radius_m)
         before = [state.positions] + [slot.positions_after for slot in slots[:-1]]
         region = [(slot.feet, positions) for slot, positions in zip(slots, before, strict=True)]
+        if gait == 'static_crawl':
+            # The COM over the middle of the feet between the swings, where every stance limb
+            # is as near its nominal place as the stride allows, moved into the region by as
+            # little as the margin needs (a sideways move costs RoboSimian's stance limbs
+            # twice the joint travel of a forward one). The margin the step keeps is measured
+            # on the ZMP it makes (_still_body_zmp).
+            target = slots[0].positions_after.mean(axis=0)
+            knots, _ = zmp_reference.crawl_knots(self.layout, region, target,
+                                                 self._params.zmp_margin_m, state.zmp,
+                                                 target_is_point=True)
+            return knots, self.robot.foot_radius_m
         knots, kept = zmp_reference.crawl_knots(self.layout, region, slots[0].positions_after,
                                                 self._params.zmp_margin_m, state.zmp)
         return knots, kept + self.robot.foot_radius_m

@@ -14,6 +14,10 @@ trot     one diagonal pair, together                 Kurazume 2.1: on the diagon
                                                      the support pair
 crawl    one lateral pair, hind then fore            thesis III.B.1: from the diagonal
                                                      pairs, moves twice a cycle
+static_  as crawl, the body still while a foot       the cart-table ZMP of the body's
+crawl    swings, moving only with every foot down    rest-to-rest moves and of the
+         (thesis eq. (2) walked: value-table         swinging limbs (the COM of the
+         swings at the limb's own speed)             full model, base placed)
 =======  ==========================================  ===============================
 
 Each foot swings ``(1 - duty_factor) * T`` (``timing: fixed``). With ``timing: joint_limit``
@@ -38,7 +42,8 @@ Admissible duty factors (open intervals):
   ankle, is then inside it with room to spare.
 * trot: (25) with the ZMP on the support diagonal the whole time, i.e. ``alpha = 0``:
   ``1/2 < beta < 1``.
-* crawl: ``3/4 < beta < 1`` (one foot at a time, with a four-foot phase for each ZMP move).
+* crawl, static_crawl: ``3/4 < beta < 1`` (one foot at a time, with a four-foot phase for each
+  ZMP move). The static crawl needs closed-form limb IK (the body is placed, not balanced).
 
 ``gait = 'auto'`` resolves, for a robot with closed-form limb IK and both quadruped gaits, to the
 faster of the value-iteration crawl and the ZMP trot at the robot's joint velocity limit (thesis
@@ -57,7 +62,7 @@ from dataclasses import dataclass
 from gait_nodes.errors import GaitCommandError, GaitParameterError
 from gait_nodes.robot.description import RobotDescription
 
-GAITS = ('biped', 'crawl', 'trot', 'auto')
+GAITS = ('biped', 'crawl', 'static_crawl', 'trot', 'auto')
 SWING_METHODS = ('polynomial', 'value_table')
 COM_METHODS = ('preview', 'sway', 'polynomial')
 TIMINGS = ('fixed', 'joint_limit')
@@ -65,7 +70,7 @@ TIMINGS = ('fixed', 'joint_limit')
 #: Steps per gait cycle (every gait).
 STEPS_PER_CYCLE = 2
 #: Sequential swing slots in one step.
-SWING_SLOTS = {'biped': 1, 'trot': 1, 'crawl': 2}
+SWING_SLOTS = {'biped': 1, 'trot': 1, 'crawl': 2, 'static_crawl': 2}
 
 #: Numeric fields: (lowest excluded, highest included, unit) before any robot check.
 NUMERIC_RANGES: dict[str, tuple[float, float, str]] = {
@@ -95,7 +100,7 @@ class GaitParameters:
     """Settings of the gait, validated on construction (robot checks: :meth:`check_robot`).
 
     Attributes:
-        gait: biped | crawl | trot | auto.
+        gait: biped | crawl | static_crawl | trot | auto.
         step_length_m: Longest stride, one foot's displacement per swing [m].
         step_width_m: Distance between the left and right foot tracks [m].
         step_height_m: Swing apex above the ground [m] (for the swing-leg policy).
@@ -228,7 +233,11 @@ class GaitParameters:
             raise GaitParameterError(
                 f'duty_factor = {self.duty_factor:g} is not admissible for the {gait} gait: '
                 f'must be in ({low:.4g}, {high:g}) ({DUTY_FACTOR_RULES[gait]})')
-        if gait == 'crawl':
+        if gait == 'static_crawl' and robot.extra.get('limb_ik') is None:
+            raise GaitParameterError(
+                f'gait \'static_crawl\' needs closed-form limb IK (the body is held still under '
+                f'each swing); {robot.name} has none: use crawl')
+        if gait in ('crawl', 'static_crawl'):
             from gait_nodes.planning.zmp_reference import crawl_margin_feasible
 
             clearance = crawl_margin_feasible(robot, self)
@@ -243,13 +252,15 @@ DUTY_FACTOR_RULES = {
     'biped': 'Kurazume (25): (1 + alpha)/2 < beta < 1 with the sole edge at alpha D',
     'trot': 'Kurazume (25) with the ZMP on the support diagonal: 1/2 < beta < 1',
     'crawl': 'crawl: one foot at a time with a four-foot phase per ZMP move, 3/4 < beta < 1',
+    'static_crawl': 'crawl: one foot at a time with a four-foot phase per body move, '
+                    '3/4 < beta < 1',
 }
 
 
 def duty_factor_bounds(gait: str, robot: RobotDescription,
                        params: GaitParameters) -> tuple[float, float]:
     """Open interval of admissible duty factors for ``gait`` (resolved) on ``robot``."""
-    if gait == 'crawl':
+    if gait in ('crawl', 'static_crawl'):
         return 0.75, 1.0
     if gait == 'trot':
         return 0.5, 1.0

@@ -89,7 +89,7 @@ class FootLayout:
             return (((r['l'],),), ((r['r'],),))
         if gait == 'trot':
             return (((r['fl'], r['rr']),), ((r['fr'], r['rl']),))
-        if gait == 'crawl':
+        if gait in ('crawl', 'static_crawl'):
             return (((r['rl'],), (r['fl'],)), ((r['rr'],), (r['fr'],)))
         raise ConfigError(f'no swing order for gait {gait!r}')
 

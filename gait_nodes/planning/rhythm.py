@@ -94,6 +94,9 @@ def rhythm_for_swing(gait: str, swing_s: float, in_place_s: float, source: str,
         source: What the swing times come from.
         body_move_s: Least transfer time for the body's move at the joint limit [s].
     """
+    if gait == 'static_crawl':  # the body's move is timed as it is walked, not modelled
+        return Rhythm(float(swing_s), float(max(MIN_TRANSFER_S, body_move_s)),
+                      SWING_SLOTS[gait], source)
     transfer = max(MIN_TRANSFER_S, 0.5 * (swing_s - in_place_s), body_move_s)
     return Rhythm(float(swing_s), float(transfer), SWING_SLOTS[gait], source)
 

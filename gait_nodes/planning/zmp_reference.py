@@ -100,17 +100,18 @@ def crawl_region(layout: FootLayout, slots: Sequence[tuple[Sequence[int], np.nda
 
 
 def crawl_knots(layout: FootLayout, slots: Sequence[tuple[Sequence[int], np.ndarray]],
-                mid_positions: np.ndarray, margin_m: float, z0: np.ndarray
-                ) -> tuple[np.ndarray, float]:
+                mid_positions: np.ndarray, margin_m: float, z0: np.ndarray,
+                target_is_point: bool = False) -> tuple[np.ndarray, float]:
     """(3, 2) knots of a crawl step and the margin they keep [m].
 
     The target is the crossing of the diagonals of ``mid_positions`` (the feet between the hind
-    and the fore swing, the thesis' ZMP); the knot is its projection into the region that keeps
-    ``margin_m`` inside every stance triangle of the step. If that region is empty, the point of
-    largest margin is used and the smaller margin returned.
+    and the fore swing, the thesis' ZMP), or ``mid_positions`` itself if ``target_is_point``;
+    the knot is its projection into the region that keeps ``margin_m`` inside every stance
+    triangle of the step. If that region is empty, the point of largest margin is used and the
+    smaller margin returned.
     """
     normals, offsets = crawl_region(layout, slots, margin_m)
-    target = stand_point(layout, mid_positions)
+    target = mid_positions if target_is_point else stand_point(layout, mid_positions)
     point = support.project_onto_halfplanes(target, normals, offsets)
     kept = margin_m
     if point is None:

@@ -51,7 +51,7 @@ from gait_nodes.errors import ConfigError
 from gait_nodes.paths import data_dir
 
 KINDS = ('quadruped', 'biped')
-GAITS_BY_KIND = {'quadruped': ('crawl', 'trot'), 'biped': ('biped',)}
+GAITS_BY_KIND = {'quadruped': ('crawl', 'static_crawl', 'trot'), 'biped': ('biped',)}
 EXAMPLE_ROBOT_DATA_PREFIX = 'example-robot-data:'
 #: Largest joint velocity limit a robot YAML may give [rad/s or m/s].
 MAX_VELOCITY_RAD_S = 100.0

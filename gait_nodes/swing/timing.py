@@ -139,7 +139,10 @@ class SwingTiming:
     through the whole-body IK: the other feet stand at their nominal places and the full-model
     COM stays where it is at the nominal stance, so the body moves under the swinging limb as
     it does when the robot walks (it compensates the limb's mass: about 15 % of the foot's
-    displacement for RoboSimian), and every joint of every limb counts. The
+    displacement for RoboSimian), and every joint of every limb counts. The probe holds the
+    COM's height too (the body bobs against the lifted limb, the joints run faster): an upper
+    bound on the walk's IK, which holds a quadruped's body height
+    (:func:`gait_nodes.robot.whole_body_ik.walking_vertical`). The
     swing then lasts ``max_j max_u |dq_j / du| / W`` times ``1 + BODY_MOTION_MARGIN``.
 
     A robot without closed-form limb IK (``family`` None) has a model that probes planned
@@ -247,18 +250,8 @@ class SwingTiming:
                                        f'the reach of the limbs')
             solutions.append(result.q)
             joints.append(self.robot.joint_positions(result.q))
-        joints = np.array(joints)
-        rates = np.abs(np.diff(joints, axis=0)) / np.diff(u)[:, None]
-        limits = np.asarray(self.robot.velocity_limits_rad_s, dtype=float)
-        time_s = velocity_factor * float((rates / limits).max())
-        if acceleration is None:
-            return time_s
-        accelerations = np.asarray(self.robot.acceleration_limits_rad_s2, dtype=float)
-        if acceleration == 'path':
-            curvature = np.abs(np.gradient(np.gradient(joints, u, axis=0), u, axis=0))
-        else:
-            curvature = MIN_JERK_PEAK_ACCELERATION * rates
-        return max(time_s, math.sqrt(float((curvature / accelerations).max())))
+        return joint_path_time_s(self.robot, u, np.array(joints), acceleration,
+                                 velocity_factor)
 
     def world_shape(self, swing: Swing, body_yaw_rad: float) -> tuple[np.ndarray, np.ndarray]:
         """The swing published for a planned ``swing``, as ``(u, states)``.
@@ -459,6 +452,32 @@ class TableSwingTiming(SwingTiming):
         smoothed, needed = smooth_trajectory(polyline, None, needed_probe_period(path))
         states = np.column_stack([smoothed.positions_in_world, np.unwrap(smoothed.yaws_rad)])
         return smoothed.times_s / needed, states
+
+
+def joint_path_time_s(robot, u: np.ndarray, joints: np.ndarray,
+                      acceleration: str | float | None = None,
+                      velocity_factor: float = 1.0) -> float:
+    """Least time [s] of a joint path ``joints`` (N, J) at ``u`` (N,) within the joint limits.
+
+    ``velocity_factor max |dq/du| / W`` over every joint; with ``acceleration`` also long
+    enough for the acceleration limits A: ``sqrt(max |d2q/du2| / A)`` when ``u`` is the
+    motion's own time law (``'path'``), ``sqrt(MIN_JERK_PEAK_ACCELERATION max |dq/du| / A)``
+    when ``u`` is the distance along a path the motion follows in a minimum-jerk time law
+    (``'min_jerk'``), or in another whose peak acceleration over a unit move in unit time is
+    ``acceleration`` (a number).
+    """
+    rates = np.abs(np.diff(joints, axis=0)) / np.diff(u)[:, None]
+    limits = np.asarray(robot.velocity_limits_rad_s, dtype=float)
+    time_s = velocity_factor * float((rates / limits).max())
+    if acceleration is None:
+        return time_s
+    accelerations = np.asarray(robot.acceleration_limits_rad_s2, dtype=float)
+    if acceleration == 'path':
+        curvature = np.abs(np.gradient(np.gradient(joints, u, axis=0), u, axis=0))
+    else:
+        peak = MIN_JERK_PEAK_ACCELERATION if acceleration == 'min_jerk' else float(acceleration)
+        curvature = peak * rates
+    return max(time_s, math.sqrt(float((curvature / accelerations).max())))
 
 
 def needed_probe_period(path) -> float:

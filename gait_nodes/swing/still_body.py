@@ -1,0 +1,306 @@
+"""The static crawl's kinematics: the body placed, still while a foot swings.
+
+In the static crawl (``gait: static_crawl``, thesis eq. (2) walked) the body stands still while
+a foot swings, so the swing is the limb's alone: the value table's path at the time its own
+joints need, with no body compensating the limb's mass; the body moves only with every foot
+down, rest to rest. The whole-body IK still tracks the full-model COM, so the COM reference of
+such a walk is the COM the robot has with its body where the plan puts it and the swinging foot
+on its path: :meth:`StillBody.com` computes it, and the footstep planner makes the ZMP
+reference its cart-table ZMP, which the COM controller turns back into that COM.
+
+:class:`StillBody` wraps a :class:`gait_nodes.swing.timing.SwingTiming` (the swing's shape and
+its placed path, the same the swing-leg policy publishes) and times, through the closed-form
+limb IK of its family:
+
+- a swing with the body still (:meth:`StillBody.step_s`: the swinging limb's joints along the
+  placed path; the other limbs do not move);
+- a body move with every foot down (:meth:`StillBody.transfer_s`: every limb's joints while the
+  base runs along the segment in a minimum-jerk time law);
+- and, for the rhythm of steady walking (:mod:`gait_nodes.planning.rhythm`), the same at the
+  nominal stance (:meth:`StillBody.swing_s`, :meth:`StillBody.steady_transfer_s`), times
+  ``1 + STILL_MARGIN`` for the stance of a walk being a part of a stride off the nominal one
+  (the planner probes every planned step where it happens and re-times one timed short).
+"""
+
+from __future__ import annotations
+
+import math
+import weakref
+
+import numpy as np
+
+from gait_nodes.errors import SwingPolicyError
+from gait_nodes.robot.model import yaw_rotation
+from gait_nodes.swing.timing import (
+    LATTICE,
+    STEP_PROBE_SAMPLES,
+    TRANSFER_PROBE_SAMPLES,
+    joint_path_time_s,
+)
+
+#: Relative extra time of the steady rhythm's swings and body moves over their probe at the
+#: nominal stance (the planner re-times a planned step that needs more).
+STILL_MARGIN = 0.05
+#: Gravity [m/s^2] of the cart-table ZMP.
+GRAVITY_M_S2 = 9.81
+#: Share of a body move spent speeding up (and as much slowing down): the base's speed rises
+#: along a half cosine, cruises, and falls the same way (:func:`body_move`). Its speed peaks
+#: ``1 / (1 - RAMP_FRACTION)`` times above the mean, where a minimum-jerk move's peaks 1.875
+#: times: the move needs that much less time at the joint limit.
+RAMP_FRACTION = 0.25
+#: Peak speed over mean speed of :func:`body_move`.
+BODY_MOVE_PEAK_FACTOR = 1.0 / (1.0 - RAMP_FRACTION)
+#: Peak acceleration of :func:`body_move` over a unit move in unit time.
+BODY_MOVE_PEAK_ACCELERATION = math.pi / (2.0 * RAMP_FRACTION * (1.0 - RAMP_FRACTION))
+
+
+class StillBody:
+    """Swing and body-move times, and the full-model COM, with the base placed.
+
+    Args:
+        timing: The swing timing model (closed-form limb IK: ``timing.family`` not None) whose
+            swing shapes are timed.
+    """
+
+    def __init__(self, timing):
+        if timing.timing is None:
+            raise SwingPolicyError(f'{timing.robot.name} has no closed-form limb IK: the body '
+                                   f'cannot be held still under a swing (gait: static_crawl)')
+        self.source = timing
+        self.robot = timing.robot
+        self.family = timing.family
+        self.ik = timing.timing.ik
+        self.name = f'{timing.name}, body still'
+        self._data = self.robot.new_data()
+        self._limbs = [(foot.name, self.robot.indices(foot.joints))
+                       for foot in self.robot.description.feet]
+        self._swing_s: dict[tuple[float, float, float], float] = {}
+        self._transfer_s: dict[tuple[int, int], float] = {}
+        self._q_posture = self.robot.joint_positions(
+            self.robot.configuration(np.zeros(3), 0.0))
+        height = float(self.robot.description.body_height_m)
+        self._base = np.array([0.0, 0.0, height])
+        self._feet = self.robot.nominal_feet_in_world(self._base, 0.0)
+
+    @property
+    def factor(self) -> float:
+        """The wrapped model's factor on every time (> 1 for a stand-in)."""
+        return self.source.factor
+
+    # --- kinematics ----------------------------------------------------------------------------
+
+    def joints(self, base_in_world: np.ndarray, body_yaw_rad: float, feet_in_world: np.ndarray,
+               foot_yaws_rad: np.ndarray, limbs=None) -> np.ndarray:
+        """(N, J) joint vectors with the base at ``base_in_world`` (N, 3) and the feet placed.
+
+        ``feet_in_world`` (N, F, 3) and ``foot_yaws_rad`` (N, F); ``limbs``: the feet whose
+        limbs are solved (default all; the others keep the posture).
+
+        Raises:
+            SwingPolicyError: A foot out of the reach of its limb in the model's family.
+        """
+        base = np.asarray(base_in_world, dtype=float)
+        feet = np.asarray(feet_in_world, dtype=float)
+        yaws = np.asarray(foot_yaws_rad, dtype=float)
+        rotation = yaw_rotation(body_yaw_rad)
+        joints = np.repeat(self._q_posture[None], len(base), axis=0)
+        for f in (range(len(self._limbs)) if limbs is None else limbs):
+            name, index = self._limbs[f]
+            in_base = (feet[:, f] - base) @ rotation
+            angles, feasible = self.ik.solve(in_base, yaws[:, f] - body_yaw_rad, self.family,
+                                             name)
+            if not feasible.all():
+                where = np.round(feet[int(np.argmin(feasible)), f], 3).tolist()
+                raise SwingPolicyError(f'the {name} foot at {where} leaves the reach of its limb '
+                                       f'(IK family {self.family}) with the body still at '
+                                       f'{np.round(base[0], 3).tolist()}')
+            joints[:, index] = angles
+        return joints
+
+    def com(self, base_in_world: np.ndarray, body_yaw_rad: float, feet_in_world: np.ndarray,
+            foot_yaws_rad: np.ndarray) -> np.ndarray:
+        """(N, 3) full-model COM with the base at ``base_in_world`` (N, 3), the feet placed."""
+        import pinocchio as pin
+
+        joints = self.joints(base_in_world, body_yaw_rad, feet_in_world, foot_yaws_rad)
+        coms = np.empty((len(joints), 3))
+        for k, (base, values) in enumerate(zip(np.asarray(base_in_world, dtype=float), joints,
+                                               strict=True)):
+            q = self.robot.configuration(base, body_yaw_rad, values)
+            coms[k] = pin.centerOfMass(self.robot.model, self._data, q)
+        return coms
+
+    def base_for_com(self, com_xy: np.ndarray, base_z_m: float, body_yaw_rad: float,
+                     feet_in_world: np.ndarray, foot_yaws_rad: np.ndarray) -> np.ndarray:
+        """(3,) base position whose full-model COM is over ``com_xy``, the feet where they stand.
+
+        A few fixed-point steps (the COM moves with the base less than one for one: the feet
+        stay).
+        """
+        target = np.asarray(com_xy, dtype=float)[:2]
+        feet = np.asarray(feet_in_world, dtype=float)[None]
+        yaws = np.asarray(foot_yaws_rad, dtype=float)[None]
+        base = np.array([*target, base_z_m])
+        base[:2] += self._base[:2] - self.com(self._base[None], 0.0, self._feet[None],
+                                              np.zeros((1, len(self._feet))))[0, :2]
+        for _ in range(8):
+            error = target - self.com(base[None], body_yaw_rad, feet, yaws)[0, :2]
+            if float(np.hypot(*error)) < 1e-7:
+                break
+            base[:2] += 1.4 * error  # the base moves ~1.4 m per metre of COM (RoboSimian)
+        return base
+
+    # --- planned steps -------------------------------------------------------------------------
+
+    def step_s(self, swings: dict, feet_in_world: np.ndarray, foot_yaws_rad: np.ndarray,
+               body_yaw_rad: float, base_in_world: np.ndarray,
+               with_acceleration: bool = False) -> float:
+        """Least time [s] of planned swings made together, the body still at ``base_in_world``.
+
+        Args:
+            swings: Foot index -> its planned swing (world places and yaws; times unused).
+            feet_in_world: (F, 3) contact points of all feet before the swings.
+            foot_yaws_rad: (F,) their yaws [rad].
+            body_yaw_rad: Body yaw [rad].
+            base_in_world: (3,) the base's position [m].
+            with_acceleration: Long enough for the joints' acceleration limits too.
+        """
+        u = np.linspace(0.0, 1.0, STEP_PROBE_SAMPLES)
+        feet, yaws = self.swing_feet(swings, feet_in_world, foot_yaws_rad, body_yaw_rad, u)
+        base = np.repeat(np.asarray(base_in_world, dtype=float)[None], len(u), axis=0)
+        joints = self.joints(base, body_yaw_rad, feet, yaws, limbs=list(swings))
+        return self.factor * joint_path_time_s(self.robot, u, joints,
+                                               'path' if with_acceleration else None)
+
+    def swing_feet(self, swings: dict, feet_in_world: np.ndarray, foot_yaws_rad: np.ndarray,
+                   body_yaw_rad: float, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(N, F, 3) feet and (N, F) yaws at ``u`` (N,) of the swings' time law (0 to 1)."""
+        feet = np.repeat(np.asarray(feet_in_world, dtype=float)[None], len(u), axis=0)
+        yaws = np.repeat(np.asarray(foot_yaws_rad, dtype=float)[None], len(u), axis=0)
+        for foot, swing in swings.items():
+            own_u, states = self.source.world_shape(swing, body_yaw_rad)
+            own_u = own_u / own_u[-1]
+            feet[:, foot] = np.column_stack([np.interp(u, own_u, states[:, i])
+                                             for i in range(3)])
+            yaws[:, foot] = np.interp(u, own_u, states[:, 3])
+        return feet, yaws
+
+    def transfer_s(self, feet_in_world: np.ndarray, foot_yaws_rad: np.ndarray,
+                   body_yaw_rad: float, base_from: np.ndarray, base_to: np.ndarray,
+                   with_acceleration: bool = False) -> float:
+        """Least time [s] of the body's move from ``base_from`` to ``base_to``, feet down.
+
+        Every limb's joints follow the base along the segment in the time law of
+        :func:`body_move` (its speed peaks :data:`BODY_MOVE_PEAK_FACTOR` times above the
+        mean).
+        """
+        u = np.linspace(0.0, 1.0, TRANSFER_PROBE_SAMPLES)
+        base_from, base_to = np.asarray(base_from, dtype=float), np.asarray(base_to, dtype=float)
+        if np.linalg.norm(base_to - base_from) < 1e-9:
+            return 0.0
+        base = base_from + u[:, None] * (base_to - base_from)
+        feet = np.repeat(np.asarray(feet_in_world, dtype=float)[None], len(u), axis=0)
+        yaws = np.repeat(np.asarray(foot_yaws_rad, dtype=float)[None], len(u), axis=0)
+        joints = self.joints(base, body_yaw_rad, feet, yaws)
+        return self.factor * joint_path_time_s(
+            self.robot, u, joints, BODY_MOVE_PEAK_ACCELERATION if with_acceleration else None,
+            BODY_MOVE_PEAK_FACTOR)
+
+    # --- the steady rhythm (gait_nodes.planning.rhythm) ----------------------------------------
+
+    def swing_s(self, foot: int, step_in_base: np.ndarray, turn_rad: float = 0.0) -> float:
+        """Least time [s] of foot ``foot``'s swing by ``step_in_base`` at the nominal stance.
+
+        The front-right limb's mirrored step, its shape (:meth:`SwingTiming.shape`) timed
+        through its own limb IK, times ``1 + STILL_MARGIN``; cached on :data:`LATTICE`'s
+        resolution (a quarter of it).
+        """
+        mirror = self.source._mirror_floats[foot]
+        key = tuple(round(v / (0.25 * step), 0) * 0.25 * step for v, step in zip(
+            (float(step_in_base[0]) * mirror[0], float(step_in_base[1]) * mirror[1],
+             mirror[0] * mirror[1] * float(turn_rad)), LATTICE, strict=True))
+        if key not in self._swing_s:
+            if len(self._swing_s) > 4096:
+                self._swing_s.clear()
+            u, states = self.source.shape(np.array(key[:2]), key[2])
+            q, feasible = self.source.timing.joints(states)
+            if not feasible.all():
+                raise SwingPolicyError(f'a swing by {np.round(key[:2], 3).tolist()} m leaves the '
+                                       f'reach of the limb (IK family {self.family})')
+            reference = self._limbs[self.source._reference][1][:q.shape[1]]
+            self._swing_s[key] = (1.0 + STILL_MARGIN) * self.factor * joint_path_time_s(
+                _Limb(self.robot, reference), u, q, 'path')
+        return self._swing_s[key]
+
+    def lift_and_lower_s(self) -> float:
+        """Swing time [s] of a step in place (the lift and the lowering)."""
+        return self.swing_s(self.source._reference, np.zeros(2), 0.0)
+
+    def steady_transfer_s(self, move_in_base: np.ndarray) -> float:
+        """Body-move time [s] of a steady walk whose body moves ``move_in_base`` (2,).
+
+        :meth:`transfer_s` at the nominal stance, centred on it, times ``1 + STILL_MARGIN``;
+        cached on :data:`LATTICE`'s resolution.
+        """
+        key = tuple(int(round(abs(float(v)) / step)) for v, step in
+                    zip(move_in_base[:2], LATTICE[:2], strict=True))
+        if key not in self._transfer_s:
+            half = 0.5 * np.array([key[0] * LATTICE[0], key[1] * LATTICE[1], 0.0])
+            self._transfer_s[key] = (1.0 + STILL_MARGIN) * self.transfer_s(
+                self._feet, np.zeros(len(self._feet)), 0.0, self._base - half,
+                self._base + half, True)
+        return self._transfer_s[key]
+
+
+class _Limb:
+    """The velocity and acceleration limits of one limb's joints (for joint_path_time_s)."""
+
+    def __init__(self, robot, index: np.ndarray):
+        self.velocity_limits_rad_s = np.asarray(robot.velocity_limits_rad_s)[index]
+        self.acceleration_limits_rad_s2 = np.asarray(robot.acceleration_limits_rad_s2)[index]
+
+
+def cart_table_zmp(times_s: np.ndarray, com: np.ndarray, height_m: float) -> np.ndarray:
+    """(N, 2) cart-table ZMP ``c - (h / g) c''`` of a COM path sampled at ``times_s`` (N,).
+
+    ``c''`` by second differences on the samples' own times (the ends held at rest: the path
+    starts and ends still).
+    """
+    com = np.asarray(com, dtype=float)[:, :2]
+    t = np.asarray(times_s, dtype=float)
+    acceleration = np.zeros_like(com)
+    if len(t) > 2:
+        h0, h1 = np.diff(t)[:-1, None], np.diff(t)[1:, None]
+        acceleration[1:-1] = 2.0 * ((com[2:] - com[1:-1]) / h1 - (com[1:-1] - com[:-2]) / h0) \
+            / (h0 + h1)
+    return com - height_m / GRAVITY_M_S2 * acceleration
+
+
+def body_move(u: np.ndarray) -> np.ndarray:
+    """Fraction of a rest-to-rest body move done at ``u`` (0 to 1) of its time.
+
+    The speed rises along a half cosine over :data:`RAMP_FRACTION` of the time, cruises, and
+    falls symmetrically: position, speed and acceleration are continuous (the acceleration
+    starts and ends at zero), so the cart-table ZMP has no jump.
+    """
+    u = np.clip(np.asarray(u, dtype=float), 0.0, 1.0)
+    f, peak = RAMP_FRACTION, BODY_MOVE_PEAK_FACTOR
+
+    def ramp(x):
+        return peak * (0.5 * x - f / (2.0 * math.pi) * np.sin(math.pi * x / f))
+
+    return np.where(u < f, ramp(u), np.where(u > 1.0 - f, 1.0 - ramp(1.0 - u),
+                                             peak * (0.5 * f + (u - f))))
+
+
+
+
+_VIEWS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
+def still_body_of(timing) -> StillBody:
+    """The (cached) :class:`StillBody` view of a swing timing model."""
+    view = _VIEWS.get(timing)
+    if view is None:
+        view = _VIEWS[timing] = StillBody(timing)
+    return view

@@ -1,0 +1,159 @@
+"""The static crawl's kinematics (gait_nodes.swing.still_body), checked against the whole-body IK.
+
+The body-still times and COM come from the closed-form limb IK; here the same motions are
+replayed through the whole-body IK with the base held where the plan puts it (Levenberg-Marquardt
+on Pinocchio's kinematics, another code path), and the joints' speeds and the COM are measured
+on its solutions.
+"""
+
+import dataclasses
+
+import numpy as np
+import pytest
+from swing_helpers import robot
+
+from gait_nodes.contract import Swing
+from gait_nodes.errors import GaitParameterError
+from gait_nodes.planning.footsteps import GaitPlanner, Twist2D
+from gait_nodes.planning.gait_params import GaitParameters
+from gait_nodes.robot.description import load_robot_description
+from gait_nodes.robot.whole_body_ik import (
+    IkSettings,
+    IkTargets,
+    WholeBodyIkSolver,
+    seed_configuration,
+)
+from gait_nodes.swing.still_body import (
+    BODY_MOVE_PEAK_ACCELERATION,
+    BODY_MOVE_PEAK_FACTOR,
+    StillBody,
+    body_move,
+    cart_table_zmp,
+)
+from gait_nodes.swing.timing import PolynomialSwingTiming
+
+HEIGHT_M = 0.7
+
+
+@pytest.fixture(scope='module')
+def still():
+    return StillBody(PolynomialSwingTiming(robot(), 2, 1.0, 0.06))
+
+
+def held_base_joints(model, base, feet, yaws):
+    """Joint vectors reaching ``feet`` (N, F, 3) with the base held at ``base`` (N, 3)."""
+    solver = WholeBodyIkSolver(model, IkSettings(max_iterations=200))
+    joints = []
+    q = None
+    for b, f, y in zip(base, feet, yaws, strict=True):
+        targets = IkTargets(f, y, 0.0, base_position_in_world=b)
+        q = solver.solve(targets, seed_configuration(model, targets, 2) if q is None else q).q
+        joints.append(model.joint_positions(q))
+    return np.array(joints), q
+
+
+def test_body_move_starts_and_ends_at_rest_with_its_stated_peaks():
+    u = np.linspace(0.0, 1.0, 20001)
+    s = body_move(u)
+    v = np.gradient(s, u)
+    a = np.gradient(v, u)
+    assert s[0] == 0.0 and s[-1] == pytest.approx(1.0, abs=1e-12)
+    assert np.all(np.diff(s) >= 0.0)
+    assert v[0] == pytest.approx(0.0, abs=1e-3) and v[-1] == pytest.approx(0.0, abs=1e-3)
+    assert abs(a[2]) < 0.05 and abs(a[-3]) < 0.05  # no acceleration jump at the ends
+    assert v.max() == pytest.approx(BODY_MOVE_PEAK_FACTOR, rel=1e-6)
+    assert np.abs(a[5:-5]).max() == pytest.approx(BODY_MOVE_PEAK_ACCELERATION, rel=1e-4)
+
+
+def test_cart_table_zmp_of_a_parabola():
+    t = np.linspace(0.0, 1.0, 51)
+    com = np.column_stack([0.3 * t * t, -0.1 * t * t, np.full_like(t, 0.5)])
+    zmp = cart_table_zmp(t, com, 0.5)
+    expected = com[:, :2] - 0.5 / 9.81 * np.array([0.6, -0.2])
+    np.testing.assert_allclose(zmp[1:-1], expected[1:-1], atol=1e-12)
+
+
+def test_com_and_base_for_com_agree_with_the_whole_body_ik(still):
+    model = robot()
+    feet = model.nominal_feet_in_world(np.array([0.0, 0.0, HEIGHT_M]), 0.0)
+    feet[0, 0] += 0.08  # a foot a part of a stride off its nominal place
+    yaws = np.zeros(len(feet))
+    base = still.base_for_com(np.array([0.05, 0.02]), HEIGHT_M, 0.0, feet, yaws)
+    joints, q = held_base_joints(model, base[None], feet[None], yaws[None])
+    com = model.com(q)
+    assert com[:2] == pytest.approx([0.05, 0.02], abs=1e-6)
+    np.testing.assert_allclose(still.com(base[None], 0.0, feet[None], yaws[None])[0], com,
+                               atol=1e-9)
+
+
+def test_a_swing_with_the_body_still_puts_its_fastest_joint_at_the_limit(still):
+    model = robot()
+    base = np.array([0.02, -0.01, HEIGHT_M])
+    feet = model.nominal_feet_in_world(base, 0.0)
+    yaws = np.zeros(len(feet))
+    foot = model.foot_names.index('rear_left')
+    end = feet[foot] + [0.18, 0.01, 0.0]
+    swings = {foot: Swing('rear_left', 0.0, 1.0, feet[foot], end, 0.0, 0.0)}
+    duration_s = still.step_s(swings, feet, yaws, 0.0, base)
+    u = np.linspace(0.0, 1.0, 241)
+    placed, placed_yaws = still.swing_feet(swings, feet, yaws, 0.0, u)
+    joints, _ = held_base_joints(model, np.repeat(base[None], len(u), axis=0), placed,
+                                 placed_yaws)
+    rates = np.abs(np.diff(joints, axis=0)) / (np.diff(u) * duration_s)[:, None]
+    ratio = (rates / model.velocity_limits_rad_s).max()
+    assert ratio == pytest.approx(1.0, abs=0.01)
+    # Only the swinging limb moves: the body is still.
+    moving = np.flatnonzero(np.abs(joints - joints[0]).max(axis=0) > 1e-9)
+    limb = set(model.indices(model.description.feet[foot].joints).tolist())
+    assert set(moving.tolist()) <= limb
+
+
+def test_a_body_move_with_every_foot_down_keeps_its_fastest_joint_at_the_limit(still):
+    # At the limit or just under it: the probe takes the largest joint rate per distance
+    # times the time law's peak speed, wherever along the move each comes.
+    model = robot()
+    feet = model.nominal_feet_in_world(np.array([0.0, 0.0, HEIGHT_M]), 0.0)
+    yaws = np.zeros(len(feet))
+    start, end = np.array([-0.05, 0.0, HEIGHT_M]), np.array([0.05, 0.03, HEIGHT_M])
+    duration_s = still.transfer_s(feet, yaws, 0.0, start, end)
+    u = np.linspace(0.0, 1.0, 401)
+    base = start + body_move(u)[:, None] * (end - start)
+    joints, _ = held_base_joints(model, base, np.repeat(feet[None], len(u), axis=0),
+                                 np.repeat(yaws[None], len(u), axis=0))
+    rates = np.abs(np.diff(joints, axis=0)) / (np.diff(u) * duration_s)[:, None]
+    assert 0.95 < (rates / model.velocity_limits_rad_s).max() <= 1.0 + 1e-3
+
+
+def test_the_static_crawl_needs_closed_form_limb_ik():
+    go2 = load_robot_description('go2')
+    with pytest.raises(GaitParameterError, match="'static_crawl' is not possible for go2"):
+        GaitParameters.for_robot(go2, gait='static_crawl').check_robot(go2)
+    # A Go2 YAML that listed it would still be refused, with the reason.
+    listed = dataclasses.replace(go2, gaits=(*go2.gaits, 'static_crawl'))
+    with pytest.raises(GaitParameterError, match='static_crawl.*closed-form limb IK'):
+        GaitParameters.for_robot(listed, gait='static_crawl').check_robot(listed)
+
+
+def test_a_static_crawl_plan_keeps_its_zmp_inside_and_its_body_still_between_moves(still):
+    model = robot()
+    params = GaitParameters.for_robot(model.description, gait='static_crawl',
+                                      timing='joint_limit', step_height_m=0.06)
+    planner = GaitPlanner(model.description, params, swing_timing=still.source)
+    planner.set_velocity(Twist2D(0.1), 0.0)
+    planner.advance(40.0)
+    walking = [step for step in planner.steps if step.slots]
+    assert len(walking) >= 5
+    for step in walking:
+        assert step.zmp_margin_kept_m > 0.03  # measured on the ZMP made, foot discs included
+        assert step.bases is not None and np.all(np.diff(step.zmp_times_s) > 0)
+        # At rest between steps: the reference ends where the COM of the full model is with
+        # the body at its second base and the feet where the step leaves them.
+        feet = np.column_stack([step.positions_end, np.zeros(len(step.positions_end))])
+        com = still.com(step.bases[1][None], 0.0, feet[None], step.yaws_end[None])[0]
+        assert step.zmp_points[-1] == pytest.approx(com[:2], abs=1e-9)
+    # Faster than the ZMP crawl at the same settings and joint limit.
+    crawl = GaitPlanner(model.description, params.replace(gait='crawl'),
+                        swing_timing=still.source)
+    fastest_static, _ = planner.set_velocity(Twist2D(0.2), 40.0)
+    fastest_crawl, _ = crawl.set_velocity(Twist2D(0.2), 0.0)
+    assert fastest_static.vx_m_s > 1.5 * fastest_crawl.vx_m_s
