@@ -10,6 +10,7 @@ from hypothesis import strategies as st
 from scipy.optimize import fsolve
 
 from gait_nodes.errors import ConfigError
+from gait_nodes.robot.ik_check import LimbChain, match_solutions, multistart_limb_ik
 from gait_nodes.robot.limb_ik import (
     FAMILIES,
     MEETING_DEGREE,
@@ -48,6 +49,12 @@ def robot():
 @pytest.fixture(scope='module')
 def limb_ik(robot):
     return RoboSimianLimbIk(robot)
+
+
+@pytest.fixture(scope='module')
+def chain(robot):
+    # Composed from Pinocchio's joint placements, checked against its FK at construction.
+    return LimbChain.of(robot, 'front_right')
 
 
 def mirrored(foot: str, targets: np.ndarray, yaws: np.ndarray):
@@ -294,6 +301,34 @@ def test_turning_the_foot_all_the_way_round_leaves_the_family(limb_ik):
     positions, _ = limb_ik.forward(result.joint_angles[result.feasible])
     np.testing.assert_allclose(positions, targets[result.feasible], atol=1e-9)
     assert not result.ok
+
+
+def test_every_solution_is_found_by_an_independent_multistart_solver(robot, limb_ik, chain):
+    # A seeded sample of the thesis swing workspace at walking yaws, and the targets where the
+    # former solver missed solutions: both solvers find the same set at every target.
+    rng = np.random.default_rng(2024)
+    count = 36
+    targets = np.stack([rng.uniform(0.2, 0.8, count), rng.uniform(-0.65, -0.4, count),
+                        rng.choice([-0.7, -0.65, -0.6], count)], axis=1)
+    yaws = rng.uniform(-0.45, 0.45, count)
+    known = [*TWO_IN_A_FAMILY, *(case for case, _ in CLOSE_CROSSINGS)]
+    targets = np.concatenate([targets, [target for target, _ in known]])
+    yaws = np.concatenate([yaws, [yaw for _, yaw in known]])
+    ours = limb_ik.solutions(targets, yaws)
+    theirs = multistart_limb_ik(chain, targets, yaws, starts=400, seed=0)
+    for k in range(len(targets)):
+        found_ours, found_theirs = match_solutions(ours.joint_angles[k, :ours.count[k]],
+                                                   theirs[k])
+        assert found_ours.all() and found_theirs.all(), (targets[k], yaws[k])
+    # The multistart solutions are Pinocchio's, independently of both solvers.
+    for k in (0, count):
+        for angles in theirs[k]:
+            position, rotation = pinocchio_sole(robot, 'front_right', angles)
+            np.testing.assert_allclose(position, targets[k], atol=1e-9)
+            np.testing.assert_allclose(rotation, pin.rpy.rpyToMatrix(0.0, 0.0, yaws[k]),
+                                       atol=1e-9)
+    assert set(ours.count[:count]) >= {0, 4, 6, 8}
+    assert (ours.count[count:count + len(TWO_IN_A_FAMILY)] == 8).all()
 
 
 def test_a_family_can_hold_two_solutions_and_another_none(robot, limb_ik):
