@@ -207,8 +207,8 @@ def angle_gap(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.abs(np.angle(np.exp(1j * (np.asarray(a) - np.asarray(b))))).max(axis=-1)
 
 
-def match_solutions(ours: np.ndarray, theirs: np.ndarray, tolerance_rad: float = 1e-6
-                    ) -> tuple[np.ndarray, np.ndarray]:
+def match_solutions(ours: np.ndarray, theirs: np.ndarray,
+                    tolerance_rad: float = SAME_SOLUTION_RAD) -> tuple[np.ndarray, np.ndarray]:
     """``(ours_found, theirs_found)``: which of each set has a match in the other.
 
     Args:
@@ -221,3 +221,32 @@ def match_solutions(ours: np.ndarray, theirs: np.ndarray, tolerance_rad: float =
         return np.zeros(len(ours), dtype=bool), np.zeros(len(theirs), dtype=bool)
     close = angle_gap(ours[:, None], theirs[None]) < tolerance_rad
     return close.any(axis=1), close.any(axis=0)
+
+
+@dataclass(frozen=True)
+class Agreement:
+    """How two solvers' solution sets compare over targets (:func:`compare_solution_sets`).
+
+    Attributes:
+        targets: Targets compared.
+        agreeing: Targets where both sets are the same.
+        missed_by_first: Solutions of the second solver the first one lacks.
+        missed_by_second: Solutions of the first solver the second one lacks.
+    """
+
+    targets: int
+    agreeing: int
+    missed_by_first: int
+    missed_by_second: int
+
+
+def compare_solution_sets(first: list[np.ndarray], second: list[np.ndarray],
+                          tolerance_rad: float = SAME_SOLUTION_RAD) -> Agreement:
+    """Compare two solvers' solutions, target by target ((M, J) arrays each)."""
+    agreeing = missed_by_first = missed_by_second = 0
+    for ours, theirs in zip(first, second, strict=True):
+        found_first, found_second = match_solutions(ours, theirs, tolerance_rad)
+        missed_by_second += int((~found_first).sum())
+        missed_by_first += int((~found_second).sum())
+        agreeing += int(found_first.all() and found_second.all())
+    return Agreement(len(first), agreeing, missed_by_first, missed_by_second)

@@ -57,7 +57,8 @@ rad families 1 and 6 hold two each, 3 and 4 none). :meth:`RoboSimianLimbIk.solut
 every solution and its family; :meth:`RoboSimianLimbIk.solve` returns a family's principal
 solution, its crossing farthest from the sheets' edges (the one a motion inside the family
 keeps; the family's solution can still jump between two, which :func:`continuity_breaks` and
-:func:`trajectory_ik` catch).
+:func:`trajectory_ik` catch). ``python -m gait_nodes.swing_table ik-check`` counts them over the
+workspace and checks them against an independent solver.
 
 Families coincide only where a choice has no second option, at singular configurations:
 ``sin(q2) = 0`` (link 2 along joint 1's axis, where the base sheets join: families ``f`` and
@@ -65,8 +66,9 @@ Families coincide only where a choice has no second option, at singular configur
 join: ``f`` and ``f ^ 2`` meet; near it q4 and q6 run fast in opposite directions, their
 sum does not) and ``det(J) = 0`` with both sines non-zero (two crossings
 merge at a fold of the workspace's boundary: ``f`` and ``f ^ 1`` meet). A motion through one of
-them passes from one family to the other, and near them a family may not exist. Anywhere else no
-two families give the same configuration (tested).
+them passes from one family to the other, and near them a family may not exist. A solution
+with ``|sin(q2)|`` or ``|sin(q5)|`` at most :data:`SINGULAR_SINE` (1e-3) is not returned.
+Anywhere else no two families give the same configuration (tested).
 
 Every solution is found, by a search whose completeness is proven, not sampled. On a sheet
 ``g = (alpha + s beta + t gamma + s t delta) / scale`` with ``s = +-sqrt(1 - c2^2)``,
@@ -145,6 +147,9 @@ ROOT_WIDTH_RAD = 1e-7
 ROOT_CROWD = 256
 #: Signs of ``(s, t)``, the two square roots, on the four sheets.
 SHEETS = ((1.0, 1.0), (1.0, -1.0), (-1.0, 1.0), (-1.0, -1.0))
+#: A solution with ``|sin(q2)|`` or ``|sin(q5)|`` at most this is singular (where two families
+#: meet) and not returned.
+SINGULAR_SINE = 1e-3
 #: Targets solved at once (the sampled circle of a chunk stays in the CPU's cache).
 CHUNK = 2048
 _EPS = 1e-9
@@ -712,7 +717,7 @@ class RoboSimianLimbIk:
             target, away from its singularities and within the joint limits.
         """
         family_bits(family)
-        targets, yaws = self._reference_targets(targets_in_base, yaws_rad, foot)
+        targets, yaws = self.mirror_targets(targets_in_base, yaws_rad, foot)
         q, feasible = self._solve_reference(targets, yaws, family, wrap=True)
         return q * self.angle_signs[self.foot_index[foot]], feasible
 
@@ -728,7 +733,7 @@ class RoboSimianLimbIk:
         Returns:
             The solutions, their families and each target's count.
         """
-        targets, yaws = self._reference_targets(targets_in_base, yaws_rad, foot)
+        targets, yaws = self.mirror_targets(targets_in_base, yaws_rad, foot)
         parts = [_Found(np.zeros(0, dtype=int), np.zeros(0, dtype=int), np.zeros((0, 7)),
                         np.zeros(0))]
         for k in range(0, len(targets), CHUNK):
@@ -751,8 +756,18 @@ class RoboSimianLimbIk:
         principal[rows, rank] = _group_starts(rows, families)
         return LimbIkSolutions(joint_angles, labels, principal, count)
 
-    def _reference_targets(self, targets_in_base, yaws_rad, foot: str):
-        """Targets and yaws of ``foot`` mirrored onto the front-right limb."""
+    def mirror_targets(self, targets_in_base, yaws_rad, foot: str
+                       ) -> tuple[np.ndarray, np.ndarray]:
+        """Targets and yaws of ``foot`` mirrored onto the front-right limb, and back.
+
+        A mirror is its own inverse: the same call takes front-right targets (the thesis'
+        workspace) to ``foot``'s.
+
+        Args:
+            targets_in_base: (N, 3) sole positions in the base frame [m].
+            yaws_rad: (N,) sole yaws relative to the base [rad].
+            foot: Which limb.
+        """
         targets = np.atleast_2d(np.asarray(targets_in_base, dtype=float))
         yaws = np.broadcast_to(np.asarray(yaws_rad, dtype=float), (len(targets),))
         s = self._mirror(foot)
@@ -991,7 +1006,8 @@ class RoboSimianLimbIk:
             center = self.centers[families]
             q[:, :6] = center[:, :6] + np.mod(q[:, :6] - center[:, :6] + math.pi,
                                               2 * math.pi) - math.pi
-        feasible = (admissible & (margin > _SINGULAR) & (np.abs(g_root) < 1e-9)
+        # margin = min(sin(q2)^2, sin(q5)^2)
+        feasible = (admissible & (margin > SINGULAR_SINE ** 2) & (np.abs(g_root) < 1e-9)
                     & np.all((q >= self.lower_limits - _EPS) & (q <= self.upper_limits + _EPS),
                              axis=1))
         return _Found(rows[feasible], families[feasible], q[feasible], margin[feasible])
