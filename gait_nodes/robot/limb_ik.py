@@ -85,7 +85,8 @@ one sheet's ``g``. So:
 
 1. ``H``'s Fourier coefficients ``c_k`` come exactly (up to rounding) from
    :data:`MEETING_SAMPLES` = 64 > 2 x 24 samples, and bound its derivatives:
-   ``max |H^(j)| <= sum_k k^j |c_k|``.
+   ``max |H^(j)| <= sum_k k^j |c_k|``. ``H`` is evaluated to degree 16; the coefficients
+   above, rounding in fact, count in the rounding allowance.
 2. The circle is cut in :data:`ROOT_GRID` arcs. Taylor's theorem at an arc's end, to order
    :data:`TAYLOR_ORDER` with that bound on the remainder and the rounding of every term allowed
    for (with a margin of 100), proves the arc free of zeros of ``H`` (``|H|`` stays above zero)
@@ -98,11 +99,11 @@ one sheet's ``g``. So:
    meets the target to about 1e-12 m.
 
 Only an arc of 1e-7 rad about a double (or nearly double) zero of ``H`` is left to the signs of
-``g``: two solutions on different sheets there are both found, two on one sheet (a fold, where they
-merge and ``det(J)`` is within about 1e-7 of 0) can both be missed. Tested against a multistart
-solver that shares nothing with this module (:mod:`gait_nodes.robot.ik_check`) over the thesis
-workspace. Cost, 10,000 targets on one core: about 0.3 s for one family, 0.45 s for every solution
-of every family (the former bracketing: 0.24 s per family, 1.9 s for all eight).
+``g``: two solutions on different sheets there are both found, two on one sheet within 1e-7 rad of
+each other (about to merge at a fold, where ``det(J)`` vanishes) can both be missed. Tested against
+a multistart solver that shares nothing with this module (:mod:`gait_nodes.robot.ik_check`) over
+the thesis workspace. Cost, 10,000 targets, CPU time on one core: 0.3 s for one family, 0.43 s for
+every solution of every family (the former bracketing: 0.17 s per family, 1.3 s for all eight).
 
 Targets are sole positions and yaws in the base frame (the thesis' "local limb positions" with
 the centre of body at the origin). As in the thesis the front-right limb is solved and the other
@@ -136,8 +137,11 @@ MAX_JOINT_STEP_RAD = 0.25
 #: Degree bound of ``H``, the meeting polynomial (module docstring), and its samples (> 2x).
 MEETING_DEGREE = 24
 MEETING_SAMPLES = 64
+#: Degree to which ``H`` is evaluated: its degree in fact (the coefficients above are rounding,
+#: and are counted as such).
+EVALUATED_DEGREE = 16
 #: Order of the Taylor expansions that decide an arc.
-TAYLOR_ORDER = 6
+TAYLOR_ORDER = 4
 #: Arcs of ``P3``'s circle the root search starts from, and how an undecided arc is cut.
 ROOT_GRID = 128
 ROOT_SPLIT = 4
@@ -859,17 +863,22 @@ class RoboSimianLimbIk:
         h, size = _meeting_polynomial(meeting.terms(np.cos(samples), np.sin(samples)))
         spectrum = np.fft.rfft(h, axis=1)[:, :MEETING_DEGREE + 1] / MEETING_SAMPLES
         orders = np.arange(MEETING_DEGREE + 1)
-        derivative_factors = (1j * orders) ** np.arange(m + 1)[:, None]      # (m + 1, K)
-        taylor = (spectrum * np.where(orders > 0, 2.0, 1.0))[:, None, :] * derivative_factors
-        moments = (orders ** np.arange(m + 2)[:, None]) @ np.abs(taylor[:, 0]).T
+        weights = np.where(orders > 0, 2.0, 1.0)
+        magnitudes = weights * np.abs(spectrum)
+        moments = (orders ** np.arange(m + 2)[:, None]) @ magnitudes.T
         # Rounding: H's samples are good to a few ulps of size, values from the coefficients
-        # to a few ulps of the moments; 1e-12 leaves a margin of 100 or more.
-        rounding = 1e-12 * (moments[:m + 1] + float(MEETING_DEGREE) ** np.arange(m + 1)[:, None]
-                            * size.max(axis=1))
+        # to a few ulps of the moments; 1e-12 leaves a margin of 100 or more. H is evaluated
+        # to EVALUATED_DEGREE: the rest of its spectrum counts as rounding too.
+        kept = EVALUATED_DEGREE + 1
+        rounding = (1e-12 * (moments[:m + 1] + float(MEETING_DEGREE) ** np.arange(m + 1)[:, None]
+                             * size.max(axis=1))
+                    + (orders[kept:] ** np.arange(m + 1)[:, None]) @ magnitudes[:, kept:].T)
+        derivative_factors = (1j * orders[:kept]) ** np.arange(m + 1)[:, None]     # (m + 1, K)
+        taylor = (weights[:kept] * spectrum[:, :kept])[:, None, :] * derivative_factors
         bounds = _Bounds(moments, rounding)
         # 2. The uniform grid's arcs (H by inverse FFT) that reach inside the sheets' edges.
         padded = np.zeros((count, m + 1, ROOT_GRID // 2 + 1), dtype=complex)
-        padded[:, :, :MEETING_DEGREE + 1] = spectrum[:, None, :] * derivative_factors
+        padded[:, :, :kept] = spectrum[:, None, :kept] * derivative_factors
         at_lo = np.moveaxis(np.fft.irfft(padded, n=ROOT_GRID, axis=2), 1, 0) * ROOT_GRID
         at_hi = np.roll(at_lo, -1, axis=2)
         step = 2.0 * math.pi / ROOT_GRID
