@@ -16,7 +16,15 @@ speed, and with ``--perturb`` repeats the optimality test of thesis IV.B.7.
 ``python -m gait_nodes.swing_table crossover --joint-vel-limits 1 1.5 2 2.5 3`` compares the
 value-iteration crawl with the ZMP-based trot under the same joint velocity limits (thesis IV.C).
 
-Exit status: 0 on success, 2 on bad input (one line on stderr).
+``python -m gait_nodes.swing_table ik-check --robot robosimian`` counts the limb IK's solutions
+at every target of the thesis' swing workspace (by default the fine table grid on the two swing
+planes and between them: x 0.2-0.8 m in 31, y -0.65 to -0.4 m in 14, z -0.7 to -0.6 m in 3, yaw
++-0.45 rad in 11, front-right foot, 14,322 targets), how many have 10, 8, 6, ... and where a
+family holds more than one, and checks 40 random targets of it against an independent multistart
+solver (:mod:`gait_nodes.robot.ik_check`); exit status 1 if they disagree.
+
+Exit status: 0 on success, 2 on bad input (one line on stderr), 1 when ik-check finds the
+solvers disagree.
 """
 
 from __future__ import annotations
@@ -237,8 +245,81 @@ def _crossover(options) -> int:
     return 0
 
 
+def _ik_check(options) -> int:
+    import time
+
+    from gait_nodes.errors import ArgumentError, ConfigError
+    from gait_nodes.robot.ik_check import (
+        LimbChain,
+        compare_solution_sets,
+        multistart_limb_ik,
+    )
+    from gait_nodes.robot.limb_ik import SINGULAR_SINE
+    from gait_nodes.robot.model import load_robot_model
+    from gait_nodes.robot.whole_body_ik import robosimian_limb_ik
+
+    axes = {}
+    for name in ('x_range', 'y_range', 'z_range', 'yaw_range'):
+        low, high, count = getattr(options, name)
+        if not (low <= high and count >= 1 and float(count).is_integer()):
+            raise ArgumentError(f'--{name.replace("_", "-")}: MIN <= MAX and an integer COUNT >= '
+                                f'1 expected, got {low:g} {high:g} {count:g}')
+        axes[name] = (low, high, int(count))
+    if options.check_targets < 0 or options.starts < 1:
+        raise ArgumentError(f'--check-targets must be >= 0 and --starts >= 1, got '
+                            f'{options.check_targets} and {options.starts}')
+    robot = load_robot_model(options.robot)
+    if robot.description.extra.get('limb_ik') is None:
+        raise ConfigError(f'robot {robot.name!r} has no closed-form limb IK (extra.limb_ik in '
+                          f'{robot.description.path})')
+    ik = robosimian_limb_ik(robot)
+    grid = np.meshgrid(*(np.linspace(*axes[name]) for name in axes), indexing='ij')
+    targets, yaws = ik.mirror_targets(np.stack([g.ravel() for g in grid[:3]], axis=1),
+                                      grid[3].ravel(), options.foot)
+    start = time.perf_counter()
+    every = ik.solutions(targets, yaws, options.foot)
+    seconds = time.perf_counter() - start
+    ranges = ', '.join(f'{name.split("_")[0]} {low:g}..{high:g} {unit} ({count})'
+                       for (name, (low, high, count)), unit
+                       in zip(axes.items(), ('m', 'm', 'm', 'rad'), strict=True))
+    print(f'{robot.name} {options.foot} limb IK over the front-right workspace {ranges}: '
+          f'{len(targets)} targets solved in {seconds:.2f} s')
+    values, counts = np.unique(every.count, return_counts=True)
+    print('solutions per target: ' + ', '.join(
+        f'{value}: {count} ({100 * count / len(targets):.1f} %)'
+        for value, count in zip(values[::-1], counts[::-1], strict=True)))
+    family_counts = every.family_counts()
+    crowded = family_counts >= 2
+    print(f'a family holds more than one solution at {int(crowded.any(axis=1).sum())} targets'
+          + ''.join(f'; family {family}: {int(crowded[:, family].sum())}'
+                    for family in range(8) if crowded[:, family].any()))
+    if not options.check_targets:
+        return 0
+    rng = np.random.default_rng(options.seed)
+    low, high = (np.array([axes[name][k] for name in axes]) for k in (0, 1))
+    samples = rng.uniform(low, high, (options.check_targets, 4))
+    check_targets, check_yaws = ik.mirror_targets(samples[:, :3], samples[:, 3], options.foot)
+    ours = ik.solutions(check_targets, check_yaws, options.foot)
+    theirs = multistart_limb_ik(LimbChain.of(robot, options.foot), check_targets, check_yaws,
+                                options.starts, options.seed)
+    # limb_ik returns no singular solution; the multistart solver's are set aside.
+    singular = [np.minimum(np.abs(np.sin(q[:, 1])), np.abs(np.sin(q[:, 4]))) <= SINGULAR_SINE
+                for q in theirs]
+    theirs = [q[~aside] for q, aside in zip(theirs, singular, strict=True)]
+    agreement = compare_solution_sets(
+        [ours.joint_angles[k, :ours.count[k]] for k in range(len(check_targets))], theirs)
+    print(f'multistart check ({agreement.targets} random targets of the workspace, '
+          f'{options.starts} starts each, seed {options.seed}): {agreement.agreeing} of '
+          f'{agreement.targets} agree; {int(ours.count.sum())} solutions, '
+          f'{agreement.missed_by_first} found only by the multistart solver, '
+          f'{agreement.missed_by_second} only by limb_ik ({sum(int(a.sum()) for a in singular)} '
+          f'singular ones of the multistart solver, |sin q2| or |sin q5| <= {SINGULAR_SINE:g}, '
+          f'set aside)')
+    return 0 if agreement.agreeing == agreement.targets else 1
+
+
 def main(args: list[str] | None = None) -> int:
-    """Entry point: ``python -m gait_nodes.swing_table build|sweep|crossover ...``."""
+    """Entry point: ``python -m gait_nodes.swing_table build|sweep|crossover|ik-check ...``."""
     parser = ArgumentParser(prog=PROG, description=__doc__.split('\n\n')[0], epilog=None)
     commands = parser.add_subparsers(dest='command', required=True)
     build = commands.add_parser('build', help='run the value iteration, write a table file')
@@ -271,10 +352,26 @@ def main(args: list[str] | None = None) -> int:
     crossover.add_argument('--step-height-m', type=float, default=0.1)
     crossover.add_argument('--joint-vel-limits', type=float, nargs='+',
                            default=[1.0, 1.5, 2.0, 2.5, 3.0])
+    ik_check = commands.add_parser('ik-check', help='limb IK solutions per target over the '
+                                   'swing workspace, checked by a multistart solver')
+    ik_check.add_argument('--robot', default='robosimian', help='robot name or YAML path')
+    ik_check.add_argument('--foot', default='front_right',
+                          help='limb; the workspace is the front-right one, mirrored onto it')
+    for name, default, unit in (('x', (0.2, 0.8, 31), 'm'), ('y', (-0.65, -0.4, 14), 'm'),
+                                ('z', (-0.7, -0.6, 3), 'm'), ('yaw', (-0.45, 0.45, 11), 'rad')):
+        ik_check.add_argument(f'--{name}-range', type=float, nargs=3,
+                              metavar=('MIN', 'MAX', 'COUNT'), default=default,
+                              help=f'{name} axis of the workspace [{unit}] (default '
+                              f'{" ".join(f"{v:g}" for v in default)})')
+    ik_check.add_argument('--check-targets', type=int, default=40,
+                          help='random targets checked by the multistart solver (0: none)')
+    ik_check.add_argument('--starts', type=int, default=400,
+                          help='multistart starts per target (default 400)')
+    ik_check.add_argument('--seed', type=int, default=0, help='seed of targets and starts')
     options = parser.parse_args(args)
     try:
-        return {'build': _build, 'sweep': _sweep, 'crossover': _crossover}[options.command](
-            options)
+        return {'build': _build, 'sweep': _sweep, 'crossover': _crossover,
+                'ik-check': _ik_check}[options.command](options)
     except GaitNodesError as exc:
         return fail(PROG, exc)
 

@@ -1,4 +1,4 @@
-"""python -m gait_nodes.swing_table: build, sweep (eq. (2), plot, --perturb), bad input."""
+"""python -m gait_nodes.swing_table: build, sweep (eq. (2), plot, perturb), ik-check, bad input."""
 
 import re
 
@@ -61,3 +61,30 @@ def test_sweep_prints_the_optimum_plots_and_perturbs(tmp_path, capsys):
     losses = [float(v) for v in re.findall(r'mean speed lost ([+-][\d.]+) ft/min', printed)]
     assert len(losses) == 4 and np.mean(losses) > 0
     assert plot.read_bytes()[:8] == b'\x89PNG\r\n\x1a\n'
+
+
+IK_GRID = ['--x-range', '0.3', '0.6', '4', '--y-range', '-0.55', '-0.45', '3', '--z-range', '-0.7',
+           '-0.6', '2', '--yaw-range', '-0.3', '0.3', '3']
+
+
+def test_ik_check_counts_solutions_and_agrees_with_the_multistart_solver(capsys):
+    assert main(['ik-check', *IK_GRID, '--check-targets', '6', '--starts', '200']) == 0
+    printed = capsys.readouterr().out
+    assert '72 targets solved' in printed
+    histogram = re.search(r'solutions per target: (.*)', printed).group(1)
+    counts = {int(k): int(v) for k, v in re.findall(r'(\d+): (\d+) \(', histogram)}
+    assert sum(counts.values()) == 72 and max(counts) >= 8
+    assert '6 of 6 agree' in printed and '0 found only by the multistart solver' in printed
+
+
+@pytest.mark.parametrize('arguments, message', [
+    (['--starts', '0'], 'starts'),
+    (['--x-range', '0.8', '0.2', '3'], 'x-range'),
+    (['--yaw-range', '-0.3', '0.3', '2.5'], 'yaw-range'),
+    (['--foot', 'nose'], 'nose'),
+    (['--robot', 'biped'], 'limb IK'),
+])
+def test_ik_check_refuses_bad_input_with_exit_2(capsys, arguments, message):
+    assert main(['ik-check', *IK_GRID, '--check-targets', '0', *arguments]) == 2
+    error = capsys.readouterr().err
+    assert message in error and len(error.strip().splitlines()) == 1
