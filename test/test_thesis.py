@@ -165,6 +165,26 @@ def test_fig14_on_a_finer_grid_is_printed_with_its_verdict(quick_run, quick_cach
     assert f'| optimum converged over grids 16x6x5, 21x6x5 | {verdict} |' in printed
 
 
+def test_the_sweep_command_gives_the_thesis_commands_optimum_on_its_grid(quick_run, quick_cache,
+                                                                        monkeypatch, capsys):
+    from gait_nodes.swing.sweep import describe_optimum
+    from gait_nodes.swing_table import main as swing_table
+
+    monkeypatch.setenv('XDG_CACHE_HOME', str(quick_cache))
+    _, _, results, _ = quick_run
+    s = results.settings
+    assert swing_table(['sweep', '--families', '2', '--step-heights-m', '0.1', '--x-range',
+                        '0.2', '0.8', str(s.x_count), '--y-range', '-0.65', '-0.4',
+                        str(s.y_count), '--yaw-range', '-0.45', '0.45', str(s.yaw_count),
+                        '--radii-m', *map(str, s.radii_m), '--azimuths', str(s.azimuth_count),
+                        '--quiet']) == 0
+    printed = capsys.readouterr().out
+    assert (f'swings centred at x 0.50 m: optimal step '
+            f'{describe_optimum(results.centred[2, 0.1])},') in printed
+    assert (f'best over every goal: optimal step '
+            f'{describe_optimum(results.anywhere[2, 0.1])},') in printed
+
+
 def test_gait_speed_has_an_interior_maximum_over_step_size(quick_run):
     _, _, results, _ = quick_run
     # Fig. 14 (thesis' 3rd family, 0.1 m step height), swings centred on the stance. On the
