@@ -136,11 +136,18 @@ def test_convergence_is_judged_on_the_two_finest_grids():
     converged, text = thesis.convergence([_grid((16, 6, 5), 0.04, 0.44),
                                           _grid((41, 16, 9), 0.015, 0.54),
                                           _grid((61, 21, 13), 0.01, 0.56)])
-    assert converged and text.startswith('converged: 0.54 m on 41x16x9, 0.56 m on 61x21x13')
+    assert converged and text.startswith('converged: 0.54 m on 41x16x9, 0.56 m on 61x21x13;')
+    # The flat top around the optimum: every step within 5 % of the best speed.
+    assert 'within 5 % of the best on 61x21x13: 0.52-0.60 m' in text
+    converged, text = thesis.convergence([_grid((41, 16, 9), 0.015, 0.6),
+                                          _grid((61, 21, 13), 0.01, 0.8)])
+    assert converged and text.startswith(
+        'converged, at the end of the range, not an interior optimum: 0.60 m on 41x16x9')
     converged, text = thesis.convergence([_grid((41, 16, 9), 0.015, 0.45),
                                           _grid((61, 21, 13), 0.01, 0.56)])
     assert converged is False
-    assert text.startswith('not converged: 0.45 m on 41x16x9, 0.56 m on 61x21x13 (moves +0.11')
+    assert text.startswith('not converged: 0.45 m on 41x16x9, 0.56 m on 61x21x13;')
+    assert '(moves +0.11 m, more than one step of the coarser grid, 0.030 m)' in text
 
 
 def test_fig14_on_a_finer_grid_is_printed_with_its_verdict(quick_run, quick_cache,
