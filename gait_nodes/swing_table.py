@@ -9,9 +9,15 @@ steps: 218 actions) builds in about a second; a finer one, e.g. ``--x-range 0.2 
 seconds.
 
 ``python -m gait_nodes.swing_table sweep --families 2 7 --step-heights-m 0.06 0.1 --plot
-sweep.png [--perturb]`` builds one table per goal, family and step height, plots step size
-against the crawl speed of thesis eq. (2) (thesis Fig. 14, 17-19), prints the optimal step and
-speed, and with ``--perturb`` repeats the optimality test of thesis IV.B.7.
+sweep.png [--perturb]`` builds one table per goal and family, plots step size against the crawl
+speed of thesis eq. (2) (thesis Fig. 14, 17-19), prints the optimal step and speed of the swings
+centred on the middle of the grid's x range and over every goal, and with ``--perturb``
+repeats the optimality test of thesis IV.B.7. Its defaults are the thesis' setting of
+``python -m gait_nodes.thesis`` (:meth:`GridSpec.thesis`, :func:`thesis_actions`, goals at y
+-0.5 m, z -0.6 m, every x node ahead of the middle whose mirror is a node): on the same grid
+both print the same optima. Steps end where the grid's x range does (0.6 m on x 0.2-0.8 m); an
+optimum on the longest or shortest step is printed as "at the end of the range, not an interior
+optimum". The one-step costs are cached as the thesis command's.
 
 ``python -m gait_nodes.swing_table crossover --joint-vel-limits 1 1.5 2 2.5 3`` compares the
 value-iteration crawl with the ZMP-based trot under the same joint velocity limits (thesis IV.C).
@@ -71,7 +77,7 @@ def _add_table_options(parser: argparse.ArgumentParser, single: bool) -> None:
     parser.add_argument('--quiet', action='store_true', help='no progress bars')
 
 
-def _grid_and_actions(options, base=None):
+def _grid_and_actions(options, base=None, base_actions=None):
     from dataclasses import replace
 
     from gait_nodes.swing.grid import SwingActions
@@ -79,6 +85,8 @@ def _grid_and_actions(options, base=None):
 
     spec = base or GridSpec()
     changes = {}
+    if options.z_levels is not None or options.z_spacing_m is not None:
+        changes['z_planes_m'] = None  # levels from the swing plane up, not fixed planes
     for name, field in (('x_range', 'x_range_m'), ('y_range', 'y_range_m'),
                         ('yaw_range', 'yaw_range_rad')):
         value = getattr(options, name)
@@ -89,7 +97,7 @@ def _grid_and_actions(options, base=None):
     if options.z_spacing_m is not None:
         changes['z_spacing_m'] = options.z_spacing_m
     spec = replace(spec, **changes)
-    defaults = SwingActions()
+    defaults = base_actions or SwingActions()
     actions = SwingActions(
         tuple(options.radii_m or defaults.radii_m),
         options.azimuths if options.azimuths is not None else defaults.azimuth_count,
@@ -126,48 +134,45 @@ def _sweep(options) -> int:
     from gait_nodes.swing.policy import SwingPolicy
     from gait_nodes.swing.sweep import (
         FT_PER_MIN,
-        envelope,
+        centred_goal_xs,
         perturbation_test,
-        speed_curve,
+        sweep_tables,
     )
-    from gait_nodes.swing.value_iteration import GridSpec, build_table, default_goal
+    from gait_nodes.swing.value_iteration import GridSpec, thesis_actions, thesis_goal
+    from gait_nodes.thesis import THESIS
 
     robot = load_robot_model(options.robot)
     limit = options.joint_vel_limit or robot.description.joint_velocity_limit_rad_s
-    spec, actions = _grid_and_actions(options, GridSpec(x_range_m=(-0.4, 1.1, 31)))
+    spec, actions = _grid_and_actions(options, GridSpec.thesis(), thesis_actions())
+    low, high, count = spec.x_range_m
+    centre = 0.5 * (low + high)
+    goal_xs = options.goal_x or centred_goal_xs(np.linspace(low, high, int(count)), centre)
+
+    def log(message):
+        if not options.quiet:
+            print(message, file=sys.stderr, flush=True)
+
+    sweep = sweep_tables(robot, options.families, options.step_heights_m, spec, actions,
+                         [thesis_goal(x) for x in goal_xs], limit, log)
+    for family, goal_x, reason in sweep.skipped:
+        print(f'family {family}, goal x {goal_x:g} m: skipped: {reason}', file=sys.stderr)
     results = []
     for family in options.families:
         for height in options.step_heights_m:
-            curves, tables = [], []
-            for goal_x in options.goal_x:
-                goal = default_goal(robot, height)
-                goal[0] = goal_x
-                try:
-                    table, _ = build_table(robot, family, height, limit, spec, actions, goal,
-                                           progress=not options.quiet)
-                except GaitNodesError as exc:
-                    print(f'family {family}, step height {height:g} m, goal x {goal_x:g} m: '
-                          f'skipped: {exc}', file=sys.stderr)
-                    continue
-                curves.append(speed_curve(table))
-                tables.append(table)
-            if not curves:
+            try:
+                anywhere = sweep.anywhere(family, height)
+            except GaitNodesError:
                 continue
-            best_curve = envelope(curves)
-            k = best_curve.best
-            interior = 0 < k < len(best_curve.steps_m) - 1
-            results.append((family, height, curves, best_curve))
-            print(f'family {family} (thesis {family + 1}), step height {height:g} m: optimal '
-                  f'step {best_curve.steps_m[k]:.3f} m, {best_curve.speeds_m_s[k]:.4f} m/s = '
-                  f'{best_curve.speeds_m_s[k] * FT_PER_MIN:.3f} ft/min, swing '
-                  f'{best_curve.swing_s[k]:.3f} s'
-                  + ('' if interior else ' (at the end of the swept steps: widen the grid)'))
+            centred = sweep.centred(family, height, centre)
+            results.append((family, height, centred, anywhere))
+            for label, curve in ((f'swings centred at x {centre:.2f} m', centred),
+                                 ('best over every goal', anywhere)):
+                print(f'family {family} (thesis {family + 1}), step height {height:g} m, '
+                      f'{label}: {_optimum_line(curve)}')
             if options.perturb:
-                owner = next(t for t, c in zip(tables, curves, strict=True)
-                             if np.any(np.isclose(c.steps_m, best_curve.steps_m[k])
-                                       & np.isclose(c.speeds_m_s, best_curve.speeds_m_s[k])))
-                policy = SwingPolicy(owner, robot)
-                path = policy.path_from(best_curve.starts[k])
+                best = centred if len(centred.steps_m) else anywhere
+                policy = SwingPolicy(sweep.owner(family, height, best), robot)
+                path = policy.path_from(best.starts[best.best])
                 for result in perturbation_test(policy, path, options.trials,
                                                 options.amplitude_m):
                     print(f'  perturbed in {result.mode:>3}: mean speed lost '
@@ -176,47 +181,58 @@ def _sweep(options) -> int:
                           f'{len(result.speeds_m_s)} copies slower')
     if not results:
         raise GaitNodesError('no table could be built for the families and step heights given')
-    overall = max(results, key=lambda r: r[3].speeds_m_s[r[3].best])
-    k = overall[3].best
-    print(f'optimal overall: family {overall[0]}, step height {overall[1]:g} m, step '
-          f'{overall[3].steps_m[k]:.3f} m, {overall[3].speeds_m_s[k] * FT_PER_MIN:.3f} ft/min '
-          f'(thesis: 0.34 m, 8.542 ft/min for RoboSimian)')
+    # As the thesis' Fig. 19: the centred swings (any goal when none is centred).
+    index = 2 if any(len(r[2].steps_m) for r in results) else 3
+    family, height, curve = max(
+        ((r[0], r[1], r[index]) for r in results if len(r[index].steps_m)),
+        key=lambda r: r[2].speeds_m_s[r[2].best])
+    which = f'centred at x {centre:.2f} m' if index == 2 else 'any goal'
+    print(f'optimal overall ({which}): family {family}, step height {height:g} m, '
+          f'{_optimum_line(curve)} (thesis: {THESIS["fig19_overall"]}, for RoboSimian)')
     if options.plot:
-        _plot_sweep(results, options.plot, limit)
+        _plot_sweep(results, options.plot, limit, centre)
         print(f'plot: {options.plot}')
     return 0
 
 
-def _plot_sweep(results, path, limit) -> None:
+def _optimum_line(curve) -> str:
+    from gait_nodes.swing.sweep import describe_optimum
+
+    swing = f', swing {curve.swing_s[curve.best]:.3f} s' if len(curve.steps_m) else ''
+    return f'optimal step {describe_optimum(curve)}{swing}'
+
+
+def _plot_sweep(results, path, limit, centre) -> None:
     import matplotlib
 
     matplotlib.use('Agg')
     import matplotlib.pyplot as plt
 
     from gait_nodes.swing.sweep import FT_PER_MIN
+    from gait_nodes.thesis import THESIS_NUMBERS
 
     def feet_per_min(curve):
         return np.where(curve.speeds_m_s > 0, curve.speeds_m_s * FT_PER_MIN, np.nan)
 
-    families = sorted({family for family, _, _, _ in results})
-    styles = ('-', '--', ':', '-.')
     figure, axes = plt.subplots(figsize=(8, 5))
-    for family, height, curves, best in results:
-        line, = axes.plot(best.steps_m, feet_per_min(best), marker='o', ms=3,
-                          ls=styles[families.index(family) % len(styles)],
-                          label=f'family {family + 1} (thesis numbering), {height * 100:g} cm')
-        for curve in curves:
-            axes.plot(curve.steps_m, feet_per_min(curve), color=line.get_color(),
-                      alpha=0.25, lw=0.8)
-        k = best.best
-        axes.plot(best.steps_m[k], best.speeds_m_s[k] * FT_PER_MIN, marker='*', ms=12,
-                  color=line.get_color())
+    for family, height, centred, anywhere in results:
+        line, = axes.plot(centred.steps_m, feet_per_min(centred), marker='o', ms=3,
+                          label=f'family {family} (thesis {family + 1}), {height:g} m')
+        axes.plot(anywhere.steps_m, feet_per_min(anywhere), ':', color=line.get_color(),
+                  lw=1)
+        if len(centred.steps_m):
+            k = centred.best
+            axes.plot(centred.steps_m[k], centred.speeds_m_s[k] * FT_PER_MIN, marker='*',
+                      ms=12, color=line.get_color())
+    axes.plot(THESIS_NUMBERS['overall_step_m'], THESIS_NUMBERS['overall_ft_min'], 'X', ms=11,
+              color='k', label='thesis: optimum overall (family 3, 0.06 m)')
     axes.set_xlabel('step size [m]')
     axes.set_ylabel('gait speed [ft/min] (thesis eq. (2))')
-    axes.set_title(f'Step size vs. gait speed at {limit:g} rad/s (faint: one goal each)')
+    axes.set_title(f'Step size vs. gait speed at {limit:g} rad/s (solid: centred at x '
+                   f'{centre:g} m; dotted: any goal)')
     axes.set_ylim(bottom=0)
     axes.grid(True, alpha=0.3)
-    axes.legend()
+    axes.legend(fontsize=8)
     figure.tight_layout()
     figure.savefig(path, dpi=120)
     plt.close(figure)
@@ -337,8 +353,9 @@ def main(args: list[str] | None = None) -> int:
                        help='step heights [m] (default 0.06 0.1)')
     sweep.add_argument('--joint-vel-limit', type=float, default=None,
                        help='joint velocity limit [rad/s] (default: the robot YAML\'s)')
-    sweep.add_argument('--goal-x', type=float, nargs='+', default=[0.6, 0.7, 0.8, 0.9],
-                       help='goal x positions, one table each [m] (default 0.6 0.7 0.8 0.9)')
+    sweep.add_argument('--goal-x', type=float, nargs='+', default=None,
+                       help='goal x positions, one table each [m] (default: every x node ahead '
+                       'of the middle of the x range whose mirror about it is a node)')
     sweep.add_argument('--plot', default=None, help='PNG file of the sweep')
     sweep.add_argument('--perturb', action='store_true',
                        help='perturbation test of the optimal path (thesis IV.B.7)')

@@ -1,17 +1,21 @@
 """Reproduce the thesis' results with our models: one table beside the thesis' numbers, PNGs.
 
-``python -m gait_nodes.thesis [--out DIR] [--quick]`` runs, on the shipped RoboSimian:
+``python -m gait_nodes.thesis [--out DIR] [--quick] [--convergence]`` runs, on the shipped
+RoboSimian (every PNG marks the thesis' values in black, labelled "thesis", beside ours):
 
 - Fig. 8: largest ZMP error of the simplified models against step size: the full model's ZMP
   (:mod:`gait_nodes.robot.dynamics`) when the body follows the cart-table preview COM, and after
   one multi-mass correction (:mod:`gait_nodes.com.multimass`, our stand-in for the nine-link
   model), ZMP crawl (:mod:`gait_nodes.swing.crossover`'s plan), steady cycles only;
 - Fig. 10: largest stance-limb joint speed of that ZMP crawl against step size;
-- Fig. 12: joint travel per metre of a small move along the swing's line (the thesis' reason
-  for the drop of Fig. 14: the joints move more close to the body);
+- Fig. 12: the thesis' map over the swing plane (z -0.6 m): the fastest joint's travel per
+  metre of a small move along x and along y, with the thesis' grid drawn on it; printed along
+  the swing's line too (the thesis' reason for the drop of Fig. 14: the joints move more close
+  to the body);
 - Figs. 14, 17-19: crawl speed (thesis eq. (2)) against step size from value tables on the
   thesis' setting (:meth:`GridSpec.thesis`), IK families 2 and 7 (the thesis' 3rd and 8th),
-  step heights 0.1 and 0.06 m;
+  step heights 0.1 and 0.06 m; with ``--convergence`` Fig. 14 again on the finer grids of
+  :attr:`Settings.finer_grids`, and whether its optimum stays put (:func:`convergence`);
 - Figs. 15-16: the optimal swing's top view against a straight swing, and the share of the
   lift and lowering in the swing time;
 - IV.B.7 (Fig. 20): random perturbations of the optimal swing's waypoints;
@@ -24,24 +28,29 @@ over every goal of the grid is printed too. The ZMP gaits plan with the thesis' 
 the robot's reach (:func:`thesis_description`). The thesis gives no step period for its ZMP
 gait: Figs. 8 and 10 use :data:`ZMP_STEP_PERIODS_S` (both drawn, the first printed). The
 one-step costs of the value iteration are cached in ``$XDG_CACHE_HOME/gait_nodes/thesis/`` (a
-minute per family on the default grid).
+minute per family on the default grid; 3.5 and 6 minutes for family 2 on the finer grids of
+``--convergence``).
 
 Exit status: 0 on success, 2 on bad input (one line on stderr).
 """
 
 from __future__ import annotations
 
-import hashlib
 import sys
+import textwrap
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from gait_nodes.cli import ArgumentParser, fail
 from gait_nodes.errors import GaitNodesError
 from gait_nodes.swing.value_iteration import THESIS_STEP_HEIGHTS_M
+
+if TYPE_CHECKING:
+    from gait_nodes.swing.sweep import SweepTables
 
 PROG = 'python -m gait_nodes.thesis'
 
@@ -56,27 +65,47 @@ ZMP_CROSSOVER_STEPS_M = (0.05, 0.1, 0.15, 0.2, 0.25, 0.3, 0.35, 0.4, 0.45, 0.5)
 #: The foot's radius: the thesis' bound on a useful ZMP error (IV.A.1) [m].
 FOOT_RADIUS_M = 0.055
 
+#: The thesis' numbers (000, section IV), drawn beside ours in the figures.
+THESIS_NUMBERS = {
+    'fig8_useful_step_m': 0.4,            # IV.A.1: the models useful up to about 0.4 m
+    'fig10_step_m': 0.2,                  # IV.A.2: 1 rad/s allows steps slightly below 0.2 m
+    'fig10_speed_rad_s': 1.0,
+    'fig12_x_m': (0.2, 0.8),              # IV.B.1: the grid chosen from its Fig. 12
+    'fig12_y_m': (-0.65, -0.4),
+    'fig14_optimum_m': 0.34,              # IV.B.3, family 3, 0.1 m step height
+    'fig17_family_3_slower_m': (0.42, 0.54),  # IV.B.4: family 3 slower at these steps
+    'overall_step_m': 0.34,               # IV.B.6: family 3, 0.06 m
+    'overall_ft_min': 8.542,
+    'lift_share': 0.3876,                 # IV.B.5
+    # IV.B.7: mean speed lost by perturbing the optimal path [ft/min].
+    'perturb_loss_ft_min': {'x': 0.5026, 'y': 0.1513, 'z': 0.1803, 'xyz': 0.4353},
+}
+_N = THESIS_NUMBERS
+
 #: The thesis' numbers (000, section IV), by row key.
 THESIS = {
-    'fig8_useful_step': 'about 0.4 m (error < foot radius 0.055 m)',
-    'fig10_speed_at_0.2': 'about 1 rad/s',
-    'fig10_largest_step': 'slightly below 0.2 m',
+    'fig8_useful_step': f'about {_N["fig8_useful_step_m"]:g} m (error < foot radius 0.055 m)',
+    'fig10_speed_at_0.2': f'about {_N["fig10_speed_rad_s"]:g} rad/s',
+    'fig10_largest_step': f'slightly below {_N["fig10_step_m"]:g} m',
     'fig12_travel': 'more joint travel close to the body',
-    'fig14_optimum': '0.34 m (interior)',
+    'fig12_region': (f'smaller in x {_N["fig12_x_m"][0]:g}-{_N["fig12_x_m"][1]:g} m, y '
+                     f'{_N["fig12_y_m"][0]:g} to {_N["fig12_y_m"][1]:g} m (its grid)'),
+    'fig14_optimum': f'{_N["fig14_optimum_m"]:.2f} m (interior)',
+    'fig14_converged': 'not shown (one grid)',
     'fig15_outward': 'curves outward in y',
     'fig16_straight': 'straight is slower',
-    'fig16_lift_share': '38.76 %',
+    'fig16_lift_share': f'{100 * _N["lift_share"]:.2f} %',
     'fig17_families': 'family 3 faster overall',
     'fig18_heights': '0.06 m faster',
-    'fig19_overall': 'family 3, 0.06 m, 0.34 m, 8.542 ft/min',
+    'fig19_overall': (f'family 3, 0.06 m, {_N["overall_step_m"]:.2f} m, '
+                      f'{_N["overall_ft_min"]:.3f} ft/min'),
     'fig5_families_differ': 'all joints differ',
-    'perturb_x': '-0.50 ft/min, all slower',
-    'perturb_y': '-0.15 ft/min, all slower',
-    'perturb_z': '-0.18 ft/min, all slower',
-    'perturb_xyz': '-0.44 ft/min, all slower',
+    **{f'perturb_{mode}': f'-{loss:.2f} ft/min, all slower'
+       for mode, loss in _N['perturb_loss_ft_min'].items()},
     'fig21_zmp_feasible': 'from 1.9 rad/s',
     'fig21_zmp_faster': 'above about 2.4 rad/s',
 }
+del _N
 
 
 @dataclass(frozen=True)
@@ -94,6 +123,8 @@ class Settings:
         trials: Perturbed copies per axis (IV.B.7).
         amplitude_m: Largest perturbation of a waypoint [m].
         step_heights_m: Step heights [m] (the thesis' 0.1 and 0.06 m).
+        finer_grids: ``(x, y, yaw)`` node counts of the finer grids Fig. 14 is redone on
+            with ``--convergence`` (each with a node at x 0.5 m and y -0.5 m, and yaw 0).
     """
 
     x_count: int = 31
@@ -106,19 +137,26 @@ class Settings:
     trials: int = 40
     amplitude_m: float = 0.02
     step_heights_m: tuple[float, ...] = THESIS_STEP_HEIGHTS_M
+    finer_grids: tuple[tuple[int, int, int], ...] = ((41, 16, 9), (61, 21, 13))
 
     @classmethod
     def quick(cls) -> Settings:
         """A coarse run (about a minute): x every 0.04 m, y every 0.05 m, 5 yaws."""
         return cls(x_count=16, y_count=6, yaw_count=5, radii_m=(0.04, 0.08, 0.16),
                    azimuth_count=8, zmp_steps_m=(0.1, 0.2, 0.3, 0.4),
-                   limits_rad_s=(1.0, 1.5, 2.0, 2.5, 3.0), trials=10)
+                   limits_rad_s=(1.0, 1.5, 2.0, 2.5, 3.0), trials=10,
+                   finer_grids=((21, 6, 5), (31, 11, 5)))
 
-    def grid_spec(self):
-        """The thesis' grid at this resolution."""
+    @property
+    def counts(self) -> tuple[int, int, int]:
+        """``(x, y, yaw)`` node counts of the run's grid."""
+        return self.x_count, self.y_count, self.yaw_count
+
+    def grid_spec(self, counts: tuple[int, int, int] | None = None):
+        """The thesis' grid at this resolution, or at ``(x, y, yaw)`` node counts."""
         from gait_nodes.swing.value_iteration import GridSpec
 
-        return GridSpec.thesis(self.x_count, self.y_count, self.yaw_count)
+        return GridSpec.thesis(*(counts or self.counts))
 
     def actions(self):
         """The thesis' kind of action set at this resolution."""
@@ -223,105 +261,78 @@ def zmp_model_errors(robot, step_m: float, step_period_s: float, dt_s: float = 0
 # -- the value tables (thesis III.C, IV.B) -----------------------------------------------------
 
 
-def cached_costs(robot, family: int, limit_rad_s: float, grid, displacements, log):
-    """One-step costs of :func:`one_step_costs`, from the cache when computed before."""
-    from gait_nodes.swing.cache import cache_dir, robot_digest
-    from gait_nodes.swing.kinematics import LimbTiming
-    from gait_nodes.swing.value_iteration import one_step_costs
-
-    key = hashlib.sha256(robot_digest(robot).encode())
-    for array in (*grid.axes, displacements, np.array([family, limit_rad_s])):
-        key.update(np.ascontiguousarray(array, dtype=float).tobytes())
-    path = cache_dir() / 'thesis' / f'costs_{robot.name}_f{family}_{key.hexdigest()[:16]}.npz'
-    if path.is_file():
-        with np.load(path, allow_pickle=False) as data:
-            return data['costs'], data['feasible']
-    log(f'one-step costs of family {family}: {grid.size} states x {len(displacements)} '
-        f'actions (cached in {path.parent})')
-    costs, feasible = one_step_costs(LimbTiming(robot, family, limit_rad_s), grid,
-                                     displacements)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    partial = path.with_suffix('.part.npz')
-    np.savez(partial, costs=costs, feasible=feasible)
-    partial.replace(path)
-    return costs, feasible
-
-
-@dataclass
-class Tables:
-    """Value tables by ``(family, step height, goal x)`` and their speed curves."""
-
-    tables: dict = field(default_factory=dict)
-    curves: dict = field(default_factory=dict)
-    skipped: list = field(default_factory=list)
-
-
-def build_tables(robot, settings: Settings, centre_x_m: float, log) -> Tables:
-    """One table per family and goal, with the lift and lowering of every step height.
+def build_tables(robot, settings: Settings, centre_x_m: float, log,
+                 families=FAMILIES, counts: tuple[int, int, int] | None = None) -> SweepTables:
+    """One table per family and goal on the thesis' grid, every step height (Figs. 14-19).
 
     The goals are the grid's x nodes ahead of ``centre_x_m`` whose mirror about it is a node
-    too (each gives one centred step); the one-step costs are shared by every goal.
+    too (each gives one centred step), at the thesis' y and z (:func:`thesis_goal`).
+
+    Args:
+        robot: The RobotModel.
+        settings: The run's settings.
+        centre_x_m: Where the swings are centred [m].
+        log: Called with progress messages.
+        families: IK families.
+        counts: ``(x, y, yaw)`` node counts; None: the settings'.
     """
-    from gait_nodes.swing.sweep import speed_curve
-    from gait_nodes.swing.value_iteration import (
-        THESIS_GOAL_Z_M,
-        build_table,
-        table_grid,
-        thesis_goal,
-        with_step_height,
-    )
+    from gait_nodes.swing.sweep import centred_goal_xs, sweep_tables
+    from gait_nodes.swing.value_iteration import thesis_goal
 
-    spec, actions = settings.grid_spec(), settings.actions()
-    limit = robot.description.joint_velocity_limit_rad_s
-    first = settings.step_heights_m[0]
-    grounds = {h: THESIS_GOAL_Z_M - h for h in settings.step_heights_m}
-    x_axis = table_grid(robot, first, spec, thesis_goal(0.8), grounds[first]).x_m
-    goal_xs = [x for x in x_axis if x > centre_x_m + 1e-9
-               and np.min(np.abs(x_axis - (2 * centre_x_m - x))) < 1e-9]
-    result = Tables()
-    for family in FAMILIES:
-        grid = table_grid(robot, first, spec, thesis_goal(goal_xs[0]), grounds[first])
-        costs = cached_costs(robot, family, limit, grid, actions.displacements(), log)
-        started = time.perf_counter()
-        for goal_x in goal_xs:
-            try:
-                table, _ = build_table(robot, family, first, limit, spec, actions,
-                                       thesis_goal(goal_x), ground_z_m=grounds[first],
-                                       costs=costs)
-            except GaitNodesError as exc:
-                result.skipped.append((family, goal_x, str(exc)))
-                continue
-            for height in settings.step_heights_m:
-                try:
-                    tab = with_step_height(table, robot, height, grounds[height])
-                except GaitNodesError as exc:
-                    result.skipped.append((family, goal_x, str(exc)))
-                    continue
-                result.tables[family, height, goal_x] = tab
-                result.curves[family, height, goal_x] = speed_curve(tab)
-        log(f'family {family}: {len(goal_xs)} goals in {time.perf_counter() - started:.1f} s')
-    return result
+    spec = settings.grid_spec(counts)
+    x_axis = np.linspace(*spec.x_range_m[:2], int(spec.x_range_m[2]))
+    goals = [thesis_goal(x) for x in centred_goal_xs(x_axis, centre_x_m)]
+    return sweep_tables(robot, families, settings.step_heights_m, spec, settings.actions(),
+                        goals, robot.description.joint_velocity_limit_rad_s, log)
 
 
-def joint_travel_along_x(robot, family: int, step_m: float = 0.01
-                         ) -> tuple[np.ndarray, np.ndarray]:
-    """Thesis Figs. 11-12: largest joint travel per metre of a small move along x [rad/m].
+#: Fig. 12's map over the swing plane: x and y of the front-right foot [m], every 0.01 m
+#: (the thesis maps "a wide range of points"; this holds the limb's reach on that plane).
+FIG12_X_M = np.round(np.arange(0.0, 1.0 + 1e-9, 0.01), 6)
+FIG12_Y_M = np.round(np.arange(-1.0, 0.0 + 1e-9, 0.01), 6)
+#: Fig. 12's axes of the small move: the thesis' top (x) and bottom (y) panels.
+FIG12_MOVES = ('x', 'y')
 
-    At y -0.5 m, z -0.6 m (the swing's line), yaw 0, x from 0.2 to 0.8 m every 0.01 m; NaN
-    where the family does not reach either end.
+
+def joint_travel_map(robot, family: int, x_m: np.ndarray, y_m: np.ndarray, move: str,
+                     z_m: float = -0.6, step_m: float = 0.01) -> np.ndarray:
+    """Thesis Figs. 11-12: largest joint travel per metre of a small move of the foot [rad/m].
+
+    The thesis maps the joint velocity when each node is moved a small amount along x (its top
+    panel) or y (bottom) on the plane 0.6 m below the centre of body; ours is the fastest
+    joint's travel per metre of foot travel, its speed [rad/s] at a foot speed of 1 m/s.
+
+    Args:
+        robot: The RobotModel.
+        family: IK family 0..7.
+        x_m: (nx,) foot x [m] (base frame, front-right limb).
+        y_m: (ny,) foot y [m].
+        move: ``'x'`` or ``'y'``: the axis of the small move.
+        z_m: Foot z [m] (yaw 0).
+        step_m: The small move [m].
+
+    Returns:
+        (ny, nx) travel [rad/m]; NaN where the family reaches neither end (the thesis' 0).
     """
     from gait_nodes.swing.kinematics import LimbTiming
-    from gait_nodes.swing.value_iteration import THESIS_GOAL_Y_M, THESIS_GOAL_Z_M
 
     timing = LimbTiming(robot, family, 1.0)
-    x = np.round(np.arange(0.2, 0.8 + 1e-9, 0.01), 6)
-    states = np.column_stack([x, np.full_like(x, THESIS_GOAL_Y_M),
-                              np.full_like(x, THESIS_GOAL_Z_M), np.zeros_like(x)])
+    xx, yy = np.meshgrid(x_m, y_m)
+    states = np.column_stack([xx.ravel(), yy.ravel(), np.full(xx.size, z_m),
+                              np.zeros(xx.size)])
     q, ok = timing.joints(states)
-    moved = states + np.array([step_m, 0.0, 0.0, 0.0])
+    moved = states.copy()
+    moved[:, FIG12_MOVES.index(move)] += step_m
     q_next, ok_next = timing.joints(moved)
     travel = np.abs(q_next - q).max(axis=1) / step_m
-    return x, np.where(ok & ok_next, travel, np.nan)
+    return np.where(ok & ok_next, travel, np.nan).reshape(xx.shape)
+
+
+def thesis_region(x_m: np.ndarray, y_m: np.ndarray) -> np.ndarray:
+    """(ny, nx) True inside the thesis' grid (x 0.2-0.8 m, y -0.65 to -0.4 m)."""
+    (x0, x1), (y0, y1) = THESIS_NUMBERS['fig12_x_m'], THESIS_NUMBERS['fig12_y_m']
+    xx, yy = np.meshgrid(x_m, y_m)
+    return (xx >= x0 - 1e-9) & (xx <= x1 + 1e-9) & (yy >= y0 - 1e-9) & (yy <= y1 + 1e-9)
 
 
 def straight_swing(start: np.ndarray, goal: np.ndarray, spacing_m: float = 0.01) -> np.ndarray:
@@ -342,7 +353,7 @@ class Results:
     zmp_errors: dict = field(default_factory=dict)       # (period, step) -> ZmpErrors
     zmp_joint_speeds: dict = field(default_factory=dict)  # (period, step) -> rad/s
     centre_x_m: float = 0.0
-    tables: Tables | None = None
+    tables: SweepTables | None = None
     centred: dict = field(default_factory=dict)          # (family, height) -> SpeedCurve
     anywhere: dict = field(default_factory=dict)         # (family, height) -> SpeedCurve
     optimal: dict = field(default_factory=dict)          # Figs. 15-16
@@ -350,16 +361,98 @@ class Results:
     perturbations_of: tuple = ()                         # (family, height) of the path
     families_q: tuple | None = None
     joint_travel: dict = field(default_factory=dict)     # family -> (x, rad/m along x)
+    travel_maps: dict = field(default_factory=dict)      # 'x' / 'y' -> (ny, nx) rad/m
+    fig14_grids: list = field(default_factory=list)      # GridOptimum, coarsest first
     # (limit, value-table crawl, ZMP crawl limited by its stance limbs, by every limb) [m/s]
     crossover: list = field(default_factory=list)
     seconds: dict = field(default_factory=dict)
 
 
-def run(robot, settings: Settings, log) -> Results:
-    """Compute every figure's data (see the module docstring)."""
+@dataclass(frozen=True)
+class GridOptimum:
+    """Fig. 14 (family 2, 0.1 m step height, centred swings) on one grid.
+
+    Attributes:
+        counts: ``(x, y, yaw)`` node counts.
+        x_spacing_m: Node spacing along x [m] (centred steps lie twice that apart).
+        curve: The centred speed curve.
+        seconds: Wall time of its value tables, one-step costs included [s].
+    """
+
+    counts: tuple[int, int, int]
+    x_spacing_m: float
+    curve: object
+    seconds: float
+
+    @classmethod
+    def of(cls, settings: Settings, counts, curve, seconds: float) -> GridOptimum:
+        """The optimum of ``curve`` on the settings' grid with ``counts`` nodes."""
+        low, high, count = settings.grid_spec(counts).x_range_m
+        return cls(tuple(counts), (high - low) / (count - 1), curve, seconds)
+
+    @property
+    def name(self) -> str:
+        """``'31x11x7'``: nodes along x, y and yaw."""
+        return 'x'.join(str(c) for c in self.counts)
+
+    @property
+    def step_m(self) -> float:
+        """The optimal step [m]."""
+        return float(self.curve.steps_m[self.curve.best])
+
+
+def convergence(grids: list[GridOptimum]) -> tuple[bool | None, str]:
+    """Whether Fig. 14's optimum stays put on the two finest grids, and a sentence saying so.
+
+    Converged: the optimal step on the finest grid is within one step of the coarser grid of
+    the two (twice its x spacing: centred steps lie that far apart) of the coarser one's. An
+    optimum on the longest or shortest step is said to be at the end of the range, and the
+    steps within 5 % of the best speed are named (a flat top moves its argmax easily).
+
+    Returns:
+        ``(converged, text)``; ``converged`` None with one grid (not checked).
+    """
+    from gait_nodes.swing.sweep import END_OF_RANGE
+
+    if len(grids) < 2:
+        return None, 'not checked: one grid (--convergence redoes it on finer grids)'
+    coarse, fine = grids[-2], grids[-1]
+    tolerance = 2 * coarse.x_spacing_m
+    shift = fine.step_m - coarse.step_m
+    speed = _best_speed(fine.curve) / _best_speed(coarse.curve) - 1
+    near = fine.curve.steps_m[fine.curve.speeds_m_s >= 0.95 * _best_speed(fine.curve)]
+    both = (f'{coarse.step_m:.2f} m on {coarse.name}, {fine.step_m:.2f} m on {fine.name}; '
+            f'steps within 5 % of the best on {fine.name}: {near.min():.2f}-{near.max():.2f} m')
+    if abs(shift) > tolerance + 1e-9:
+        return False, (f'not converged: {both} (moves {shift:+.2f} m, more than one step of the '
+                       f'coarser grid, {tolerance:.3f} m)')
+    where = '' if fine.curve.best_is_interior else f', {END_OF_RANGE}'
+    return True, (f'converged{where}: {both} (within one step of the coarser grid, '
+                  f'{tolerance:.3f} m; best speed {100 * speed:+.1f} %)')
+
+
+def fig14_on_grid(robot, settings: Settings, centre_x_m: float, counts, log) -> GridOptimum:
+    """Fig. 14's centred curve on the thesis' grid with ``counts`` nodes."""
+    started = time.perf_counter()
+    family, height = FAMILIES[0], settings.step_heights_m[0]
+    tables = build_tables(robot, settings, centre_x_m, log, families=(family,), counts=counts)
+    return GridOptimum.of(settings, counts, tables.centred(family, height, centre_x_m),
+                          time.perf_counter() - started)
+
+
+def run(robot, settings: Settings, log, convergence_grids: bool = False) -> Results:
+    """Compute every figure's data (see the module docstring).
+
+    Args:
+        robot: The RobotModel.
+        settings: What to compute.
+        log: Called with progress messages.
+        convergence_grids: Redo Fig. 14 on :attr:`Settings.finer_grids` too.
+    """
     from gait_nodes.swing.crossover import zmp_gait_joint_speed, zmp_gait_table_for
     from gait_nodes.swing.policy import SwingPolicy
-    from gait_nodes.swing.sweep import centred, envelope, perturbation_test
+    from gait_nodes.swing.sweep import perturbation_test
+    from gait_nodes.swing.value_iteration import THESIS_GOAL_Y_M, THESIS_GOAL_Z_M
 
     results = Results(settings)
     started = time.perf_counter()
@@ -377,27 +470,39 @@ def run(robot, settings: Settings, log) -> Results:
     results.tables = tables = build_tables(robot, settings, results.centre_x_m, log)
     for family in FAMILIES:
         for height in settings.step_heights_m:
-            curves = [c for (f, h, _), c in tables.curves.items()
-                      if f == family and h == height]
-            if curves:
-                results.centred[family, height] = centred(curves, results.centre_x_m)
-                results.anywhere[family, height] = envelope(curves)
+            results.centred[family, height] = tables.centred(family, height,
+                                                             results.centre_x_m)
+            results.anywhere[family, height] = tables.anywhere(family, height)
     results.seconds['tables'] = time.perf_counter() - started
+    results.fig14_grids.append(GridOptimum.of(
+        settings, settings.counts, results.centred[FAMILIES[0], settings.step_heights_m[0]],
+        results.seconds['tables']))
+    if convergence_grids:
+        for counts in settings.finer_grids:
+            grid = fig14_on_grid(robot, settings, results.centre_x_m, counts, log)
+            results.fig14_grids.append(grid)
+            log(f'Fig. 14 on grid {grid.name}: optimum {grid.step_m:.2f} m in '
+                f'{grid.seconds:.0f} s')
 
     family, height = FAMILIES[0], settings.step_heights_m[0]
     results.optimal = optimal_swing(robot, tables, results.centred[family, height],
                                     family, height)
     best_key = max(results.centred, key=lambda k: _best_speed(results.centred[k]))
     best = results.centred[best_key]
-    table = owner(tables, best_key, best)
+    table = tables.owner(*best_key, best)
     policy = SwingPolicy(table, robot)
     path = policy.path_from(best.starts[best.best])
     results.perturbations = perturbation_test(policy, path, settings.trials,
                                               settings.amplitude_m)
     results.perturbations_of = best_key
 
-    for family in FAMILIES:
-        results.joint_travel[family] = joint_travel_along_x(robot, family)
+    for move in FIG12_MOVES:
+        results.travel_maps[move] = joint_travel_map(robot, FAMILIES[0], FIG12_X_M, FIG12_Y_M,
+                                                     move, THESIS_GOAL_Z_M)
+    row = int(np.argmin(np.abs(FIG12_Y_M - THESIS_GOAL_Y_M)))
+    on_grid = (FIG12_X_M >= 0.2 - 1e-9) & (FIG12_X_M <= 0.8 + 1e-9)
+    results.joint_travel[FAMILIES[0]] = (FIG12_X_M[on_grid],
+                                         results.travel_maps['x'][row, on_grid])
     ik = policy.timing.ik
     point = np.array([[0.6, -0.54, -0.6]])
     results.families_q = tuple(ik.solve(point, 0.0, f)[0][0, :6] for f in FAMILIES)
@@ -420,22 +525,11 @@ def _best_speed(curve) -> float:
     return float(curve.speeds_m_s[curve.best]) if len(curve.speeds_m_s) else 0.0
 
 
-def owner(tables: Tables, key, curve):
-    """The table of the curve's best point (its goal: start x + step)."""
-    family, height = key
-    goal_x = curve.starts[curve.best, 0] + curve.steps_m[curve.best]
-    for (f, h, gx), table in tables.tables.items():
-        if f == family and h == height and abs(gx - goal_x) < 1e-9:
-            return table
-    raise GaitNodesError(f'no table with goal x {goal_x:.3f} m for family {family}, step '
-                         f'height {height} m')
-
-
-def optimal_swing(robot, tables: Tables, curve, family: int, height: float) -> dict:
+def optimal_swing(robot, tables: SweepTables, curve, family: int, height: float) -> dict:
     """Figs. 15-16: the optimal swing, a straight one between the same places, their times."""
     from gait_nodes.swing.policy import SwingPolicy
 
-    table = owner(tables, (family, height), curve)
+    table = tables.owner(family, height, curve)
     policy = SwingPolicy(table, robot)
     path = policy.path_from(curve.starts[curve.best])
     swing = path.swing_states
@@ -466,11 +560,9 @@ def _metres(value: float) -> str:
 
 
 def _optimum_text(curve) -> str:
-    if not len(curve.steps_m) or _best_speed(curve) <= 0:
-        return 'no feasible step'
-    k = curve.best
-    where = 'interior' if 0 < k < len(curve.steps_m) - 1 else 'at the edge of the steps'
-    return f'{curve.steps_m[k]:.2f} m ({where}), {_ft(curve.speeds_m_s[k])}'
+    from gait_nodes.swing.sweep import describe_optimum
+
+    return describe_optimum(curve)
 
 
 def rows(results: Results) -> list[tuple[str, str, str, str]]:
@@ -504,12 +596,28 @@ def rows(results: Results) -> list[tuple[str, str, str, str]]:
                 '-0.6', f'peak {travel[peak]:.1f} rad/m at x {x[peak]:.2f} m; <= '
                 f'{behind:.1f} at x <= 0.3 m; median {ahead:.1f} at x 0.45-0.75 m',
                 THESIS['fig12_travel']))
+    inside = thesis_region(FIG12_X_M, FIG12_Y_M)
+    medians = [(np.nanmedian(results.travel_maps[m][inside]),
+                np.nanmedian(results.travel_maps[m][~inside])) for m in FIG12_MOVES]
+    out.append(('Fig. 12', f'map at z -0.6 m (x {FIG12_X_M[0]:g}-{FIG12_X_M[-1]:g}, y '
+                f'{FIG12_Y_M[0]:g}-{FIG12_Y_M[-1]:g} m): median joint travel per metre inside '
+                "/ outside the thesis' grid, moves along " + ' / '.join(FIG12_MOVES),
+                '; '.join(f'{m}: {a:.1f} / {b:.1f} rad/m'
+                          for m, (a, b) in zip(FIG12_MOVES, medians, strict=True)),
+                THESIS['fig12_region']))
     family, height = FAMILIES[0], s.step_heights_m[0]
     out.append(('Fig. 14', f'optimal step, family {family} (thesis {family + 1}), '
                 f'{height:g} m, centred', _optimum_text(results.centred[family, height]),
                 THESIS['fig14_optimum']))
     out.append(('Fig. 14', 'same, best over every goal of the grid',
                 _optimum_text(results.anywhere[family, height]), '-'))
+    for grid in results.fig14_grids[1:]:
+        out.append(('Fig. 14', f'same, centred, finer grid {grid.name} (x every '
+                    f'{grid.x_spacing_m:.3f} m)', f'{_optimum_text(grid.curve)} '
+                    f'({grid.seconds:.0f} s)', '-'))
+    out.append(('Fig. 14', 'optimum converged over grids '
+                + ', '.join(g.name for g in results.fig14_grids),
+                convergence(results.fig14_grids)[1], THESIS['fig14_converged']))
     o = results.optimal
     out.append(('Fig. 15', f'optimal swing ({o["step_m"]:.2f} m): largest y outward of the '
                 'straight line', f'{-o["outward_m"]:.3f} m', THESIS['fig15_outward']))
@@ -568,20 +676,25 @@ def format_table(table_rows) -> str:
 
 
 def write_figures(results: Results, out_dir: Path) -> list[Path]:
-    """Every figure as a PNG in ``out_dir``; returns the paths."""
+    """Every figure as a PNG in ``out_dir``, the thesis' values marked in black; the paths."""
     import matplotlib
 
     matplotlib.use('Agg')
     import matplotlib.pyplot as plt
+    from matplotlib.colors import LogNorm
+    from matplotlib.patches import Rectangle
 
     from gait_nodes.swing.sweep import FT_PER_MIN
+    from gait_nodes.swing.value_iteration import THESIS_GOAL_Y_M
 
     out_dir.mkdir(parents=True, exist_ok=True)
     s = results.settings
+    n = THESIS_NUMBERS
+    thesis_style = {'color': 'k', 'zorder': 5}
     written = []
 
-    def save(figure, name):
-        figure.tight_layout()
+    def save(figure, name, rect=None):
+        figure.tight_layout(rect=rect)
         path = out_dir / name
         figure.savefig(path, dpi=110)
         plt.close(figure)
@@ -590,6 +703,9 @@ def write_figures(results: Results, out_dir: Path) -> list[Path]:
     def finite(values):
         values = np.asarray(values, dtype=float)
         return np.where(np.isfinite(values), values, np.nan)
+
+    def feet_per_min(curve):
+        return np.where(curve.speeds_m_s > 0, curve.speeds_m_s * FT_PER_MIN, np.nan)
 
     steps = np.array(s.zmp_steps_m)
     figure, axes = plt.subplots(figsize=(7, 4.5))
@@ -600,6 +716,8 @@ def write_figures(results: Results, out_dir: Path) -> list[Path]:
         axes.plot(steps, finite([e.corrected_m for e in errors]), 'o-',
                   label=f'+ one multi-mass correction, T {period:g} s')
     axes.axhline(FOOT_RADIUS_M, color='k', lw=0.8, ls=':', label='foot radius 0.055 m')
+    axes.plot(n['fig8_useful_step_m'], FOOT_RADIUS_M, 'X', ms=11, **thesis_style,
+              label=f'thesis: useful up to about {n["fig8_useful_step_m"]:g} m')
     # Log scale: where the full model's IK loses a foot the error jumps by orders.
     axes.set_yscale('log')
     axes.set(xlabel='step size [m]', ylabel='max |ZMP ref - full-model ZMP| [m]',
@@ -613,48 +731,92 @@ def write_figures(results: Results, out_dir: Path) -> list[Path]:
         axes.plot(steps, finite([results.zmp_joint_speeds[period, v] for v in steps]), 'o-',
                   label=f'step period {period:g} s')
     axes.axhline(1.0, color='k', lw=0.8, ls=':', label='RoboSimian limit 1 rad/s')
+    axes.plot(n['fig10_step_m'], n['fig10_speed_rad_s'], 'X', ms=11, **thesis_style,
+              label=f'thesis: about {n["fig10_speed_rad_s"]:g} rad/s at slightly below '
+              f'{n["fig10_step_m"]:g} m')
     axes.set(xlabel='step size [m]', ylabel='max stance joint speed [rad/s]',
              title='Fig. 10: step size vs. joint speed of the ZMP crawl')
     axes.legend(fontsize=8)
     axes.grid(alpha=0.3)
     save(figure, 'fig10_joint_speed.png')
 
-    figure, axes = plt.subplots(figsize=(7, 4.5))
-    for family, (x, travel) in results.joint_travel.items():
-        axes.plot(x, travel, label=f'family {family} (thesis {family + 1})')
-    axes.set_yscale('log')
-    axes.set(xlabel='x [m] (y -0.5 m, z -0.6 m, yaw 0)',
-             ylabel='max joint travel per metre along x [rad/m]',
-             title='Fig. 12: joint travel of a small move along the swing line')
-    axes.grid(alpha=0.3)
-    axes.legend()
+    figure, panels = plt.subplots(2, 1, figsize=(7, 9), sharex=True)
+    # Capped: along the singular curves the travel runs to hundreds of rad/m and would wash
+    # out the 3-30 rad/m that tell the regions apart.
+    norm = LogNorm(vmin=2.0, vmax=40.0, clip=False)
+    (x0, x1), (y0, y1) = n['fig12_x_m'], n['fig12_y_m']
+    for axes, move in zip(panels, FIG12_MOVES, strict=True):
+        axes.set_facecolor('0.85')  # unreachable: the thesis' 0 rad/s
+        image = axes.pcolormesh(FIG12_X_M, FIG12_Y_M, results.travel_maps[move], norm=norm,
+                                cmap='viridis', shading='nearest')
+        axes.add_patch(Rectangle((x0, y0), x1 - x0, y1 - y0, fill=False, lw=2, ls='--',
+                                 label="thesis' grid, chosen from its Fig. 12", **thesis_style))
+        axes.axhline(THESIS_GOAL_Y_M, color='w', lw=0.8, ls=':',
+                     label=f'the swing line (y {THESIS_GOAL_Y_M:g} m)')
+        axes.set(ylabel='y [m]', title=f'small move along {move}', aspect='equal')
+        axes.legend(fontsize=8, loc='lower right')
+        figure.colorbar(image, ax=axes, extend='max',
+                        label='max joint travel per metre [rad/m]')
+    panels[-1].set_xlabel('x [m] (front-right foot, base frame; grey: out of reach)')
+    figure.suptitle(f'Fig. 12: joint travel of a small move, family {FAMILIES[0]} (thesis '
+                    f'{FAMILIES[0] + 1}), z -0.6 m, yaw 0')
     save(figure, 'fig12_joint_travel.png')
 
-    def speed_plot(name, title, keys):
+    converged, verdict = convergence(results.fig14_grids)
+    figure, axes = plt.subplots(figsize=(7.5, 5))
+    for grid in results.fig14_grids:
+        ft = feet_per_min(grid.curve)
+        line, = axes.plot(grid.curve.steps_m, ft, 'o-', ms=3,
+                          label=f'grid {grid.name} (x every {grid.x_spacing_m:.3f} m): '
+                          f'{grid.step_m:.2f} m')
+        axes.plot(grid.step_m, ft[grid.curve.best], '*', ms=13, color=line.get_color())
+    axes.axvline(n['fig14_optimum_m'], lw=1.2, ls='--', **thesis_style,
+                 label=f'thesis: optimum {n["fig14_optimum_m"]:.2f} m')
+    family, height = FAMILIES[0], s.step_heights_m[0]
+    axes.set(xlabel='step size [m]', ylabel='gait speed [ft/min] (thesis eq. (2))',
+             title=f'Fig. 14: step size vs. gait speed, family {family} (thesis {family + 1}), '
+             f'{height:g} m, centred at x {results.centre_x_m:g} m')
+    axes.set_ylim(bottom=0)
+    axes.grid(alpha=0.3)
+    axes.legend(fontsize=8, loc='lower right')
+    radii = '/'.join(f'{r:g}' for r in s.radii_m)
+    note = '\n'.join(textwrap.fill(text, 62) for text in (
+        f'optimum {verdict}',
+        f'every grid: actions on spheres of {radii} m, {s.azimuth_count} azimuths'))
+    axes.text(0.02, 0.97, note, transform=axes.transAxes, va='top', fontsize=7.5,
+              bbox={'facecolor': 'w', 'alpha': 0.85, 'lw': 0.5})
+    save(figure, 'fig14_step_vs_speed.png')
+
+    def speed_plot(name, title, keys, marks=()):
         figure, axes = plt.subplots(figsize=(7, 4.5))
         for family, height in keys:
             curve = results.centred[family, height]
-            ft = np.where(curve.speeds_m_s > 0, curve.speeds_m_s * FT_PER_MIN, np.nan)
+            ft = feet_per_min(curve)
             line, = axes.plot(curve.steps_m, ft, 'o-', ms=3,
                               label=f'family {family} (thesis {family + 1}), {height:g} m')
             k = curve.best
             axes.plot(curve.steps_m[k], ft[k], '*', ms=13, color=line.get_color())
-            other = results.anywhere[family, height]
-            axes.plot(other.steps_m, np.where(other.speeds_m_s > 0,
-                                              other.speeds_m_s * FT_PER_MIN, np.nan),
+            axes.plot(results.anywhere[family, height].steps_m,
+                      feet_per_min(results.anywhere[family, height]),
                       ':', color=line.get_color(), lw=1, alpha=0.6)
+        for step in marks:
+            axes.axvline(step, lw=0.8, ls='--', **thesis_style,
+                         label='thesis: family 3 slower here' if step == marks[0] else None)
+        axes.plot(n['overall_step_m'], n['overall_ft_min'], 'X', ms=11, **thesis_style,
+                  label=f'thesis: optimum overall (family 3, 0.06 m) {n["overall_step_m"]:g} '
+                  f'm, {n["overall_ft_min"]:g} ft/min')
         axes.set(xlabel='step size [m]', ylabel='gait speed [ft/min] (thesis eq. (2))',
                  title=title)
         axes.set_ylim(bottom=0)
         axes.grid(alpha=0.3)
-        axes.legend(fontsize=8, title='solid: centred at x 0.5 m; dotted: any goal',
-                    title_fontsize=7)
+        axes.legend(fontsize=7, loc='lower right',
+                    title='solid: centred at x 0.5 m; dotted: any goal', title_fontsize=7)
         save(figure, name)
 
     f2, f7 = FAMILIES
     h1, h2 = s.step_heights_m
-    speed_plot('fig14_step_vs_speed.png', 'Fig. 14: step size vs. gait speed', [(f2, h1)])
-    speed_plot('fig17_families.png', 'Fig. 17: IK families', [(f2, h1), (f7, h1)])
+    speed_plot('fig17_families.png', 'Fig. 17: IK families', [(f2, h1), (f7, h1)],
+               n['fig17_family_3_slower_m'])
     speed_plot('fig18_step_heights.png', 'Fig. 18: step heights', [(f2, h2), (f2, h1)])
     speed_plot('fig19_overall.png', 'Fig. 19: overall',
                [(f, h) for f in FAMILIES for h in s.step_heights_m])
@@ -669,35 +831,59 @@ def write_figures(results: Results, out_dir: Path) -> list[Path]:
     swing = o['path'].swing_states
     top.quiver(swing[:, 0], swing[:, 1], np.cos(swing[:, 3]), np.sin(swing[:, 3]),
                angles='xy', scale=25, width=0.004, color='C0', alpha=0.6)
+    # The thesis gives the step, not where it lies: centred like ours (our reading).
+    ends = results.centre_x_m + np.array([-0.5, 0.5]) * n['fig14_optimum_m']
+    for axes in (side, top):
+        for x in ends:
+            axes.axvline(x, lw=0.8, ls='--', **thesis_style, label=None if x != ends[0] else
+                         f"thesis' {n['fig14_optimum_m']:g} m step (centred at x "
+                         f'{results.centre_x_m:g} m)')
     side.set(xlabel='x [m]', ylabel='z [m]', title=f'Fig. 15: optimal swing, family {f2} '
              f'(thesis {f2 + 1}), {h1:g} m, step {o["step_m"]:.2f} m')
     top.set(xlabel='x [m]', ylabel='y [m] (front-right limb, body frame)',
-            title='top view (arrows: foot yaw)')
+            title='top view (arrows: foot yaw; thesis: curves outward in y)')
     top.set_aspect('equal', adjustable='datalim')
     for axes in (side, top):
         axes.grid(alpha=0.3)
         axes.legend(fontsize=8)
     save(figure, 'fig15_optimal_swing.png')
 
-    figure, axes = plt.subplots(figsize=(7, 4.5))
+    figure, (bars, share) = plt.subplots(1, 2, figsize=(9, 4.5),
+                                         gridspec_kw={'width_ratios': [3, 1]})
     joints = np.arange(1, 7)
-    axes.bar(joints - 0.2, o['joint_travel_rad'], 0.4, label='optimal')
-    axes.bar(joints + 0.2, o['straight_joint_travel_rad'], 0.4, label='straight')
-    axes.set(xlabel='joint', ylabel='joint travel over the swing [rad]',
-             title=f'Fig. 16: curved vs. straight (lift and lowering '
-             f'{100 * o["lift_share"]:.1f} % of the optimal swing)')
-    axes.legend()
-    axes.grid(alpha=0.3, axis='y')
+    bars.bar(joints - 0.2, o['joint_travel_rad'], 0.4, label='optimal')
+    bars.bar(joints + 0.2, o['straight_joint_travel_rad'], 0.4, label='straight')
+    bars.set(xlabel='joint', ylabel='joint travel over the swing [rad]',
+             title='Fig. 16: curved vs. straight (thesis: straight needs more)')
+    bars.legend()
+    bars.grid(alpha=0.3, axis='y')
+    share.bar([0, 1], [100 * o['lift_share'], 100 * n['lift_share']], color=['C0', 'k'])
+    share.set_xticks([0, 1], [f'ours\n{o["step_m"]:.2f} m step',
+                              f'thesis\n{n["fig14_optimum_m"]:g} m step'])
+    for x, value in enumerate((100 * o['lift_share'], 100 * n['lift_share'])):
+        share.text(x, value, f'{value:.1f} %', ha='center', va='bottom', fontsize=9)
+    share.set(ylabel='lift and lowering [% of the swing time]', title='lift share')
+    share.grid(alpha=0.3, axis='y')
     save(figure, 'fig16_curved_vs_straight.png')
 
-    figure, grid_axes = plt.subplots(2, 2, figsize=(8, 6))
+    figure, grid_axes = plt.subplots(2, 2, figsize=(8, 6.5))
     for axes, result in zip(grid_axes.ravel(), results.perturbations, strict=False):
-        axes.plot(result.speeds_m_s * FT_PER_MIN, 'o', ms=3, label='perturbed')
-        axes.axhline(result.optimal_m_s * FT_PER_MIN, color='k', label='value-table swing')
-        axes.set(title=f'perturbed in {result.mode}', xlabel='copy', ylabel='ft/min')
+        optimal = result.optimal_m_s * FT_PER_MIN
+        loss = n['perturb_loss_ft_min'][result.mode]
+        axes.plot(result.speeds_m_s * FT_PER_MIN, 'o', ms=3, label='perturbed copies')
+        axes.axhline(optimal, color='C1', label='value-table swing')
+        axes.axhline(optimal - result.mean_loss_m_s * FT_PER_MIN, color='C0', ls=':',
+                     label='perturbed copies: mean')
+        axes.axhline(optimal - loss, lw=1.2, ls='--', **thesis_style,
+                     label="thesis: its mean loss below the optimum")
+        axes.set_title(f'perturbed in {result.mode} (thesis: mean -{loss:.2f} ft/min)',
+                       fontsize=9)
+        axes.set(xlabel='copy', ylabel='ft/min')
         axes.grid(alpha=0.3)
-        axes.legend(fontsize=7)
-    save(figure, 'fig20_perturbations.png')
+    figure.legend(*grid_axes[0, 0].get_legend_handles_labels(), loc='lower center', ncol=2,
+                  fontsize=8)
+    figure.suptitle('Fig. 20 (IV.B.7): perturbed copies of the optimal swing')
+    save(figure, 'fig20_perturbations.png', rect=(0, 0.08, 1, 1))
 
     figure, axes = plt.subplots(figsize=(7, 4.5))
     limits = np.array([c[0] for c in results.crossover])
@@ -716,11 +902,15 @@ def write_figures(results: Results, out_dir: Path) -> list[Path]:
 
 
 def main(args: list[str] | None = None) -> int:
-    """Entry point: ``python -m gait_nodes.thesis [--out DIR] [--quick]``."""
+    """Entry point: ``python -m gait_nodes.thesis [--out DIR] [--quick] [--convergence]``."""
     parser = ArgumentParser(prog=PROG, description=__doc__.split('\n\n')[0], epilog=None)
     parser.add_argument('--out', default='thesis_figures', help='directory of the PNG figures '
                         '(default ./thesis_figures)')
     parser.add_argument('--quick', action='store_true', help='a coarse run (about a minute)')
+    parser.add_argument('--convergence', action='store_true',
+                        help="redo Fig. 14 on two finer grids (Settings.finer_grids; the "
+                        'full run then takes about 8 min with the one-step costs cached, 20 '
+                        'cold)')
     parser.add_argument('--robot', default='robosimian', help='robot name or YAML path')
     options = parser.parse_args(args)
     out_dir = Path(options.out).expanduser()
@@ -740,7 +930,7 @@ def main(args: list[str] | None = None) -> int:
 
         robot = load_robot_model(options.robot)
         settings = Settings.quick() if options.quick else Settings()
-        results = run(robot, settings, log)
+        results = run(robot, settings, log, convergence_grids=options.convergence)
     except GaitNodesError as exc:
         return fail(PROG, exc)
     for family, goal_x, reason in results.tables.skipped:

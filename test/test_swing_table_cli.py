@@ -10,6 +10,13 @@ from gait_nodes.swing.sweep import FT_PER_MIN, gait_speed_m_s
 from gait_nodes.swing.table import load_table
 from gait_nodes.swing_table import main
 
+
+@pytest.fixture(autouse=True)
+def _own_cache(tmp_path, monkeypatch):
+    """The sweep caches its one-step costs: in the test's directory, not the user's."""
+    monkeypatch.setenv('XDG_CACHE_HOME', str(tmp_path / 'cache'))
+
+
 TINY = ['--x-range', '0.1', '0.8', '15', '--y-range', '-0.6', '-0.45', '4', '--z-levels', '2',
         '--yaw-range', '-0.15', '0.15', '3', '--radii-m', '0.05', '0.1', '--elevations-rad',
         '-0.6', '0', '0.6', '--quiet']
@@ -54,10 +61,14 @@ def test_sweep_prints_the_optimum_plots_and_perturbs(tmp_path, capsys):
     assert main(['sweep', '--families', '2', '--step-heights-m', '0.1', '--goal-x', '0.7',
                  '--plot', str(plot), '--perturb', '--trials', '8', *TINY]) == 0
     printed = capsys.readouterr().out
-    match = re.search(r'optimal step ([\d.]+) m, ([\d.]+) m/s = ([\d.]+) ft/min', printed)
+    match = re.search(r'centred at x 0.45 m: optimal step ([\d.]+) m \(([a-z ,]+)\), '
+                      r'([\d.]+) ft/min, swing ([\d.]+) s', printed)
     assert match
-    step, speed, feet_per_min = (float(v) for v in match.groups())
-    assert 0 < step <= 0.6 and speed * FT_PER_MIN == pytest.approx(feet_per_min, rel=2e-3)
+    step, feet_per_min, swing_s = (float(match[i]) for i in (1, 3, 4))
+    # Goal 0.7 m, its mirror about the middle of 0.1-0.8 m is 0.2 m: one centred step, 0.5 m.
+    assert step == pytest.approx(0.5)
+    # eq. (2) with the lift and lowering at most the whole swing: between 5 and 4 swings.
+    assert step / (5 * swing_s) <= feet_per_min / FT_PER_MIN <= step / (4 * swing_s) * 1.001
     losses = [float(v) for v in re.findall(r'mean speed lost ([+-][\d.]+) ft/min', printed)]
     assert len(losses) == 4 and np.mean(losses) > 0
     assert plot.read_bytes()[:8] == b'\x89PNG\r\n\x1a\n'
@@ -88,3 +99,34 @@ def test_ik_check_refuses_bad_input_with_exit_2(capsys, arguments, message):
     assert main(['ik-check', *IK_GRID, '--check-targets', '0', *arguments]) == 2
     error = capsys.readouterr().err
     assert message in error and len(error.strip().splitlines()) == 1
+
+
+def test_sweep_defaults_are_the_thesis_setting():
+    import argparse
+
+    from gait_nodes.swing.value_iteration import GridSpec, thesis_actions
+    from gait_nodes.swing_table import _grid_and_actions
+
+    unset = dict.fromkeys(('x_range', 'y_range', 'yaw_range', 'z_levels', 'z_spacing_m',
+                           'radii_m', 'azimuths', 'elevations_rad', 'yaw_steps_rad'))
+    spec, actions = _grid_and_actions(argparse.Namespace(**unset), GridSpec.thesis(),
+                                      thesis_actions())
+    # The thesis command's grid: x 0.2-0.8 m (steps up to 0.6 m, not the 1.0 m of before).
+    assert spec == GridSpec.thesis() and spec.x_range_m[:2] == (0.2, 0.8)
+    assert actions == thesis_actions()
+    levels = _grid_and_actions(argparse.Namespace(**{**unset, 'z_levels': 2}),
+                               GridSpec.thesis(), thesis_actions())[0]
+    assert levels.z_planes_m is None and levels.z_levels == 2
+
+
+def test_sweep_says_when_the_optimum_is_at_the_end_of_the_range(capsys):
+    # Starts from x 0.45 m on: the slow band near the body (thesis Fig. 12) is off the grid,
+    # the speed rises with the step up to the longest one the range holds.
+    arguments = [a for a in TINY]
+    arguments[arguments.index('--x-range') + 1:arguments.index('--x-range') + 4] = [
+        '0.45', '0.8', '8']
+    assert main(['sweep', '--families', '2', '--step-heights-m', '0.1', '--goal-x', '0.6',
+                 '0.7', '0.8', *arguments]) == 0
+    printed = capsys.readouterr().out
+    line = next(row for row in printed.splitlines() if 'best over every goal' in row)
+    assert 'optimal step 0.35 m (at the end of the range, not an interior optimum)' in line

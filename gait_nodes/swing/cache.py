@@ -73,3 +73,42 @@ def load_or_build(robot, family: int, step_height_m: float, joint_velocity_limit
         table, _ = build_table(robot, family, step_height_m, joint_velocity_limit_rad_s)
         table.save(path)
     return load_table(path, robot, joint_velocity_limit_rad_s, family), path
+
+
+def cached_one_step_costs(robot, family: int, joint_velocity_limit_rad_s: float, grid,
+                          displacements, log: Callable[[str], None] | None = None):
+    """``(costs, feasible)`` of :func:`~gait_nodes.swing.value_iteration.one_step_costs`.
+
+    Cached in ``$XDG_CACHE_HOME/gait_nodes/thesis/``, one file per robot, family, limit, grid
+    and action set (a minute per family on the thesis' default grid).
+
+    Args:
+        robot: The RobotModel.
+        family: IK family 0..7.
+        joint_velocity_limit_rad_s: Joint velocity limit [rad/s].
+        grid: The :class:`~gait_nodes.swing.grid.SwingGrid`.
+        displacements: (A, 4) actions of :meth:`SwingActions.displacements`.
+        log: Called with a message when the costs are being computed.
+    """
+    import numpy as np
+
+    from gait_nodes.swing.kinematics import LimbTiming
+    from gait_nodes.swing.value_iteration import one_step_costs
+
+    key = hashlib.sha256(robot_digest(robot).encode())
+    for array in (*grid.axes, displacements, np.array([family, joint_velocity_limit_rad_s])):
+        key.update(np.ascontiguousarray(array, dtype=float).tobytes())
+    path = cache_dir() / 'thesis' / f'costs_{robot.name}_f{family}_{key.hexdigest()[:16]}.npz'
+    if path.is_file():
+        with np.load(path, allow_pickle=False) as data:
+            return data['costs'], data['feasible']
+    if log is not None:
+        log(f'one-step costs of family {family}: {grid.size} states x {len(displacements)} '
+            f'actions (cached in {path.parent})')
+    costs, feasible = one_step_costs(LimbTiming(robot, family, joint_velocity_limit_rad_s),
+                                     grid, displacements)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    partial = path.with_suffix('.part.npz')
+    np.savez(partial, costs=costs, feasible=feasible)
+    partial.replace(path)
+    return costs, feasible

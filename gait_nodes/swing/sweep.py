@@ -12,16 +12,20 @@ the step is the x distance. Several goals give several curves; for each step the
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections.abc import Callable
+from dataclasses import dataclass, field
 
 import numpy as np
 
+from gait_nodes.errors import GaitNodesError
 from gait_nodes.swing.kinematics import FEASIBLE_BELOW_S
 from gait_nodes.swing.policy import SwingPath, SwingPolicy
 from gait_nodes.swing.table import ValueTable
 
 #: (ft/min) per (m/s).
 FT_PER_MIN = 60.0 / 0.3048
+#: How an optimum on the first or last step of a curve is named.
+END_OF_RANGE = 'at the end of the range, not an interior optimum'
 
 
 def gait_speed_m_s(step_m, swing_s, lift_s, lower_s):
@@ -50,6 +54,20 @@ class SpeedCurve:
     def best(self) -> int:
         """Index of the fastest step."""
         return int(np.argmax(self.speeds_m_s))
+
+    @property
+    def best_is_interior(self) -> bool:
+        """The fastest step has a step on either side (it is not the first or last one)."""
+        return 0 < self.best < len(self.steps_m) - 1
+
+
+def describe_optimum(curve: SpeedCurve) -> str:
+    """``'0.56 m (interior), 8.893 ft/min'``; an optimum at an end says :data:`END_OF_RANGE`."""
+    if not len(curve.steps_m) or curve.speeds_m_s[curve.best] <= 0:
+        return 'no feasible step'
+    k = curve.best
+    where = 'interior' if curve.best_is_interior else END_OF_RANGE
+    return f'{curve.steps_m[k]:.2f} m ({where}), {curve.speeds_m_s[k] * FT_PER_MIN:.3f} ft/min'
 
 
 def speed_curve(table: ValueTable) -> SpeedCurve:
@@ -165,3 +183,114 @@ def centred(curves: list[SpeedCurve], centre_x_m: float, tolerance_m: float = 1e
     rows = np.flatnonzero(np.abs(starts[:, 0] + 0.5 * steps - centre_x_m) < tolerance_m)
     rows = rows[np.argsort(steps[rows])]
     return SpeedCurve(steps[rows], speeds[rows], swing[rows], starts[rows])
+
+
+@dataclass
+class SweepTables:
+    """Value tables by ``(family, step height, goal x)``, their speed curves, the goals skipped.
+
+    Attributes:
+        tables: ``(family, step height [m], goal x [m]) -> ValueTable``.
+        curves: Same keys ``-> SpeedCurve`` (:func:`speed_curve`).
+        skipped: ``(family, goal x [m], reason)`` of the goals without a table.
+    """
+
+    tables: dict = field(default_factory=dict)
+    curves: dict = field(default_factory=dict)
+    skipped: list = field(default_factory=list)
+
+    def centred(self, family: int, step_height_m: float, centre_x_m: float) -> SpeedCurve:
+        """The swings centred on ``centre_x_m`` of one family and step height (:func:`centred`)."""
+        return centred(self._curves(family, step_height_m), centre_x_m)
+
+    def anywhere(self, family: int, step_height_m: float) -> SpeedCurve:
+        """The fastest swing of each step over every goal (:func:`envelope`)."""
+        return envelope(self._curves(family, step_height_m))
+
+    def owner(self, family: int, step_height_m: float, curve: SpeedCurve) -> ValueTable:
+        """The table of the curve's fastest step (its goal: start x + step)."""
+        goal_x = curve.starts[curve.best, 0] + curve.steps_m[curve.best]
+        for (f, h, gx), table in self.tables.items():
+            if f == family and h == step_height_m and abs(gx - goal_x) < 1e-9:
+                return table
+        raise GaitNodesError(f'no table with goal x {goal_x:.3f} m for family {family}, step '
+                             f'height {step_height_m:g} m')
+
+    def _curves(self, family, step_height_m):
+        curves = [c for (f, h, _), c in self.curves.items()
+                  if f == family and h == step_height_m]
+        if not curves:
+            raise GaitNodesError(f'no value table for family {family}, step height '
+                                 f'{step_height_m:g} m')
+        return curves
+
+
+def centred_goal_xs(x_axis_m: np.ndarray, centre_x_m: float) -> list[float]:
+    """The x nodes ahead of ``centre_x_m`` whose mirror about it is a node too [m].
+
+    Each gives one swing centred on ``centre_x_m`` (:func:`centred`).
+    """
+    x_axis_m = np.asarray(x_axis_m, dtype=float)
+    return [float(x) for x in x_axis_m if x > centre_x_m + 1e-9
+            and np.min(np.abs(x_axis_m - (2 * centre_x_m - x))) < 1e-9]
+
+
+def sweep_tables(robot, families, step_heights_m, grid_spec, actions, goals,
+                 joint_velocity_limit_rad_s: float,
+                 log: Callable[[str], None] | None = None) -> SweepTables:
+    """One value table per family and goal, with the lift and lowering of every step height.
+
+    The thesis' setting (000, IV.B.3-5): the swing plane and the goal are where ``goals`` put
+    them, and the foot is lifted from and lowered to the ground ``step height`` below the goal
+    (the value iteration, which does not depend on the step height, runs once per goal). The
+    one-step costs are shared by every goal on the same grid and cached
+    (:func:`~gait_nodes.swing.cache.cached_one_step_costs`).
+
+    Args:
+        robot: The RobotModel.
+        families: IK families 0..7.
+        step_heights_m: Step heights [m].
+        grid_spec: :class:`~gait_nodes.swing.value_iteration.GridSpec`; with ``z_levels``
+            (no ``z_planes_m``) the levels start at the goal's z.
+        actions: :class:`~gait_nodes.swing.grid.SwingActions`.
+        goals: (G, 4) goals (x, y, z, yaw) in the base frame.
+        joint_velocity_limit_rad_s: Joint velocity limit [rad/s].
+        log: Called with progress messages.
+    """
+    import time
+
+    from gait_nodes.swing.cache import cached_one_step_costs
+    from gait_nodes.swing.value_iteration import build_table, table_grid, with_step_height
+
+    result = SweepTables()
+    displacements = actions.displacements()
+    for family in families:
+        started = time.perf_counter()
+        costs = {}
+        for goal in np.atleast_2d(np.asarray(goals, dtype=float)):
+            goal_x = float(goal[0])
+            grounds = {h: float(goal[2]) - h for h in step_heights_m}
+            first = step_heights_m[0]
+            try:
+                grid = table_grid(robot, first, grid_spec, goal, grounds[first])
+                key = b''.join(axis.tobytes() for axis in grid.axes)
+                if key not in costs:
+                    costs[key] = cached_one_step_costs(
+                        robot, family, joint_velocity_limit_rad_s, grid, displacements, log)
+                table, _ = build_table(robot, family, first, joint_velocity_limit_rad_s,
+                                       grid_spec, actions, goal, ground_z_m=grounds[first],
+                                       costs=costs[key])
+            except GaitNodesError as exc:
+                result.skipped.append((family, goal_x, str(exc)))
+                continue
+            for height in step_heights_m:
+                try:
+                    tab = with_step_height(table, robot, height, grounds[height])
+                except GaitNodesError as exc:
+                    result.skipped.append((family, goal_x, str(exc)))
+                    continue
+                result.tables[family, height, goal_x] = tab
+                result.curves[family, height, goal_x] = speed_curve(tab)
+        if log is not None:
+            log(f'family {family}: {len(goals)} goals in {time.perf_counter() - started:.1f} s')
+    return result
