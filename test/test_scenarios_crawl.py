@@ -27,7 +27,7 @@ from gait_nodes.robot.description import load_robot_description
 #: Simulated seconds per scenario: two crawl cycles (about 17 s each) after the first swing; the
 #: online scenario changes its walk until 28 s (each change joins beyond the published horizon).
 DURATIONS_S = {'robosimian_crawl': 38.0, 'robosimian_crawl_polynomial': 38.0, 'online': 38.0,
-               'robosimian_static_crawl': 38.0, 'robosimian_gait_switch': 38.0}
+               'robosimian_gait_switch': 32.0}
 #: The first swing lifts off this soon after the first /cmd_vel [s]: the planner's lead from
 #: standstill (0.6 s, the COM states its controller has committed, and 0.3 s to reach it:
 #: gait_nodes.footstep_planner.STANDING_LEAD_S, gait_nodes.planning.online.LEAD_MARGIN_S), the
@@ -263,16 +263,24 @@ def test_the_static_crawl_holds_the_body_still_under_every_swing_and_outwalks_th
         bags):
     """Thesis eq. (2) walked: the body (/tf) still while a foot swings, moving only between.
 
-    Judged from the bag: the base's horizontal speed and height over every executed swing
-    (its lift-off and lowering excepted by a tick), and the net speed against the ZMP crawl's
-    on the same robot, joint limit and value table.
+    In the gait-switch walk, from the step boundary where the static crawl took effect to the
+    one where the crawl came back (their 'applied' answers), judged from the bag: the base's
+    horizontal drift and height over every executed swing (its lift-off and lowering excepted
+    by a tick), and the net speed against the ZMP crawl's on the same robot, joint limit and
+    value table. (The scenario robosimian_static_crawl walks the thesis' 0.06 m lift; its
+    table would cost the suite a build: bench/results.py walks it.)
     """
-    _, inspection = bags('robosimian_static_crawl')
+    _, inspection = bags('robosimian_gait_switch')
+    applied = {s['id']: s['takes_effect_ns'] for s in inspection.series.statuses
+               if s.get('state') == 'applied'}
+    start_ns, end_ns = applied['scenario-1'], applied['scenario-2']
     base = np.array(sorted(inspection.series.base), dtype=float)  # stamp, x, y, z, yaw
+    base = base[(base[:, 0] >= start_ns) & (base[:, 0] <= end_ns)]
     t = base[:, 0] * 1e-9
     speed = np.hypot(*np.gradient(base[:, 1:3], t, axis=0).T)
-    swings = executed(inspection.series.plans, int(base[-1, 0]))
-    assert len(swings) >= 12
+    swings = [s for s in executed(inspection.series.plans, end_ns)
+              if s['lift_off_ns'] >= start_ns]
+    assert len(swings) >= 6
     swinging = np.zeros(len(t), bool)
     for swing in swings:
         inside = (t > swing['lift_off_ns'] * 1e-9 + 0.02) & (t < swing['touch_down_ns'] * 1e-9
@@ -284,10 +292,8 @@ def test_the_static_crawl_holds_the_body_still_under_every_swing_and_outwalks_th
     assert speed[~swinging].max() > 0.1  # the body does move, with every foot down
     _, zmp_crawl = bags('robosimian_crawl')
 
-    def net_speed(report):
-        return report.report['gait']['base']['net_speed_m_s']
-
-    assert net_speed(inspection) > 1.8 * net_speed(zmp_crawl)
+    static_speed = np.hypot(*(base[-1, 1:3] - base[0, 1:3])) / (t[-1] - t[0])
+    assert static_speed > 1.8 * zmp_crawl.report['gait']['base']['net_speed_m_s']
 
 
 def test_a_switch_to_the_static_crawl_and_back_is_applied_once_each_and_walked(bags):

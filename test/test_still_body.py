@@ -140,9 +140,9 @@ def test_a_static_crawl_plan_keeps_its_zmp_inside_and_its_body_still_between_mov
                                       timing='joint_limit', step_height_m=0.06)
     planner = GaitPlanner(model.description, params, swing_timing=still.source)
     planner.set_velocity(Twist2D(0.1), 0.0)
-    planner.advance(40.0)
+    planner.advance(25.0)
     walking = [step for step in planner.steps if step.slots]
-    assert len(walking) >= 5
+    assert len(walking) >= 3
     for step in walking:
         assert step.zmp_margin_kept_m > 0.03  # measured on the ZMP made, foot discs included
         assert step.bases is not None and np.all(np.diff(step.zmp_times_s) > 0)
@@ -154,6 +154,6 @@ def test_a_static_crawl_plan_keeps_its_zmp_inside_and_its_body_still_between_mov
     # Faster than the ZMP crawl at the same settings and joint limit.
     crawl = GaitPlanner(model.description, params.replace(gait='crawl'),
                         swing_timing=still.source)
-    fastest_static, _ = planner.set_velocity(Twist2D(0.2), 40.0)
+    fastest_static, _ = planner.set_velocity(Twist2D(0.2), 25.0)
     fastest_crawl, _ = crawl.set_velocity(Twist2D(0.2), 0.0)
     assert fastest_static.vx_m_s > 1.5 * fastest_crawl.vx_m_s

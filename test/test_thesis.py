@@ -159,17 +159,17 @@ def test_fig14_on_a_finer_grid_is_printed_with_its_verdict(quick_run, quick_cach
     monkeypatch.setenv('XDG_CACHE_HOME', str(quick_cache))
     _, _, results, _ = quick_run
     finer = thesis.fig14_on_grid(load_robot_model('robosimian'), results.settings,
-                                 results.centre_x_m, (21, 6, 5), lambda message: None)
+                                 results.centre_x_m, (21, 4, 3), lambda message: None)
     assert finer.x_spacing_m == pytest.approx(0.03)
     # Centred steps: twice the spacing apart, centred on x 0.5 m.
     np.testing.assert_allclose(np.diff(finer.curve.steps_m), 0.06, atol=1e-9)
     np.testing.assert_allclose(finer.curve.starts[:, 0] + finer.curve.steps_m / 2, 0.5)
     with_finer = replace(results, fig14_grids=[*results.fig14_grids, finer])
     printed = thesis.format_table(thesis.rows(with_finer))
-    assert '| Fig. 14 | same, centred, finer grid 21x6x5 (x every 0.030 m) |' in printed
+    assert '| Fig. 14 | same, centred, finer grid 21x4x3 (x every 0.030 m) |' in printed
     verdict = thesis.convergence(with_finer.fig14_grids)[1]
     assert verdict.startswith(('converged: ', 'not converged: '))
-    assert f'| optimum converged over grids 16x6x5, 21x6x5 | {verdict} |' in printed
+    assert f'| optimum converged over grids 16x6x5, 21x4x3 | {verdict} |' in printed
 
 
 def test_the_sweep_command_gives_the_thesis_commands_optimum_on_its_grid(quick_run, quick_cache,
