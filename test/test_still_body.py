@@ -96,7 +96,7 @@ def test_a_swing_with_the_body_still_puts_its_fastest_joint_at_the_limit(still):
     swings = {foot: Swing('rear_left', 0.0, 1.0, feet[foot], end, 0.0, 0.0)}
     duration_s = still.step_s(swings, feet, yaws, 0.0, base)
     u = np.linspace(0.0, 1.0, 241)
-    placed, placed_yaws = still.swing_feet(swings, feet, yaws, 0.0, u)
+    placed, placed_yaws = still.source.swing_feet(swings, feet, yaws, 0.0, u)
     joints, _ = held_base_joints(model, np.repeat(base[None], len(u), axis=0), placed,
                                  placed_yaws)
     rates = np.abs(np.diff(joints, axis=0)) / (np.diff(u) * duration_s)[:, None]

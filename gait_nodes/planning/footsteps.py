@@ -1063,7 +1063,7 @@ class GaitPlanner:
                         2)
             t = np.linspace(slot.lift_off_s, slot.touch_down_s, count + 1)[1:]
             u = (t - slot.lift_off_s) / (slot.touch_down_s - slot.lift_off_s)
-            placed, placed_yaws = still.swing_feet(swings, before, yaws, yaw, u)
+            placed, placed_yaws = still.source.swing_feet(swings, before, yaws, yaw, u)
             times.append(t)
             coms.append(still.com(np.repeat(bases[1][None], len(t), axis=0), yaw, placed,
                                   placed_yaws))

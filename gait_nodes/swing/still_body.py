@@ -166,24 +166,12 @@ class StillBody:
             with_acceleration: Long enough for the joints' acceleration limits too.
         """
         u = np.linspace(0.0, 1.0, STEP_PROBE_SAMPLES)
-        feet, yaws = self.swing_feet(swings, feet_in_world, foot_yaws_rad, body_yaw_rad, u)
+        feet, yaws = self.source.swing_feet(swings, feet_in_world, foot_yaws_rad, body_yaw_rad,
+                                            u)
         base = np.repeat(np.asarray(base_in_world, dtype=float)[None], len(u), axis=0)
         joints = self.joints(base, body_yaw_rad, feet, yaws, limbs=list(swings))
         return self.factor * joint_path_time_s(self.robot, u, joints,
                                                'path' if with_acceleration else None)
-
-    def swing_feet(self, swings: dict, feet_in_world: np.ndarray, foot_yaws_rad: np.ndarray,
-                   body_yaw_rad: float, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(N, F, 3) feet and (N, F) yaws at ``u`` (N,) of the swings' time law (0 to 1)."""
-        feet = np.repeat(np.asarray(feet_in_world, dtype=float)[None], len(u), axis=0)
-        yaws = np.repeat(np.asarray(foot_yaws_rad, dtype=float)[None], len(u), axis=0)
-        for foot, swing in swings.items():
-            own_u, states = self.source.world_shape(swing, body_yaw_rad)
-            own_u = own_u / own_u[-1]
-            feet[:, foot] = np.column_stack([np.interp(u, own_u, states[:, i])
-                                             for i in range(3)])
-            yaws[:, foot] = np.interp(u, own_u, states[:, 3])
-        return feet, yaws
 
     def transfer_s(self, feet_in_world: np.ndarray, foot_yaws_rad: np.ndarray,
                    body_yaw_rad: float, base_from: np.ndarray, base_to: np.ndarray,

@@ -283,6 +283,22 @@ class SwingTiming:
         from gait_nodes.robot.whole_body_ik import IkTargets, seed_configuration
 
         u = np.linspace(0.0, 1.0, STEP_PROBE_SAMPLES)
+        feet, yaws = self.swing_feet(swings, feet_in_world, foot_yaws_rad, body_yaw_rad, u)
+        first = IkTargets(feet[0], yaws[0], body_yaw_rad, com_in_world=np.asarray(com_in_world))
+        q = seed_configuration(self.robot, first, self.family)
+        q = self._seed_solver.solve(first, q).q
+        return (1.0 + STEP_MARGIN) * self.factor * self._time_through_ik(
+            u, feet, yaws, body_yaw_rad, com_in_world, q,
+            'path' if with_acceleration else None)
+
+    def swing_feet(self, swings: dict[int, Swing], feet_in_world: np.ndarray,
+                   foot_yaws_rad: np.ndarray, body_yaw_rad: float, u: np.ndarray
+                   ) -> tuple[np.ndarray, np.ndarray]:
+        """(N, F, 3) feet and (N, F) yaws at ``u`` (N,) of the swings' time law (0 to 1).
+
+        The swinging feet on their swings as :meth:`world_shape` makes them (each stretched
+        to the common duration), the others at ``feet_in_world`` (F, 3), ``foot_yaws_rad``.
+        """
         feet = np.repeat(np.asarray(feet_in_world, dtype=float)[None], len(u), axis=0)
         yaws = np.repeat(np.asarray(foot_yaws_rad, dtype=float)[None], len(u), axis=0)
         for foot, swing in swings.items():
@@ -291,12 +307,7 @@ class SwingTiming:
             feet[:, foot] = np.column_stack([np.interp(u, own_u, states[:, i])
                                              for i in range(3)])
             yaws[:, foot] = np.interp(u, own_u, states[:, 3])
-        first = IkTargets(feet[0], yaws[0], body_yaw_rad, com_in_world=np.asarray(com_in_world))
-        q = seed_configuration(self.robot, first, self.family)
-        q = self._seed_solver.solve(first, q).q
-        return (1.0 + STEP_MARGIN) * self.factor * self._time_through_ik(
-            u, feet, yaws, body_yaw_rad, com_in_world, q,
-            'path' if with_acceleration else None)
+        return feet, yaws
 
     def transfer_s(self, feet_in_world: np.ndarray, foot_yaws_rad: np.ndarray,
                    body_yaw_rad: float, com_from: np.ndarray, com_to: np.ndarray,
