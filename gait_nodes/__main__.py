@@ -106,6 +106,32 @@ def _graph_params(options) -> dict:
     return {'/**': {'ros__parameters': values}}
 
 
+def _prepare_value_table(values: dict, names: list[str]) -> None:
+    """Build the swing value table the graph walks with before it starts (once: cached).
+
+    The footstep planner times its steps from the table and, while the swing-leg policy builds
+    it on first use, stands in with slower times: built first, a walk is the same on a cold
+    cache as on a warm one, and a fresh machine's main job walks its real speed from the start.
+    Only for the graph's own settings (a ``-p`` override builds its table on first use).
+    """
+    if values.get('swing') != 'value_table' or not {'footstep_planner',
+                                                     'swing_leg_policy'} & set(names):
+        return
+    from gait_nodes.planning.gait_params import GaitParameters
+    from gait_nodes.robot.model import load_robot_model
+    from gait_nodes.robot.whole_body_ik import limb_ik_family
+    from gait_nodes.swing.cache import load_or_build
+
+    robot = load_robot_model(values['robot'])
+    family = limb_ik_family(robot)
+    if family is None:
+        return
+    height = values.get('step_height_m', GaitParameters.for_robot(
+        robot.description, gait=robot.description.gaits[0]).step_height_m)
+    load_or_build(robot, family, float(height), robot.description.joint_velocity_limit_rad_s,
+                  log=lambda message: print(f'{PROG}: {message}', file=sys.stderr, flush=True))
+
+
 def _selected_nodes(options) -> list[str]:
     available = graph.available_nodes()
     if options.nodes is None:
@@ -458,9 +484,11 @@ def main(args: list[str] | None = None) -> int:
                                 'version')
         if options.record:
             _check_bag_directory(options.record)
+        graph_params = _graph_params(options)
+        _prepare_value_table(graph_params['/**']['ros__parameters'], names)
         with tempfile.TemporaryDirectory(prefix='gait_nodes_run_') as tmp:
             params_file = Path(tmp) / 'graph_params.yaml'
-            params_file.write_text(yaml.safe_dump(_graph_params(options)))
+            params_file.write_text(yaml.safe_dump(graph_params))
             # The namespace first: a user's own -r after it still wins.
             ros = ['--ros-args', '--params-file', str(params_file), *options.namespace_args,
                    *ros[1:]]

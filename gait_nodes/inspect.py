@@ -45,6 +45,17 @@ def format_gait(gait: dict | None) -> list[str]:
         lines.append(f'  walked:      {base["displacement_m"]:.3f} m net (base start to end) '
                      f'in {base["time_s"]:.2f} s{speed_text}; path {base["distance_m"]:.3f} m '
                      f'(sway included)')
+        steady = gait.get('steady')
+        if steady and steady['net_speed_m_s'] is not None:
+            speed = steady['net_speed_m_s']
+            text = (f'  steady:      net speed {speed:.4f} m/s ({speed * 60 * FEET_PER_METRE:.2f} '
+                    f'ft/min) over {steady["cycles"]} whole cycles, {steady["from_s"]:.1f}-'
+                    f'{steady["to_s"]:.1f} s (the start excluded)')
+            reference = steady.get('reference')
+            if reference:
+                text += (f'; {reference["ft_min"]:g} ft/min ({reference["m_s"]:.4f} m/s) in '
+                         f'{reference["source"]}')
+            lines.append(text)
         if base.get('rise_m') is not None and abs(base['rise_m']) >= 0.005:
             lines.append(f'  climbed:     {base["rise_m"]:+.3f} m (base height, last minus first)')
     steps = gait.get('steps')

@@ -724,7 +724,7 @@ class KinematicSimulator(GuardedNode):
             'velocity saturation', WARN if window.saturated_ticks else OK,
             (f'{window.saturated_ticks} of {window.ticks} ticks saturated '
              f'({window.acceleration_saturated_ticks} at an acceleration limit), commands up to '
-             f'{window.max_ratio:.3g}x the limit: {", ".join(joints)}')
+             f'{window.max_ratio:.4g}x the limit: {", ".join(joints)}')
             if window.saturated_ticks else 'joint velocities and accelerations within limits',
             {'saturated_ticks': window.saturated_ticks, 'ticks': window.ticks,
              'acceleration_saturated_ticks': window.acceleration_saturated_ticks,

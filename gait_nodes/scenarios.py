@@ -191,7 +191,7 @@ COMMAND_SCENARIOS = (
 )
 SCENARIOS.update({s.name: s for s in COMMAND_SCENARIOS})
 
-DEFAULT_SCENARIO = 'robosimian_crawl'
+DEFAULT_SCENARIO = 'robosimian_static_crawl'
 
 
 def get_scenario(name: str) -> Scenario:

@@ -574,7 +574,7 @@ class WholeBodyIk(GuardedNode):
         statuses.append((
             'velocity saturation', WARN if window.saturated_ticks else OK,
             (f'{window.saturated_ticks} of {window.ticks} ticks saturated, up to '
-             f'{window.max_ratio:.3g}x the limit: {", ".join(joints)}')
+             f'{window.max_ratio:.4g}x the limit: {", ".join(joints)}')
             if window.saturated_ticks else 'joint velocities within limits',
             {'saturated_ticks': window.saturated_ticks, 'ticks': window.ticks,
              'saturated_fraction': window.saturated_ticks / ticks,

@@ -305,3 +305,26 @@ def test_a_switch_to_the_static_crawl_and_back_is_applied_once_each_and_walked(b
     said = [d[3] for d in _diagnostic_values(path) if d[1] == 'footstep_planner: gait']
     walked = [m.split(',')[0] for m in said if m.endswith('walking')]
     assert walked.index('static_crawl') < len(walked) - 1 - walked[::-1].index('crawl')
+
+
+def test_the_steady_speed_is_measured_over_whole_cycles_and_shown_beside_the_thesis(bags):
+    """The steady speed of inspect: the base from a foot's 2nd lift-off to its last."""
+    _, inspection = bags('robosimian_crawl')
+    steady = inspection.report['gait']['steady']
+    swings = executed(inspection.series.plans)
+    feet = {s['foot'] for s in swings}
+    counts = {foot: sum(s['foot'] == foot for s in swings) for foot in feet}
+    foot = max(feet, key=lambda f: (counts[f], f))  # ties: the last by name
+    lift_offs = [s['lift_off_ns'] for s in swings if s['foot'] == foot]
+    assert steady['foot'] == foot and steady['cycles'] == len(lift_offs) - 2 >= 1
+    base = np.array(sorted(inspection.series.base), dtype=float)
+    at = [np.array([np.interp(t, base[:, 0], base[:, i]) for i in (1, 2)])
+          for t in (lift_offs[1], lift_offs[-1])]
+    expected = np.hypot(*(at[1] - at[0])) / ((lift_offs[-1] - lift_offs[1]) * 1e-9)
+    assert steady['net_speed_m_s'] == pytest.approx(expected, rel=1e-4)
+    # The start excluded: faster than the whole walk's net speed.
+    assert steady['net_speed_m_s'] > inspection.report['gait']['base']['net_speed_m_s']
+    reference = steady['reference']
+    assert reference['ft_min'] == pytest.approx(8.542)
+    assert reference['m_s'] == pytest.approx(8.542 * 0.3048 / 60, rel=1e-4)
+    assert 'thesis' in reference['source']

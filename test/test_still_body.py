@@ -26,6 +26,7 @@ from gait_nodes.robot.whole_body_ik import (
 from gait_nodes.swing.still_body import (
     BODY_MOVE_PEAK_ACCELERATION,
     BODY_MOVE_PEAK_FACTOR,
+    TRACKING_MARGIN,
     StillBody,
     body_move,
     cart_table_zmp,
@@ -101,7 +102,8 @@ def test_a_swing_with_the_body_still_puts_its_fastest_joint_at_the_limit(still):
                                  placed_yaws)
     rates = np.abs(np.diff(joints, axis=0)) / (np.diff(u) * duration_s)[:, None]
     ratio = (rates / model.velocity_limits_rad_s).max()
-    assert ratio == pytest.approx(1.0, abs=0.01)
+    # At the limit, but for the margin kept for the IK's COM tracking.
+    assert ratio == pytest.approx(1.0 / (1.0 + TRACKING_MARGIN), abs=0.005)
     # Only the swinging limb moves: the body is still.
     moving = np.flatnonzero(np.abs(joints - joints[0]).max(axis=0) > 1e-9)
     limb = set(model.indices(model.description.feet[foot].joints).tolist())

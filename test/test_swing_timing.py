@@ -32,6 +32,7 @@ from gait_nodes.swing.timing import (
     STEP_MARGIN,
     PolynomialSwingTiming,
     TableSwingTiming,
+    needed_probe_period,
     smooth_trajectory,
 )
 
@@ -78,7 +79,11 @@ def test_smoothed_swing_keeps_its_ends_stays_up_and_is_smooth():
 
 def test_smoothed_table_swing_keeps_the_joints_within_the_limit():
     # The polyline's velocity is a joint-limited one on each segment; the filter averages
-    # velocities, so the joints stay at the limit to first order.
+    # velocities, so the joints stay at the limit to first order (the IK's curvature over the
+    # kernel is the second order: up to 7.4 % with the 0.1 s kernel). The timing models time
+    # the smoothed shape by its joints' actual speeds on its samples: played at that time and
+    # sampled 10 times finer (as the swing-leg policy publishes it), the joints stay within
+    # half a per cent of the limit.
     timing = policy().timing
     for step in (0.1, 0.2):
         path, _ = policy().path_for_step(np.array([step, 0.0]))
@@ -89,7 +94,13 @@ def test_smoothed_table_swing_keeps_the_joints_within_the_limit():
                                                      smooth.yaws_rad]))
         assert feasible.all()
         rates = np.abs(np.diff(q, axis=0)) / np.diff(smooth.times_s)[:, None]
-        assert rates.max() <= 1.0 * 1.05
+        assert rates.max() <= 1.0 * 1.1
+        # The same swing on the samples the timing models probe it at.
+        coarse, _ = smooth_trajectory(polyline, None, needed_probe_period(path))
+        q_coarse, _ = timing.joints(np.column_stack([coarse.positions_in_world,
+                                                     coarse.yaws_rad]))
+        probed = np.abs(np.diff(q_coarse, axis=0)) / np.diff(coarse.times_s)[:, None]
+        assert probed.max() <= rates.max() <= 1.005 * probed.max()
 
 
 def _whole_body_peak(timing, step, duration_s) -> float:

@@ -11,6 +11,11 @@ independent reader of the bag can check it:
   stamps; :func:`net_speed`), the speed at which the robot advanced, sway excluded;
   ``path_speed_m_s``: ``distance_m`` over the same time (sway included);
   ``rise_m``: height of the last base position above the first (stairs climbed).
+- ``steady``: the net speed of the walk without its start: over whole gait cycles, from the
+  second lift-off of the foot that swung most (of equals, the last by name) to its last
+  lift-off (each foot swings once a cycle, so the interval holds whole cycles, the first one
+  excluded); with the robot YAML's ``extra.reference_speed`` (a published figure to compare
+  with) when it has one.
 - ``steps``: each swing executed by the time the bag ends (the latest /gait/footsteps version of
   it, see :class:`gait_nodes.contract.FootstepPlan`); a step's length is the horizontal distance
   from its lift-off place to its landing place.
@@ -316,6 +321,25 @@ def step_metrics(series: GaitSeries, until_ns: int | None) -> dict | None:
                          for foot, v in per_foot.items()}}
 
 
+def steady_metrics(series: GaitSeries, until_ns: int | None) -> dict | None:
+    """Net speed over whole gait cycles after the first (see the module docstring)."""
+    if not series.plans or len(series.base) < 2:
+        return None
+    lift_offs = defaultdict(list)
+    for swing in executed_swings(series.plans, until_ns):
+        lift_offs[swing['foot']].append(swing['lift_off_ns'])
+    if not lift_offs:
+        return None
+    foot, times = max(lift_offs.items(), key=lambda item: (len(item[1]), item[0]))
+    if len(times) < 3:
+        return None
+    base = np.array(sorted(series.base))
+    start, end = times[1], times[-1]
+    return {'foot': foot, 'cycles': len(times) - 2, 'from_s': _round((start - base[0, 0]) * 1e-9),
+            'to_s': _round((end - base[0, 0]) * 1e-9),
+            'net_speed_m_s': _round(net_speed(base, start, end))}
+
+
 def zmp_margins(series: GaitSeries) -> tuple[np.ndarray, np.ndarray]:
     """(stamps [ns], margins [m]) of each /gait/zmp sample that has a polygon before it."""
     if not series.zmp or not series.polygons:
@@ -362,6 +386,23 @@ def robot_limits(robot: str | None) -> tuple[str | None, Callable[[str], float |
     joints = set(description.joint_names)
     return description.name, lambda joint: (description.velocity_limit_rad_s(joint)
                                             if joint in joints else None)
+
+
+def reference_speed(robot: str | None) -> dict | None:
+    """The robot YAML's ``extra.reference_speed`` (``m_s``, ``ft_min``, ``source``), if any."""
+    if not robot:
+        return None
+    from gait_nodes.robot.description import load_robot_description
+
+    try:
+        reference = load_robot_description(robot).extra.get('reference_speed')
+    except ConfigError:
+        return None
+    if not isinstance(reference, dict) or 'ft_min' not in reference:
+        return None
+    ft_min = float(reference['ft_min'])
+    return {'ft_min': ft_min, 'm_s': _round(ft_min * 0.3048 / 60.0),
+            'source': str(reference.get('source', ''))}
 
 
 def joint_metrics(series: GaitSeries, limit_of: Callable[[str], float | None]) -> dict:
@@ -582,6 +623,7 @@ def gait_report(series: GaitSeries, robot: str | None = None) -> dict:
     sections = {
         'base': base_metrics(series),
         'steps': step_metrics(series, until),
+        'steady': steady_metrics(series, until),
         'zmp_margin': margin_metrics(series),
         'joint_velocity': joint_metrics(series, limit_of) or None,
         'commands': command_metrics(series),
@@ -590,6 +632,9 @@ def gait_report(series: GaitSeries, robot: str | None = None) -> dict:
     gait = {key: value for key, value in sections.items() if value is not None}
     if gait and robot_name:
         gait['robot'] = robot_name
+        reference = reference_speed(robot or hardware_id(series))
+        if reference and 'steady' in gait:
+            gait['steady']['reference'] = reference
         checks = physics_consistency(series, robot or hardware_id(series))
         if checks:
             gait['consistency'] = checks

@@ -33,7 +33,6 @@ from gait_nodes.errors import SwingPolicyError
 from gait_nodes.robot.model import yaw_rotation
 from gait_nodes.swing.timing import (
     LATTICE,
-    STEP_PROBE_SAMPLES,
     TRANSFER_PROBE_SAMPLES,
     joint_path_time_s,
 )
@@ -41,6 +40,15 @@ from gait_nodes.swing.timing import (
 #: Relative extra time of the steady rhythm's swings and body moves over their probe at the
 #: nominal stance (the planner re-times a planned step that needs more).
 STILL_MARGIN = 0.05
+#: Relative extra time of a probed swing for the whole-body IK's tracking: it holds the full-model
+#: COM on the preview controller's COM, which is off the planned one by a millimetre or two, so
+#: the body is not quite still under the swing. Measured on RoboSimian's static crawl (0.06 m
+#: lift, 0.1 s smoothing): a rear swing planned 1.4 % above its probe made the IK ask 1.0012
+#: times the joint limit; 2 % keeps it under.
+TRACKING_MARGIN = 0.02
+#: Samples of a probed swing: the smoothed table swing changes speed within 0.05 s; 121 samples
+#: over a 1.5 s swing find its joints' peak speed to 0.1 % (61 samples: 0.6 % short).
+STILL_PROBE_SAMPLES = 121
 #: Gravity [m/s^2] of the cart-table ZMP.
 GRAVITY_M_S2 = 9.81
 #: Share of a body move spent speeding up (and as much slowing down): the base's speed rises
@@ -157,6 +165,9 @@ class StillBody:
                with_acceleration: bool = False) -> float:
         """Least time [s] of planned swings made together, the body still at ``base_in_world``.
 
+        The swinging limbs' joints on :data:`STILL_PROBE_SAMPLES` samples, times
+        ``1 + TRACKING_MARGIN`` (the IK's COM tracking moves the body a little).
+
         Args:
             swings: Foot index -> its planned swing (world places and yaws; times unused).
             feet_in_world: (F, 3) contact points of all feet before the swings.
@@ -165,13 +176,13 @@ class StillBody:
             base_in_world: (3,) the base's position [m].
             with_acceleration: Long enough for the joints' acceleration limits too.
         """
-        u = np.linspace(0.0, 1.0, STEP_PROBE_SAMPLES)
+        u = np.linspace(0.0, 1.0, STILL_PROBE_SAMPLES)
         feet, yaws = self.source.swing_feet(swings, feet_in_world, foot_yaws_rad, body_yaw_rad,
                                             u)
         base = np.repeat(np.asarray(base_in_world, dtype=float)[None], len(u), axis=0)
         joints = self.joints(base, body_yaw_rad, feet, yaws, limbs=list(swings))
-        return self.factor * joint_path_time_s(self.robot, u, joints,
-                                               'path' if with_acceleration else None)
+        return (1.0 + TRACKING_MARGIN) * self.factor * joint_path_time_s(
+            self.robot, u, joints, 'path' if with_acceleration else None)
 
     def transfer_s(self, feet_in_world: np.ndarray, foot_yaws_rad: np.ndarray,
                    body_yaw_rad: float, base_from: np.ndarray, base_to: np.ndarray,
