@@ -131,6 +131,21 @@ def wrap_angle(angle: np.ndarray) -> np.ndarray:
     return (np.asarray(angle) + np.pi) % (2.0 * np.pi) - np.pi
 
 
+def _shared_times(planned: Sequence[float], needed: Sequence[float]) -> tuple[float, ...]:
+    """A static-crawl step's phase times: its body move's and each swing slot's [s].
+
+    The step keeps its planned period when what its phases need fits in it, each getting a
+    share of it in proportion to its need (so the path and the rhythm keep their pace: every
+    phase ends up equally far from its limit); when it does not fit, each phase gets what it
+    needs and ``RETIMING_ALLOWANCE`` more (and the path waits for the time added).
+    """
+    period, total = float(sum(planned)), float(sum(needed))
+    if total <= 0.0:
+        return tuple(float(t) for t in planned)
+    scale = period / total if total <= period else 1.0 + RETIMING_ALLOWANCE
+    return tuple(float(n) * scale for n in needed)
+
+
 def clamp_velocity(twist: Twist2D, params: GaitParameters, robot: RobotDescription,
                    layout: FootLayout, cycle_of=None, fastest: dict | None = None
                    ) -> tuple[Twist2D, list[str]]:
@@ -748,9 +763,12 @@ class GaitPlanner:
                 last = step.slots[-1]
                 self._before = (last.touch_down_s, last.positions_after, last.yaws_after)
 
-    def _next_step(self, state: _State, timed: tuple[float, float] | None = None,
+    def _next_step(self, state: _State, timed: tuple | None = None,
                    retimed: int = 0, planned: tuple[dict, float] | None = None) -> Step:
         """The step after ``state``; with ``timed``, its (swing, transfer) times [s].
+
+        ``timed`` may hold a third item: each swing slot's own time [s] (a static crawl's, whose
+        swing then is their mean).
 
         With ``timing: joint_limit`` a step whose swings or transfer (the body's move with every
         foot down) need more time than its rhythm gives
@@ -768,7 +786,7 @@ class GaitPlanner:
         t0 = state.time_s
         params = self.timed(params, twist)
         if timed is not None:
-            params = Rhythm(*timed, len(groups[0]), self._timing.name).apply(params)
+            params = Rhythm(*timed[:2], len(groups[0]), self._timing.name).apply(params)
         if twist.is_zero():
             rest = state.last_anchor if state.mode == 'walking' else state.rest_pose
             targets = place(rest, offsets)
@@ -845,8 +863,11 @@ class GaitPlanner:
         # none steps back.
         forward = (_forward(state.rest_pose, offsets, params, twist)
                    if state.measured and mode == 'walking' else None)
+        durations = (tuple(timed[2]) if timed is not None and len(timed) > 2
+                     else (swing,) * len(groups[group_index]))
         for j, feet in enumerate(groups[group_index]):
-            lift_off, touch_down = t1 + j * swing, t1 + (j + 1) * swing
+            lift_off = t1 + sum(durations[:j])
+            touch_down = lift_off + durations[j]
             moving = []
             after, after_yaws = positions.copy(), foot_yaws.copy()
             for foot in feet:
@@ -864,7 +885,7 @@ class GaitPlanner:
             if moving:
                 slots.append(SwingSlot(lift_off, touch_down, tuple(moving), after, after_yaws))
                 positions, foot_yaws = after, after_yaws
-        t_end = t1 + len(groups[group_index]) * swing
+        t_end = t1 + sum(durations)
         if planned is not None and mode == 'walking':
             # The path waits for the time the retimed step adds.
             path = dict(path, path_start_s=path['path_start_s'] + t_end - planned[1])
@@ -887,12 +908,19 @@ class GaitPlanner:
         # (A static crawl is timed for the joints' acceleration limits too: its swings and
         # moves run at the limits, the limb's own, with nothing else to slow them.)
         still = bases is not None
-        needed = self._needed_swing_s(gait, state, slots, points, params.com_height_m,
-                                      with_acceleration=still, bases=bases)
+        needs = self._slot_needs(gait, state, slots, points, params.com_height_m,
+                                 with_acceleration=still, bases=bases)
+        needed = max(needs, default=0.0)
         transfer = params.transfer_s(gait)
         needed_transfer = self._needed_transfer_s(state, points, params.com_height_m,
                                                   with_acceleration=still, bases=bases)
-        if (needed > swing * (1.0 + 1e-9) or needed_transfer > transfer * (1.0 + 1e-9)) \
+        if still and len(needs) == len(durations) and retimed < MAX_RETIMING:
+            shares = _shared_times((transfer, *durations), (needed_transfer, *needs))
+            if not np.allclose(shares, (transfer, *durations), rtol=1e-9, atol=1e-12):
+                return self._next_step(
+                    state, (float(np.mean(shares[1:])), shares[0], tuple(shares[1:])),
+                    retimed + 1, planned or (chosen, t_end))
+        elif (needed > swing * (1.0 + 1e-9) or needed_transfer > transfer * (1.0 + 1e-9)) \
                 and retimed < MAX_RETIMING:
             swing = max(swing, needed * (1.0 + RETIMING_ALLOWANCE))
             in_rhythm = rhythm_module.rhythm_for_swing(gait, swing,
@@ -936,21 +964,22 @@ class GaitPlanner:
                             yaws=step.yaws_start, zmp=step.zmp_points[0], mode='walking',
                             next_group=0, rest_pose=np.zeros(3), last_anchor=np.zeros(3))
             points = step.zmp_points[-3:] if len(step.zmp_points) > 3 else step.zmp_points
-            swing_s = min(slot.touch_down_s - slot.lift_off_s for slot in step.slots)
-            needed = self._needed_swing_s(step.gait, before, step.slots, points,
-                                          step.params.com_height_m, probe, True, step.bases)
+            needs = self._slot_needs(step.gait, before, step.slots, points,
+                                     step.params.com_height_m, probe, True, step.bases)
             transfer_s = step.slots[0].lift_off_s - step.start_s
             needed_transfer = self._needed_transfer_s(before, points, step.params.com_height_m,
                                                       probe, True, step.bases)
             names = [self.layout.names[f] for f in step.slots[0].feet]
             params = step.params
-            for what, at_s, needed_s, planned_s, more in (
-                    (f'the swing of {names}', step.slots[0].lift_off_s, needed, swing_s,
-                     'a longer period or a lower duty factor gives the swings more time, a '
-                     'shorter stride needs less'),
-                    (f'the body\'s move before the swing of {names}', step.start_s,
-                     needed_transfer, transfer_s,
-                     'a longer period or a higher duty factor gives the body more time')):
+            checks = [(f'the swing of {[self.layout.names[f] for f in slot.feet]}',
+                       slot.lift_off_s, needed_s, slot.touch_down_s - slot.lift_off_s,
+                       'a longer period or a lower duty factor gives the swings more time, a '
+                       'shorter stride needs less')
+                      for slot, needed_s in zip(step.slots, needs, strict=True)]
+            checks.append((f'the body\'s move before the swing of {names}', step.start_s,
+                           needed_transfer, transfer_s,
+                           'a longer period or a higher duty factor gives the body more time'))
+            for what, at_s, needed_s, planned_s, more in checks:
                 if needed_s > planned_s * (1.0 + 1e-9):
                     raise GaitParameterError(
                         f'the joints cannot follow {what} at {at_s:.2f} s: it needs '
@@ -958,10 +987,10 @@ class GaitPlanner:
                         f'plan gives {planned_s:.3f} s (step_period_s {params.step_period_s:g} '
                         f's, duty_factor {params.duty_factor:g}: {more})')
 
-    def _needed_swing_s(self, gait: str, state: _State, slots: Sequence[SwingSlot],
-                        zmp_points: np.ndarray, com_height_m: float, probe=None,
-                        with_acceleration: bool = False, bases=None) -> float:
-        """Longest time [s] the swings of ``slots`` need at the joint limit (0: no model).
+    def _slot_needs(self, gait: str, state: _State, slots: Sequence[SwingSlot],
+                    zmp_points: np.ndarray, com_height_m: float, probe=None,
+                    with_acceleration: bool = False, bases=None) -> list[float]:
+        """Time [s] each slot's swings need at the joint limit (none: no model).
 
         Each swing is probed where it happens (:meth:`gait_nodes.swing.timing.SwingTiming.
         step_s`): the other feet where they stand, the COM over the ZMP reference of the swing
@@ -971,10 +1000,10 @@ class GaitPlanner:
         """
         if probe is None and (self._params.timing != 'joint_limit' or self._timing is None) \
                 or not slots:
-            return 0.0
+            return []
         probe = probe or self._timing
         centre = zmp_points[1] if gait != 'trot' else 0.5 * (zmp_points[1] + zmp_points[2])
-        needed = 0.0
+        needs = []
         for feet, yaws, swings in self._slot_swings(state, slots):
             body_yaw = float(np.angle(np.exp(1j * yaws).sum()))
             if bases is not None:  # a static crawl: the body still at its base
@@ -983,8 +1012,8 @@ class GaitPlanner:
             else:
                 com = np.array([centre[0], centre[1], com_height_m + feet[:, 2].min()])
                 time_s = probe.step_s(swings, feet, yaws, body_yaw, com, with_acceleration)
-            needed = max(needed, time_s)
-        return needed
+            needs.append(time_s)
+        return needs
 
     def _slot_swings(self, state: _State, slots: Sequence[SwingSlot]):
         """Per slot: the feet (F, 3) and yaws (F,) before it and its swings (foot -> Swing)."""

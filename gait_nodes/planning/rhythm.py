@@ -123,11 +123,11 @@ def cycle_displacements(layout: FootLayout, params: GaitParameters, twist, cycle
 
 
 def swing_time_s(timing, displacements: np.ndarray, turn_rad: float,
-                 feet: range | list[int] | None = None) -> float:
-    """Longest least swing time [s] over ``feet`` (default all) for their displacements."""
+                 feet: range | list[int] | None = None, combine=max) -> float:
+    """Longest (or ``combine``'s) least swing time [s] over ``feet`` (default all)."""
     feet = range(len(displacements)) if feet is None else feet
-    return max((timing.swing_s(f, displacements[f], turn_rad) for f in feet),
-               default=timing.lift_and_lower_s())
+    times = [timing.swing_s(f, displacements[f], turn_rad) for f in feet]
+    return float(combine(times)) if times else timing.lift_and_lower_s()
 
 
 def transfer_move(gait: str, layout: FootLayout, params: GaitParameters, twist,
@@ -179,7 +179,10 @@ def walking_rhythm(gait: str, layout: FootLayout, params: GaitParameters, twist,
     for _ in range(MAX_ITERATIONS):
         displacements, turn = cycle_displacements(layout, params, twist, rhythm.cycle_s)
         try:
-            swing_s = swing_time_s(timing, displacements, turn)
+            # A static crawl's swings each take their own time (the planner shares a step's
+            # period among them): its cycle holds their mean.
+            swing_s = swing_time_s(timing, displacements, turn,
+                                   combine=np.mean if gait == 'static_crawl' else max)
             following = rhythm_for_swing(gait, swing_s, in_place, timing.name, body_move_s)
             if abs(following.cycle_s - rhythm.cycle_s) < CYCLE_TOLERANCE_S:
                 needed = timing.steady_transfer_s(transfer_move(gait, layout, params, twist,

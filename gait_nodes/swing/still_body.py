@@ -89,6 +89,8 @@ class StillBody:
         height = float(self.robot.description.body_height_m)
         self._base = np.array([0.0, 0.0, height])
         self._feet = self.robot.nominal_feet_in_world(self._base, 0.0)
+        self._reference_xy = np.asarray(self.robot.description.feet[
+            timing._reference].nominal_position_in_base[:2], dtype=float)
 
     @property
     def factor(self) -> float:
@@ -218,10 +220,16 @@ class StillBody:
         key = tuple(round(v / (0.25 * step), 0) * 0.25 * step for v, step in zip(
             (float(step_in_base[0]) * mirror[0], float(step_in_base[1]) * mirror[1],
              mirror[0] * mirror[1] * float(turn_rad)), LATTICE, strict=True))
+        # The swing around this foot's own nominal place, in the front-right limb's coordinates
+        # (a stance need not be a rectangle).
+        offset = np.asarray(self.robot.description.feet[foot].nominal_position_in_base[:2],
+                            dtype=float) * mirror - self._reference_xy
+        key = (*key, *np.round(offset, 6))
         if key not in self._swing_s:
             if len(self._swing_s) > 4096:
                 self._swing_s.clear()
             u, states = self.source.shape(np.array(key[:2]), key[2])
+            states[:, :2] += offset
             q, feasible = self.source.timing.joints(states)
             if not feasible.all():
                 raise SwingPolicyError(f'a swing by {np.round(key[:2], 3).tolist()} m leaves the '
