@@ -33,6 +33,7 @@ PROGRAMS = (
     'whole_body_ik',
     'swing_leg_policy',
     'kinematic_simulator',
+    'physics_simulator',
     'recorder',
     'command',
     'inspect',
