@@ -69,8 +69,11 @@ def node_path(name: str) -> str:
 
 
 def graph_nodes(simulator: str = DEFAULT_SIMULATOR) -> list[str]:
-    """The installed nodes of the graph in graph order, with ``simulator``'s node (a key of
-    SIMULATORS) in the simulator's place."""
+    """The installed nodes of the graph in graph order, ``simulator``'s in the simulator's place.
+
+    Args:
+        simulator: A key of SIMULATORS.
+    """
     chosen = SIMULATORS[simulator]
     return [chosen if name in SIMULATORS.values() else name for name in available_nodes()]
 
