@@ -158,6 +158,7 @@ def test_launch_file_compiles_and_declares_its_arguments():
         'robot': 'robosimian',
         'gait': 'crawl',
         'swing': 'value_table',
+        'simulator': 'kinematic',
         'use_sim_time': 'true',
         'record': '',
         'namespace': '',
