@@ -144,6 +144,7 @@ class PhysicsSimulator(KinematicSimulator):
         physics = load_physics_model(self.robot.description, self.robot.joint_names,
                                      params.staircase, params.timestep_s)
         self._continuous_joints = False  # MuJoCo's hinge angles are the joint positions
+        self._supports = [(None, None), (None, None)]
         foot_frames = [foot.frame for foot in self.robot.description.feet]
         wrench = get_message('geometry_msgs/msg/WrenchStamped')
         self._wrench_topics = [
@@ -159,6 +160,16 @@ class PhysicsSimulator(KinematicSimulator):
     def _monitor_foot_radius_m(self) -> float:
         return 0.0  # the support polygon is the actual contact points' hull
 
+    def _support_of(self, contact_points: np.ndarray):
+        # The contacts change every tick: the supports of the last two ticks' contact points
+        # (the CoP's of this tick, the monitor's of the previous one) are kept, by identity.
+        for points, support in self._supports:
+            if points is contact_points:
+                return support
+        support = self.monitor.support(contact_points)
+        self._supports = [self._supports[-1], (contact_points, support)]
+        return support
+
     def _plan_inputs(self, now_ns: int) -> tuple:
         return None, None  # the ground decides the contacts
 
@@ -171,7 +182,8 @@ class PhysicsSimulator(KinematicSimulator):
         if math.isfinite(x) and math.isfinite(y):
             self._cop.publish(new['PointStamped'](header, new['Point'](x, y, z)))
             if len(step.contact_points_in_world):
-                margin = self.monitor.margin(step.cop_in_world, step.contact_points_in_world)
+                support = self._support_of(step.contact_points_in_world)
+                margin = self.monitor.margin_in(step.cop_in_world, support)
                 window = self._window
                 window.cop_samples += 1
                 window.min_cop_margin_m = min(window.min_cop_margin_m, margin)

@@ -38,6 +38,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.spatial import ConvexHull, QhullError
 
 from gait_nodes.errors import ParameterError
 from gait_nodes.robot.model import RobotModel
@@ -114,7 +115,8 @@ class PhysicsStep:
         q: Pinocchio configuration after the step (the simulated base pose and joints).
         actuators: The joints (:class:`JointStep`).
         contacts: (F,) booleans: feet in contact (normal force over the threshold).
-        contact_points_in_world: (C, 3) contact points that carried force during the step [m].
+        contact_points_in_world: (C, 3) contact points that carried force during the step, those
+            on the convex hull of their horizontal projections [m].
         foot_forces_in_world: (F, 3) ground force on each foot, mean over the step [N].
         foot_moments_in_world: (F, 3) its moment about the world origin [N m].
         foot_wrenches_in_foot: (F, 6) force [N] and moment about the foot frame's origin
@@ -164,6 +166,22 @@ def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     ax, ay, az = a[:, 0], a[:, 1], a[:, 2]
     bx, by, bz = b[:, 0], b[:, 1], b[:, 2]
     return np.stack([ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx], 1)
+
+
+def _hull_points(points: np.ndarray) -> np.ndarray:
+    """The points (N, 3) whose horizontal projections are the vertices of their convex hull.
+
+    Counter-clockwise, read-only; the hull of the result is that of ``points``, with a few
+    points instead of every contact of every physics step.
+    """
+    if len(points) > 3:
+        try:
+            points = points[ConvexHull(points[:, :2]).vertices]
+        except QhullError:
+            pass  # fewer than three distinct points, or collinear: keep them all
+    points = np.array(points)
+    points.flags.writeable = False
+    return points
 
 
 class PhysicsSimulation:
@@ -340,8 +358,7 @@ class PhysicsSimulation:
         else:
             points, on_foot = np.zeros((0, 3)), np.zeros((0, 3))
         threshold = self.settings.contact_force_threshold_n
-        carrying = points[on_foot[:, 2] >= max(threshold, 1e-9)]
-        carrying.flags.writeable = False
+        carrying = _hull_points(points[on_foot[:, 2] >= max(threshold, 1e-9)])
         self._points = carrying
         contacts_now = forces[:, 2] >= max(threshold, 1e-9)
         contacts_now.flags.writeable = False
