@@ -24,10 +24,10 @@ is a body whose pose MuJoCo reports. ``package://`` mesh URIs are resolved under
 of the installed packages (example-robot-data's, ``AMENT_PREFIX_PATH``'s); a mesh that cannot be
 found is left out of the display geometry.
 
-The compiled model's MJCF is cached in ``$XDG_CACHE_HOME/gait_nodes/physics/`` (as the swing
-value tables are), one file per URDF, robot YAML, staircase, timestep, builder and MuJoCo
-version, so a user can open the exact model the simulator ran: ``python -m mujoco.viewer
---mjcf=FILE``.
+The compiled model is cached in ``$XDG_CACHE_HOME/gait_nodes/physics/`` (as the swing value
+tables are), one ``.mjb`` (MuJoCo's exact binary model, what the simulator runs) and its ``.xml``
+(the MJCF, to read or open: ``python -m mujoco.viewer --mjcf=FILE``) per URDF, robot YAML,
+staircase, timestep, builder and MuJoCo version.
 """
 
 from __future__ import annotations
@@ -95,7 +95,7 @@ class PhysicsModel:
 
     Attributes:
         model: The ``mujoco.MjModel``.
-        mjcf_path: The cached MJCF it was compiled from.
+        mjcf_path: The cached MJCF of the model (beside the binary model it was loaded from).
         base_body: Name of the free-floating root body (the URDF's root link).
         joint_names: The actuated joints, one actuator each, in the order of ``actuators``.
         foot_bodies: Body of each foot frame, in the robot's foot order.
@@ -325,21 +325,26 @@ def load_physics_model(description: RobotDescription, joint_names,
     mujoco = import_mujoco()
     staircase = staircase or Staircase()
     joint_names = tuple(joint_names)
-    path = cache_dir() / (f'{description.name}_'
-                          f'{model_digest(description, staircase, timestep_s)}.xml')
-    if path.is_file():
-        model = mujoco.MjModel.from_xml_path(str(path))
-    else:
+    stem = cache_dir() / f'{description.name}_{model_digest(description, staircase, timestep_s)}'
+    binary, mjcf = stem.with_suffix('.mjb'), stem.with_suffix('.xml')
+    if not binary.is_file():
         spec, _, _, _ = build_spec(description, joint_names, staircase, timestep_s)
         try:
-            model = spec.compile()
+            compiled = spec.compile()
         except ValueError as exc:
             raise ConfigError(f'{description.path}: MuJoCo cannot compile the model: '
                               f'{exc}') from exc
-        path.parent.mkdir(parents=True, exist_ok=True)
-        partial = path.with_suffix(f'.{os.getpid()}.part')
+        stem.parent.mkdir(parents=True, exist_ok=True)
+        partial = stem.with_suffix(f'.{os.getpid()}.part')
         partial.write_text(spec.to_xml())
-        partial.replace(path)
+        partial.replace(mjcf)
+        mujoco.mj_saveModel(compiled, str(partial), None)
+        partial.replace(binary)
+    # Always the model of the file (MuJoCo's binary model is exact; the MJCF rounds numbers to
+    # six digits): a run with a fresh cache and one with a warm cache simulate the same robot,
+    # to the bit.
+    model = mujoco.MjModel.from_binary_path(str(binary))
+    path = mjcf
     return _physics_model(mujoco, model, path, description, joint_names)
 
 
