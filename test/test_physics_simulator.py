@@ -14,6 +14,7 @@ import pytest
 
 from gait_nodes import graph, runtime
 from gait_nodes.contract import contact_wrench_from_msg, time_msg_to_ns
+from gait_nodes.geometry import signed_distance
 from gait_nodes.interfaces import deserialize_message, get_message
 from gait_nodes.node_parameters import parameter_names
 from gait_nodes.planning.terrain import Staircase
@@ -251,10 +252,15 @@ def test_a_short_crawl_in_physics_walks_forward_and_records_what_physics_measure
     from gait_nodes.__main__ import main
     from gait_nodes.bag.reader import BagReader
 
+    from gait_nodes.swing.cache import load_or_build
+
+    robot = load_robot_model('robosimian')
+    # The default crawl's value table (family 2, 0.1 m, 1 rad/s), there before the planner
+    # starts (built once on a cold cache: the planner then times the walk with it too).
+    load_or_build(robot, 2, 0.1, 1.0)
     bag = tmp_path / 'bag'
     assert main(['run', '--fast', '--simulator', 'physics', '--duration', '12',
                  '--record', str(bag), '--no-plot', '--json']) == 0
-    robot = load_robot_model('robosimian')
     q0 = nominal_configuration(robot)
     decoded = {}
     types = {'/tf': graph.TOPICS['/tf'], '/joint_states': graph.TOPICS['/joint_states'],
@@ -281,6 +287,16 @@ def test_a_short_crawl_in_physics_walks_forward_and_records_what_physics_measure
             totals[time_msg_to_ns(msg.header.stamp)] = totals.get(
                 time_msg_to_ns(msg.header.stamp), 0.0) + msg.wrench.force.z
     assert np.median(list(totals.values())) == pytest.approx(weight, rel=0.05)
+    # The centre of pressure inside the contact polygon (the monitor's, same stamps).
+    polygons = {}
+    for channel, _, _, payload in BagReader(bag).messages(topics=('/gait/support_polygon',)):
+        msg = deserialize_message(payload, get_message(graph.TOPICS['/gait/support_polygon']))
+        polygons[time_msg_to_ns(msg.header.stamp)] = np.array(
+            [(p.x, p.y) for p in msg.polygon.points])
+    margins = [signed_distance(np.array([[m.point.x, m.point.y]]),
+                               polygons[time_msg_to_ns(m.header.stamp)])[0]
+               for m in decoded['/gait/cop'] if time_msg_to_ns(m.header.stamp) in polygons]
+    assert len(margins) > 1000 and min(margins) > -1e-6
     # Swings happened: some tick had a foot without load.
     loads = {topic: [m.wrench.force.z for m in decoded[topic]]
              for topic in graph.foot_topics(robot.foot_names)}

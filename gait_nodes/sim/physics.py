@@ -168,18 +168,33 @@ def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.stack([ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx], 1)
 
 
+#: Contact points closer than this (horizontally) are one vertex of the contact polygon [m]:
+#: a resting foot's contacts move by micrometres between physics steps, and a polygon with
+#: edges that short makes every distance to it ill-conditioned.
+SAME_POINT_M = 1e-4
+
+
 def _hull_points(points: np.ndarray) -> np.ndarray:
     """The points (N, 3) whose horizontal projections are the vertices of their convex hull.
 
-    Counter-clockwise, read-only; the hull of the result is that of ``points``, with a few
-    points instead of every contact of every physics step.
+    Counter-clockwise, read-only, no two within :data:`SAME_POINT_M` of each other; the hull
+    of the result is that of ``points`` to that tolerance, with a few points instead of every
+    contact of every physics step.
     """
     if len(points) > 3:
         try:
             points = points[ConvexHull(points[:, :2]).vertices]
         except QhullError:
             pass  # fewer than three distinct points, or collinear: keep them all
-    points = np.array(points)
+    kept = []
+    for point in points:
+        if not kept or math.hypot(point[0] - kept[-1][0], point[1] - kept[-1][1]) \
+                >= SAME_POINT_M:
+            kept.append(point)
+    if len(kept) > 1 and math.hypot(kept[0][0] - kept[-1][0],
+                                    kept[0][1] - kept[-1][1]) < SAME_POINT_M:
+        kept.pop()
+    points = np.array(kept).reshape(-1, 3)
     points.flags.writeable = False
     return points
 
