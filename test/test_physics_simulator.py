@@ -251,7 +251,6 @@ def test_the_physics_simulator_declares_the_parameters_known_before_start():
 def test_a_short_crawl_in_physics_walks_forward_and_records_what_physics_measured(tmp_path):
     from gait_nodes.__main__ import main
     from gait_nodes.bag.reader import BagReader
-
     from gait_nodes.swing.cache import load_or_build
 
     robot = load_robot_model('robosimian')
@@ -289,7 +288,7 @@ def test_a_short_crawl_in_physics_walks_forward_and_records_what_physics_measure
     assert np.median(list(totals.values())) == pytest.approx(weight, rel=0.05)
     # The centre of pressure inside the contact polygon (the monitor's, same stamps).
     polygons = {}
-    for channel, _, _, payload in BagReader(bag).messages(topics=('/gait/support_polygon',)):
+    for _, _, _, payload in BagReader(bag).messages(topics=('/gait/support_polygon',)):
         msg = deserialize_message(payload, get_message(graph.TOPICS['/gait/support_polygon']))
         polygons[time_msg_to_ns(msg.header.stamp)] = np.array(
             [(p.x, p.y) for p in msg.polygon.points])
