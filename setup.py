@@ -28,6 +28,7 @@ PROGRAMS = [
     'whole_body_ik',
     'swing_leg_policy',
     'kinematic_simulator',
+    'physics_simulator',
     'recorder',
     'command',
     'inspect',
@@ -143,8 +144,11 @@ setup(
     # option and warns on every build. colcon reads the 'test' extra the same way.
     extras_require={
         # The tests also check the real robot models, so they need example-robot-data.
-        'test': ['pytest', 'hypothesis', 'ruff', 'example-robot-data'],
+        # ...and the physics simulator, so they need MuJoCo.
+        'test': ['pytest', 'hypothesis', 'ruff', 'example-robot-data', 'mujoco'],
         'robots': ['example-robot-data'],
+        # The physics simulator (MuJoCo) and, for the walks' videos, an ffmpeg writer.
+        'physics': ['mujoco', 'imageio[ffmpeg]'],
     },
     zip_safe=True,
     maintainer='gait_nodes maintainers',

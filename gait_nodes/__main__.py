@@ -83,8 +83,14 @@ def build_parser() -> ArgumentParser:
                           "scenario's)")
     run.add_argument('--gait', default=None,
                      help='gait: biped | crawl | static_crawl | trot | auto')
+    run.add_argument('--simulator', choices=list(graph.SIMULATORS),
+                     default=graph.DEFAULT_SIMULATOR,
+                     help='kinematic: kinematic_simulator, exact and fast (default); physics: '
+                          'physics_simulator, the robot in MuJoCo with contacts, joint gains and '
+                          'effort limits (pip install mujoco)')
     run.add_argument('--nodes', default=None,
-                     help=f'comma-separated subset of {",".join(graph.NODES)}')
+                     help=f'comma-separated subset of {",".join(graph.NODES)} (with '
+                          f'--simulator physics, physics_simulator for kinematic_simulator)')
     run.add_argument('--namespace', metavar='NS', default=None,
                      help='start the graph in ROS namespace NS (e.g. /robot1), as a launch '
                           "file's namespace does: every node process, the recorder included, "
@@ -133,12 +139,15 @@ def _prepare_value_table(values: dict, names: list[str]) -> None:
 
 
 def _selected_nodes(options) -> list[str]:
-    available = graph.available_nodes()
+    available = graph.graph_nodes(options.simulator)
     if options.nodes is None:
         return available
     wanted = [name.strip() for name in options.nodes.split(',') if name.strip()]
     for name in wanted:
-        if name not in graph.NODES:
+        if name not in available and name in graph.SIMULATORS.values():
+            raise ArgumentError(f'node {name!r} is not the chosen simulator: --simulator '
+                                f'{options.simulator} runs {graph.SIMULATORS[options.simulator]}')
+        if name not in graph.NODES and name not in graph.ALTERNATIVE_NODES:
             raise ArgumentError(f'unknown node {name!r}: choose from {", ".join(graph.NODES)}')
         if name not in available:
             raise ArgumentError(f'node {name!r} is not installed in this version')
@@ -180,9 +189,18 @@ class TopicCounter:
         return rows
 
 
+def _recorded_robot(options) -> str | None:
+    """The robot whose per-foot topics the recorder records: the physics simulator's."""
+    if options.simulator != 'physics':
+        return None
+    return options.robot or get_scenario(options.scenario).robot
+
+
 def _record_args(options) -> list[str]:
     namespace = options.namespace_args
-    return ['-o', options.record, *(['--ros-args', *namespace] if namespace else [])]
+    robot = _recorded_robot(options)
+    return ['-o', options.record, *(['--robot', robot] if robot else []),
+            *(['--ros-args', *namespace] if namespace else [])]
 
 
 def _monitor(options, runtime):
@@ -221,10 +239,11 @@ def run_inproc(options, names: list[str], ros: list[str]) -> dict:
     try:
         executor = runtime.SingleThreadedExecutor()
         for name in names:
-            executor.add_node(graph.load_class(graph.NODES[name])())
+            executor.add_node(graph.load_class(graph.node_path(name))())
         recorder = None
         if options.record:
-            recorder = graph.load_class(graph.RECORDER)(output=options.record)
+            recorder = graph.load_class(graph.RECORDER)(output=options.record,
+                                                        robot=_recorded_robot(options))
             executor.add_node(recorder)
         # The monitor is ours, not the user's: the graph's -p/-r do not address it (as in
         # run_processes, where it never sees them).
@@ -467,6 +486,10 @@ def main(args: list[str] | None = None) -> int:
             options.runtime = 'inproc'
         runtime_name = select_runtime(options.runtime)
         names = _selected_nodes(options)
+        if options.simulator == 'physics':
+            from gait_nodes.sim.mujoco_model import import_mujoco
+
+            import_mujoco()  # before anything starts: how to install it, if it is missing
         options.namespace_args = graph.namespace_arguments(options.namespace)
         # Each node would refuse a parameter it does not declare, after its start-up work.
         checked = names + ([RECORDER] if options.record is not None and

@@ -39,6 +39,17 @@ joint_trajectory_controller takes)
     joint, ``velocities`` and ``accelerations`` empty or one per joint (in every point alike),
     ``effort`` empty. Between points a follower interpolates with cubic Hermite polynomials
     (positions and velocities) or linearly (positions only).
+``/gait/contact_wrench/<foot>`` (geometry_msgs/WrenchStamped, one topic per foot of the robot
+YAML, physics_simulator)
+    ``header.frame_id`` = the foot's frame (the robot YAML's ``feet.<foot>.frame``),
+    ``header.stamp`` = the end of the interval it averages (one control tick); ``wrench.force``:
+    the ground's force on the foot [N], ``wrench.torque``: its moment about the foot frame's
+    origin [N m], both in the foot frame, as a force-torque sensor at the sole reports them. Zero
+    while the foot is in the air.
+``/gait/cop`` (geometry_msgs/PointStamped, physics_simulator)
+    ``header.frame_id`` = ``odom``: the centre of pressure of the contact forces over the tick
+    ending at ``header.stamp``, on the plane of the lowest contact point (``z`` its height); not
+    published without vertical ground force.
 
 Times are integer nanoseconds at the message boundary and float seconds inside the arrays.
 Converters from messages validate what they read and raise :class:`ContractError` with the reason;
@@ -1089,6 +1100,42 @@ def _point_rows(rows: list, field_name: str, count: int, required: bool) -> np.n
         raise ContractError(f'point {k} {field_name} hold a NaN or infinite value')
     array.setflags(write=False)
     return array
+
+
+@dataclass(frozen=True)
+class ContactWrench:
+    """One foot's contact wrench (``/gait/contact_wrench/<foot>``).
+
+    Attributes:
+        stamp_ns: End of the interval it averages [ns].
+        frame: The foot frame it is expressed in.
+        force: (3,) ground force on the foot, in the foot frame [N].
+        torque: (3,) its moment about the foot frame's origin, in the foot frame [N m].
+    """
+
+    stamp_ns: int
+    frame: str
+    force: np.ndarray
+    torque: np.ndarray
+
+
+def contact_wrench_to_msg(stamp_ns: int, frame: str, wrench: Sequence[float]):
+    """WrenchStamped of a foot's ``(fx, fy, fz, tx, ty, tz)`` [N, N m] in its ``frame``."""
+    new_vector = get_constructor('geometry_msgs/msg/Vector3')
+    fx, fy, fz, tx, ty, tz = (float(v) for v in wrench)
+    return get_constructor('geometry_msgs/msg/WrenchStamped')(
+        _header(stamp_ns, frame), get_constructor('geometry_msgs/msg/Wrench')(
+            new_vector(fx, fy, fz), new_vector(tx, ty, tz)))
+
+
+def contact_wrench_from_msg(msg) -> ContactWrench:
+    """The :class:`ContactWrench` of a WrenchStamped; ContactError if not finite or unframed."""
+    if not msg.header.frame_id:
+        raise ContractError('a contact wrench needs the foot frame in header.frame_id')
+    force = _frozen([msg.wrench.force.x, msg.wrench.force.y, msg.wrench.force.z])
+    torque = _frozen([msg.wrench.torque.x, msg.wrench.torque.y, msg.wrench.torque.z])
+    _check_finite(np.concatenate([force, torque]), 'contact wrench')
+    return ContactWrench(time_msg_to_ns(msg.header.stamp), msg.header.frame_id, force, torque)
 
 
 def joint_trajectory_from_msg(msg, known_joints: Sequence[str] | None = None

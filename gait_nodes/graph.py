@@ -16,6 +16,14 @@ NODES: dict[str, str] = {
     'kinematic_simulator': 'gait_nodes.kinematic_simulator:KinematicSimulator',
 }
 RECORDER = 'gait_nodes.recorder:Recorder'
+#: Nodes that can take a node's place in the graph, started only when chosen.
+ALTERNATIVE_NODES: dict[str, str] = {
+    'physics_simulator': 'gait_nodes.physics_simulator:PhysicsSimulator',
+}
+#: ``run --simulator`` -> the simulator node: the graph runs exactly one of them.
+SIMULATORS: dict[str, str] = {'kinematic': 'kinematic_simulator',
+                              'physics': 'physics_simulator'}
+DEFAULT_SIMULATOR = 'kinematic'
 
 #: Topic -> message type, the public contract.
 TOPICS: dict[str, str] = {
@@ -35,7 +43,39 @@ TOPICS: dict[str, str] = {
     '/gait/markers': 'visualization_msgs/msg/MarkerArray',
     '/diagnostics': 'diagnostic_msgs/msg/DiagnosticArray',
     '/clock': 'rosgraph_msgs/msg/Clock',
+    '/gait/cop': 'geometry_msgs/msg/PointStamped',
 }
+#: Topic families with one topic per foot of the robot, ``<prefix><foot name>``
+#: (``/gait/contact_wrench/front_left``) -> message type.
+FOOT_TOPICS: dict[str, str] = {
+    '/gait/contact_wrench/': 'geometry_msgs/msg/WrenchStamped',
+}
+
+
+def foot_topics(foot_names) -> dict[str, str]:
+    """``{topic: type}`` of the per-foot topic families for a robot's feet."""
+    return {prefix + foot: type_name for prefix, type_name in FOOT_TOPICS.items()
+            for foot in foot_names}
+
+
+def node_path(name: str) -> str:
+    """The ``module:Class`` of a graph node or of an alternative one (a simulator)."""
+    if name in NODES:
+        return NODES[name]
+    if name in ALTERNATIVE_NODES:
+        return ALTERNATIVE_NODES[name]
+    raise GaitNodesError(f'unknown node {name!r}; nodes: '
+                         f'{", ".join([*NODES, *ALTERNATIVE_NODES])}')
+
+
+def graph_nodes(simulator: str = DEFAULT_SIMULATOR) -> list[str]:
+    """The installed nodes of the graph in graph order, ``simulator``'s in the simulator's place.
+
+    Args:
+        simulator: A key of SIMULATORS.
+    """
+    chosen = SIMULATORS[simulator]
+    return [chosen if name in SIMULATORS.values() else name for name in available_nodes()]
 
 
 #: Contract topics that the nodes name absolutely, as ROS libraries do: tf2 (``/tf``,

@@ -201,20 +201,34 @@ class _Window:
 
 
 class KinematicSimulator(GuardedNode):
-    """The kinematic simulator and ZMP monitor node (see the module docstring)."""
+    """The kinematic simulator and ZMP monitor node (see the module docstring).
+
+    A simulator with the same topics and another simulation core (the physics simulator)
+    subclasses it and replaces the hooks: its name and parameters (``NODE_NAME``, ``Params``,
+    ``FIXED_PARAMETERS``), :meth:`_make_simulation`, :meth:`_plan_inputs`,
+    :meth:`_publish_measurements`, :meth:`_account` and :meth:`_summary_statuses`.
+    """
+
+    NODE_NAME = NODE_NAME
+    Params = KinematicSimulatorParams
+    #: Parameters that cannot change once the node runs.
+    FIXED_PARAMETERS = ('robot', 'publish_clock')
+
+    @classmethod
+    def node_defaults(cls) -> dict:
+        """Parameter defaults from ``config/<NODE_NAME>.yaml``."""
+        return shipped_node_defaults(cls.NODE_NAME)
 
     def __init__(self):
-        super().__init__(NODE_NAME)
-        defaults = node_defaults()
-        for name, value in defaults.items():
-            self.declare_parameter(name, value)
-        self.params = KinematicSimulatorParams.from_values(
+        super().__init__(self.NODE_NAME)
+        defaults = self.node_defaults()
+        self._declare_parameters(defaults)
+        self.params = self.Params.from_values(
             {name: self.get_parameter(name).value for name in defaults})
         self.robot = load_robot_model(self.params.robot)
         q_initial = nominal_configuration(self.robot)
-        self.simulation = KinematicSimulation(self.robot, q_initial,
-                                              self.params.simulation_settings())
-        self.monitor = ZmpMonitor(self.robot.model, self.robot.description.foot_radius_m,
+        self.simulation = self._make_simulation(q_initial)
+        self.monitor = ZmpMonitor(self.robot.model, self._monitor_foot_radius_m(),
                                   self.params.ground_height_m)
         # The monitor's finite differences, each configuration difference computed once.
         self._differences = SlidingDifferences(self.robot.model)
@@ -233,7 +247,7 @@ class KinematicSimulator(GuardedNode):
         # (stamp [ns], q, contact points, odom header or None) of the last three ticks, oldest
         # first; None: an instant before the first step (not published, no monitor sample).
         self._history: deque = deque(maxlen=3)
-        self._window = _Window()
+        self._window = self._new_window()
         self._last_summary_ns: int | None = None
         self._sim_ns = 0
         # The monitor's Support of the simulation's contact points (the same array until a
@@ -277,7 +291,6 @@ class KinematicSimulator(GuardedNode):
             'sensor_msgs/msg/CompressedImage', 'visualization_msgs/msg/MeshFile',
             'builtin_interfaces/msg/Time')}
         self._joint_names = list(self.robot.joint_names)
-        self._continuous_joints = bool(self.simulation.actuators.continuous.any())
         self._marker_parts_cache = self._marker_parts()
         joint_state = self._msg['JointState']
         point = self._msg['PointStamped']
@@ -302,6 +315,44 @@ class KinematicSimulator(GuardedNode):
         self.get_logger().info(f'{self.robot.name}: {len(self.robot.joint_names)} joints, '
                                f'{self.robot.mass_kg:.1f} kg, {self.params.rate_hz:g} Hz'
                                + (', publishing /clock' if self.params.publish_clock else ''))
+
+    # -- the simulation core (hooks) -----------------------------------------------------------
+
+    def _declare_parameters(self, defaults: dict) -> None:
+        for name, value in defaults.items():
+            self.declare_parameter(name, value)
+
+    def _make_simulation(self, q_initial: np.ndarray):
+        """The simulation core, started at ``q_initial``."""
+        simulation = KinematicSimulation(self.robot, q_initial,
+                                         self.params.simulation_settings())
+        # With continuous joints (cos, sin in q) the joint positions are read from q.
+        self._continuous_joints = bool(simulation.actuators.continuous.any())
+        return simulation
+
+    def _monitor_foot_radius_m(self) -> float:
+        """Radius of the discs the ZMP monitor puts around each contact point [m]."""
+        return self.robot.description.foot_radius_m
+
+    def _apply_settings(self, params) -> None:
+        """Hand changed parameters to the simulation core."""
+        self.simulation.settings = params.simulation_settings()
+
+    def _plan_inputs(self, now_ns: int) -> tuple:
+        """``(contacts, heights)`` the plan gives the simulation at ``now_ns`` (or None)."""
+        contacts = heights = None
+        if self._plan is not None:
+            t_s = (now_ns - self._plan.start_ns) * 1e-9
+            contacts = self._plan_contacts.at(t_s)
+            if any(down and foot is None
+                   for down, foot in zip(contacts.tolist(), self.simulation.latched,
+                                         strict=True)):
+                # A foot due down: it touches down on its foothold, not in the air.
+                heights = self._plan.stance_positions_at(t_s)[self._plan_contacts.order, 2]
+        return contacts, heights
+
+    def _publish_measurements(self, now_ns: int, step, header) -> None:
+        """Publish what the core measured beyond the state (nothing here)."""
 
     # -- time ----------------------------------------------------------------------------------
 
@@ -329,23 +380,23 @@ class KinematicSimulator(GuardedNode):
     # -- parameters ----------------------------------------------------------------------------
 
     def _on_set_parameters(self, parameters) -> SetParametersResult:
-        values = {name: getattr(self.params, name) for name in node_defaults()}
+        values = {name: getattr(self.params, name) for name in self.node_defaults()}
         for parameter in parameters:
             if parameter.name in values:
                 values[parameter.name] = parameter.value
         try:
-            params = KinematicSimulatorParams.from_values(values)
-            for fixed in ('robot', 'publish_clock'):
+            params = self.Params.from_values(values)
+            for fixed in self.FIXED_PARAMETERS:
                 if getattr(params, fixed) != getattr(self.params, fixed):
                     raise ParameterError(f'{fixed} is fixed at start '
                                          f'({getattr(self.params, fixed)}); restart the node')
-            settings = params.simulation_settings()
+            params.simulation_settings()
         except GaitNodesError as exc:
             return SetParametersResult(successful=False, reason=str(exc))
         if params.rate_hz != self.params.rate_hz:
             self.timer.cancel()
             self.timer = self._make_timer(params.rate_hz)
-        self.simulation.settings = settings
+        self._apply_settings(params)
         self.monitor.ground_height_m = params.ground_height_m
         self._period_ns = int(round(1e9 / params.rate_hz))
         self._markers_period_ns = int(round(1e9 / params.markers_rate_hz))
@@ -449,20 +500,13 @@ class KinematicSimulator(GuardedNode):
         previous_ns = self._history[-1][0]
         dt_s = (now_ns - previous_ns) * 1e-9 if now_ns > previous_ns else period_ns * 1e-9
 
-        contacts = heights = None
-        if self._plan is not None:
-            t_s = (now_ns - self._plan.start_ns) * 1e-9
-            contacts = self._plan_contacts.at(t_s)
-            if any(down and foot is None
-                   for down, foot in zip(contacts.tolist(), self.simulation.latched,
-                                         strict=True)):
-                # A foot due down: it touches down on its foothold, not in the air.
-                heights = self._plan.stance_positions_at(t_s)[self._plan_contacts.order, 2]
+        contacts, heights = self._plan_inputs(now_ns)
         trajectory = self.trajectory
         command, command_velocity = trajectory.sample(now_ns)
         trajectory.discard_before(now_ns)
         step = self.simulation.step(command, dt_s, contacts, command_velocity, heights)
         header = self._publish_state(now_ns, step.q, step.actuators)
+        self._publish_measurements(now_ns, step, header)
         self._history.append((now_ns, step.q, step.contact_points_in_world, header))
         self._account(step)
 
@@ -547,7 +591,8 @@ class KinematicSimulator(GuardedNode):
             else actuators.positions_rad
         self._joint_states.publish(new['JointState'](
             new['Header'](stamp, ''), self._joint_names,
-            positions.tolist(), actuators.velocities_rad_s.tolist(), []))
+            positions.tolist(), actuators.velocities_rad_s.tolist(),
+            self._joint_efforts(actuators)))
         x, y, z, qx, qy, qz, qw = q[:7].tolist()
         header = new['Header'](stamp, WORLD_FRAME)
         transform = new['TransformStamped'](
@@ -555,6 +600,10 @@ class KinematicSimulator(GuardedNode):
             new['Transform'](new['Vector3'](x, y, z), new['Quaternion'](qx, qy, qz, qw)))
         self._tf.publish(new['TFMessage']([transform]))
         return header
+
+    def _joint_efforts(self, actuators) -> list:
+        """The ``effort`` of /joint_states: none from a kinematic simulation."""
+        return []
 
     def _publish_monitor(self, stamp_ns: int, header, state: ZmpState,
                          support: Support) -> None:
@@ -704,8 +753,18 @@ class KinematicSimulator(GuardedNode):
         return aspect, level, message, values
 
     def _publish_summary(self, now_ns: int) -> None:
-        window, self._window = self._window, _Window()
+        window, self._window = self._window, self._new_window()
         self._last_summary_ns = now_ns
+        statuses = self._summary_statuses(window)
+        statuses.append(self._input_status(now_ns))
+        self.diagnostics.publish(statuses)
+
+    def _new_window(self):
+        """A fresh record of what happens until the next summary."""
+        return _Window()
+
+    def _stability_summary(self, window) -> list:
+        """The 'stability summary' status of the window's monitor samples (none without)."""
         statuses = []
         if window.samples:
             level = ERROR if window.samples_outside else WARN if window.samples_warn else OK
@@ -717,6 +776,11 @@ class KinematicSimulator(GuardedNode):
                  'samples_outside': window.samples_outside,
                  'samples_below_warn': window.samples_warn,
                  'warn_margin_m': self.params.warn_margin_m}))
+        return statuses
+
+    def _summary_statuses(self, window) -> list:
+        """Every status of the periodic summary but the inputs'."""
+        statuses = self._stability_summary(window)
         joints = sorted(window.saturated_joints, key=lambda j: -window.saturated_joints[j])
         # The aspect keeps its name ('velocity saturation'); it counts the ticks where a joint
         # lagged its command at its velocity or its acceleration limit.
@@ -737,8 +801,7 @@ class KinematicSimulator(GuardedNode):
              'contacts': ','.join(n for n, down in zip(self.robot.foot_names,
                                                        self.simulation.contacts, strict=True)
                                   if down)}))
-        statuses.append(self._input_status(now_ns))
-        self.diagnostics.publish(statuses)
+        return statuses
 
 
 def main(args: list[str] | None = None) -> int:

@@ -51,9 +51,10 @@ def parameter_names(node: str) -> frozenset[str] | None:
         node: The node's own name (before any ``__node`` remapping): a graph node or the
             recorder.
     """
-    if node not in graph.NODES and node != RECORDER:
+    graph_node = node in graph.NODES or node in graph.ALTERNATIVE_NODES
+    if not graph_node and node != RECORDER:
         return None
-    names = set(node_defaults(node)) if node in graph.NODES else set()
+    names = set(node_defaults(node)) if graph_node else set()
     if node in _BEYOND_DEFAULTS:
         names |= _BEYOND_DEFAULTS[node]()
     return frozenset(names | RUNTIME_PARAMETERS)

@@ -45,10 +45,12 @@ def parse_topics(specs: list[str]) -> dict[str, str]:
         name, _, type_name = spec.partition(':')
         if not type_name:
             contract = '/' + name.lstrip('/')
-            if contract not in graph.TOPICS:
+            families = [t for prefix, t in graph.FOOT_TOPICS.items()
+                        if contract.startswith(prefix) and len(contract) > len(prefix)]
+            if contract not in graph.TOPICS and not families:
                 raise ArgumentError(f'topic {name} is not in the contract: give its type as '
                                     f'{name}:pkg/msg/Type')
-            type_name = graph.TOPICS[contract]
+            type_name = graph.TOPICS.get(contract) or families[0]
         topics[name] = type_name
     return topics
 
@@ -60,10 +62,12 @@ class Recorder(Node):
         output: Bag directory (default: the ``output`` parameter, else bags/gait_<date-time>).
         topics: ``{topic: pkg/msg/Type}`` to record (default: every contract topic).
         open_file: How the MCAP file is opened (:class:`BagWriter`'s ``open_file``).
+        robot: A robot name or YAML: also record its per-foot topics
+            (``/gait/contact_wrench/<foot>``, the physics simulator's), with the default topics.
     """
 
     def __init__(self, output: str | None = None, topics: dict[str, str] | None = None,
-                 open_file=None):
+                 open_file=None, robot: str | None = None):
         super().__init__('recorder')
         self.writer = None  # destroy_node after a refusal has no bag to close
         values = {name: self.declare_parameter(name, default).value
@@ -76,6 +80,12 @@ class Recorder(Node):
         # /robot1/gait/footsteps, and /tf where the nodes' /tf is.
         topics = topics or {graph.node_topic_name(name): type_name
                             for name, type_name in graph.TOPICS.items()}
+        if robot:
+            from gait_nodes.robot.description import load_robot_description
+
+            feet = load_robot_description(robot).foot_names
+            topics = {**topics, **{graph.node_topic_name(name): type_name
+                                   for name, type_name in graph.foot_topics(feet).items()}}
         # Made at start, so that subscribers have matched it when a failure is reported.
         self.diagnostics = DiagnosticsReporter(self)
         self._failure_reported_ns: int | None = None
@@ -148,7 +158,7 @@ class Recorder(Node):
 
 
 def main(args: list[str] | None = None) -> int:
-    """Entry point: ``python -m gait_nodes.recorder -o DIR [-t TOPIC ...]``."""
+    """Entry point: ``python -m gait_nodes.recorder -o DIR [-t TOPIC ...] [--robot NAME]``."""
 
     def add_arguments(parser):
         parser.add_argument('-o', '--output', default=None,
@@ -157,12 +167,15 @@ def main(args: list[str] | None = None) -> int:
                             help='topics to record (default: every contract topic); '
                                  'non-contract topics as name:pkg/msg/Type; relative names '
                                  'resolve under the namespace (--ros-args -r __ns:=/robot1)')
+        parser.add_argument('--robot', default=None, metavar='NAME',
+                            help="also record this robot's per-foot topics "
+                                 '(/gait/contact_wrench/<foot>, the physics simulator\'s)')
 
     recorders = []
 
     def factory(options):
         topics = parse_topics(options.topics) if options.topics else None
-        recorders.append(Recorder(output=options.output, topics=topics))
+        recorders.append(Recorder(output=options.output, topics=topics, robot=options.robot))
         return recorders[-1]
 
     status = run_node(factory, args, prog='python -m gait_nodes.recorder',

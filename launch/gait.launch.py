@@ -6,6 +6,7 @@ Usage::
     ros2 launch gait_nodes gait.launch.py record:=bags/walk   # also record to an MCAP bag
     ros2 launch gait_nodes gait.launch.py robot:=biped gait:=biped swing:=polynomial
     ros2 launch gait_nodes gait.launch.py namespace:=robot1 use_sim_time:=false  # a second robot
+    ros2 launch gait_nodes gait.launch.py simulator:=physics  # in MuJoCo (pip install mujoco)
 
 The robot walks when it is asked to: ``ros2 topic pub /cmd_vel geometry_msgs/msg/Twist
 "{linear: {x: 0.04}}"`` or ``python -m gait_nodes.command --vel 0.04 0 0``.
@@ -28,6 +29,7 @@ from launch.actions import DeclareLaunchArgument, SetEnvironmentVariable
 from launch.conditions import IfCondition
 from launch.substitutions import (
     EnvironmentVariable,
+    EqualsSubstitution,
     LaunchConfiguration,
     NotEqualsSubstitution,
 )
@@ -35,7 +37,7 @@ from launch_ros.actions import Node
 from launch_ros.parameter_descriptions import ParameterValue
 
 from gait_nodes.cli import NODE_ENVIRONMENT_DEFAULTS
-from gait_nodes.graph import ROBOT_TOPICS
+from gait_nodes.graph import ROBOT_TOPICS, SIMULATORS
 
 PACKAGE = 'gait_nodes'
 
@@ -47,6 +49,8 @@ GAIT_NODES = (
     'whole_body_ik',
     'kinematic_simulator',
 )
+#: The simulator argument's values -> the simulator node it starts (one of them runs).
+SIMULATOR_NODES = dict(SIMULATORS)
 
 
 def _params_file(node_name):
@@ -63,6 +67,7 @@ def generate_launch_description():
     swing = ParameterValue(LaunchConfiguration('swing'), value_type=str)
     use_sim_time = ParameterValue(LaunchConfiguration('use_sim_time'), value_type=bool)
     record = LaunchConfiguration('record')
+    simulator = LaunchConfiguration('simulator')
     namespace = LaunchConfiguration('namespace')
     # The robot's own absolute topics go into its namespace with it (no-ops without one).
     remappings = [(topic, topic.lstrip('/')) for topic in ROBOT_TOPICS]
@@ -85,9 +90,15 @@ def generate_launch_description():
                         'closed-form limb IK; others fall back to polynomial) or polynomial.',
         ),
         DeclareLaunchArgument(
+            'simulator',
+            default_value='kinematic',
+            description='kinematic: kinematic_simulator (exact, fast); physics: '
+                        'physics_simulator (MuJoCo: contacts, gains, effort limits).',
+        ),
+        DeclareLaunchArgument(
             'use_sim_time',
             default_value='true',
-            description='Follow /clock, published by kinematic_simulator.',
+            description='Follow /clock, published by the simulator.',
         ),
         DeclareLaunchArgument(
             'namespace',
@@ -106,15 +117,18 @@ def generate_launch_description():
     environment = [SetEnvironmentVariable(name, EnvironmentVariable(name, default_value=value))
                    for name, value in NODE_ENVIRONMENT_DEFAULTS.items()]
     nodes = []
-    for node_name in GAIT_NODES:
+    simulator_of = {node: kind for kind, node in SIMULATOR_NODES.items()}
+    for node_name in dict.fromkeys((*GAIT_NODES, *SIMULATOR_NODES.values())):
         overrides = {'use_sim_time': use_sim_time, 'robot': robot}
         if node_name == 'footstep_planner':
             overrides['gait'] = gait
         if node_name in ('footstep_planner', 'swing_leg_policy'):
             overrides['swing'] = swing
-        if node_name == 'kinematic_simulator':
+        condition = None
+        if node_name in simulator_of:
             # The simulator owns simulated time: it publishes the /clock the others follow.
             overrides['publish_clock'] = use_sim_time
+            condition = IfCondition(EqualsSubstitution(simulator, simulator_of[node_name]))
         nodes.append(
             Node(
                 package=PACKAGE,
@@ -124,6 +138,7 @@ def generate_launch_description():
                 output='screen',
                 parameters=[*_params_file(node_name), overrides],
                 remappings=remappings,
+                condition=condition,
             )
         )
 
@@ -135,7 +150,8 @@ def generate_launch_description():
             namespace=namespace,
             output='screen',
             remappings=remappings,
-            arguments=['-o', record],
+            # The robot's per-foot topics (/gait/contact_wrench/<foot>) too: physics_simulator's.
+            arguments=['-o', record, '--robot', LaunchConfiguration('robot')],
             parameters=[*_params_file('recorder'), {'use_sim_time': use_sim_time}],
             condition=IfCondition(NotEqualsSubstitution(record, '')),
         )

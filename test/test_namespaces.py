@@ -226,7 +226,8 @@ def _fake_launch_modules(captured: list) -> dict:
                            'SetEnvironmentVariable': recorder('SetEnvironmentVariable')},
         'launch.conditions': {'IfCondition': recorder('IfCondition')},
         'launch.substitutions': {name: recorder(name) for name in (
-            'EnvironmentVariable', 'LaunchConfiguration', 'NotEqualsSubstitution')},
+            'EnvironmentVariable', 'EqualsSubstitution', 'LaunchConfiguration',
+            'NotEqualsSubstitution')},
         'launch_ros': {},
         'launch_ros.actions': {'Node': recorder('Node')},
         'launch_ros.parameter_descriptions': {'ParameterValue': recorder('ParameterValue')},
@@ -251,7 +252,7 @@ def test_the_launch_file_puts_every_node_and_the_recorder_in_the_namespace(monke
     launch_file.generate_launch_description()
     nodes = [kwargs for kind, _, kwargs in captured if kind == 'Node']
     assert sorted(node['name'] for node in nodes) == sorted(
-        [*launch_file.GAIT_NODES, 'recorder'])
+        [*launch_file.GAIT_NODES, 'physics_simulator', 'recorder'])
     namespace = ('LaunchConfiguration', ('namespace',), {})
     for node in nodes:
         assert node['namespace'] == namespace, node['name']

@@ -88,7 +88,8 @@ NOMINAL_SNAP_M = 1e-3
 AIRBORNE_M = 0.005
 #: Status on /diagnostics -> the input whose loss holds the robot still.
 DEPENDENCIES = {'whole_body_ik: inputs': '/gait/com_reference',
-                'kinematic_simulator: inputs': '/joint_commands'}
+                'kinematic_simulator: inputs': '/joint_commands',
+                'physics_simulator: inputs': '/joint_commands'}
 #: Every dependency OK again for this long before a paused walk resumes [s].
 RESUME_AFTER_S = 0.5
 #: A planned swing with no /gait/swing_trajectory this long after its lift-off is missed [s].

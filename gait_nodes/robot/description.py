@@ -32,6 +32,22 @@ Format (lengths in metres, angles in radians, in the base frame: x forward, y le
       max_step_width_m: 0.2      # largest sideways displacement of a foot in one step
       max_turn_rad: 0.35         # largest yaw change of the body per gait cycle
     extra: {}                    # robot-specific settings (e.g. ik families), free form
+    physics:                     # the physics simulator's model (optional; see below)
+      joint_stiffness_nm_per_rad: 3000.0   # every joint's position gain kp [N m/rad]
+      joint_damping_nm_s_per_rad: 100.0    # its velocity gain kd [N m s/rad]
+      joint_armature_kg_m2: 0.1            # rotor inertia seen at the joint [kg m^2]
+      foot_friction: 1.0                   # sliding friction of the feet on the ground
+      foot:                                # the feet's contact geometry, in the foot frame
+        shape: cylinder                    # cylinder (a disc) | sphere | box
+        size_m: [0.055, 0.02]              # cylinder: radius, height; sphere: radius;
+                                           # box: length x, width y, height z
+        centre_m: [0.0, 0.0, 0.01]         # centre of the shape in the foot frame
+
+Without ``physics.foot`` a foot is what the rest of the YAML says it is: a sphere of radius
+``extra.foot_frame_height_m`` centred on the foot frame when that is given (the frame at the
+centre of a point foot), else a disc of ``foot_radius_m`` whose bottom face is the foot frame's
+xy plane (the frame at the sole). The gains have no default: a robot that walks in physics says
+which gains its joints have, and why, in its YAML.
 
 Every error names the file and the offending key with the allowed values.
 """
@@ -57,6 +73,10 @@ EXAMPLE_ROBOT_DATA_PREFIX = 'example-robot-data:'
 MAX_VELOCITY_RAD_S = 100.0
 #: Largest joint acceleration limit a robot YAML may give [rad/s^2 or m/s^2].
 MAX_ACCELERATION_RAD_S2 = 10000.0
+#: Foot shapes of the physics model -> the number of ``size_m`` values each takes.
+FOOT_SHAPES = {'cylinder': 2, 'sphere': 1, 'box': 3}
+#: Thickness of a foot disc when the YAML gives its radius only [m].
+DEFAULT_DISC_HEIGHT_M = 0.02
 
 
 @dataclass(frozen=True)
@@ -92,6 +112,43 @@ class Reach:
 
 
 @dataclass(frozen=True)
+class FootShape:
+    """The contact geometry of every foot in the physics model, in the foot frame.
+
+    Attributes:
+        shape: ``cylinder`` (a disc, axis along the frame's z), ``sphere`` or ``box``.
+        size_m: cylinder: (radius, height); sphere: (radius,); box: (x, y, z) edge lengths [m].
+        centre_in_foot: (3,) centre of the shape in the foot frame [m].
+    """
+
+    shape: str
+    size_m: tuple[float, ...]
+    centre_in_foot: np.ndarray
+
+
+@dataclass(frozen=True)
+class PhysicsDescription:
+    """How the physics simulator models the robot beyond its URDF (``physics`` in the YAML).
+
+    The joints are position-controlled as a ros2_control position interface drives them: a
+    PD law ``tau = kp (q_ref - q) + kd (qd_ref - qd)``, clamped at the URDF's effort limit.
+
+    Attributes:
+        joint_stiffness_nm_per_rad: kp of every joint [N m/rad] (N/m for a prismatic joint).
+        joint_damping_nm_s_per_rad: kd of every joint [N m s/rad].
+        joint_armature_kg_m2: Rotor inertia reflected through the gearbox [kg m^2].
+        foot_friction: Coulomb friction coefficient of the feet on the ground.
+        foot: Every foot's contact shape.
+    """
+
+    joint_stiffness_nm_per_rad: float
+    joint_damping_nm_s_per_rad: float
+    joint_armature_kg_m2: float
+    foot_friction: float
+    foot: FootShape
+
+
+@dataclass(frozen=True)
 class RobotDescription:
     """A robot YAML, validated. See the module docstring for the meaning of each field."""
 
@@ -112,6 +169,7 @@ class RobotDescription:
     reach: Reach
     description: str = ''
     extra: Mapping[str, object] = field(default_factory=dict)
+    physics: PhysicsDescription | None = None
 
     @property
     def foot_names(self) -> tuple[str, ...]:
@@ -287,7 +345,7 @@ def load_robot_description(name_or_path: str | os.PathLike) -> RobotDescription:
     known = {'name', 'description', 'urdf', 'kind', 'gaits', 'base_frame', 'feet',
              'foot_radius_m', 'body_height_m', 'com_height_m', 'joint_velocity_limit_rad_s',
              'joint_velocity_limits_rad_s', 'joint_acceleration_limit_rad_s2',
-             'joint_acceleration_limits_rad_s2', 'reach', 'extra'}
+             'joint_acceleration_limits_rad_s2', 'reach', 'extra', 'physics'}
     unknown = sorted(set(data) - known)
     if unknown:
         raise ConfigError(f'{path}: unknown keys {unknown}; allowed: {sorted(known)}')
@@ -347,6 +405,8 @@ def load_robot_description(name_or_path: str | os.PathLike) -> RobotDescription:
         reach=reach,
         description=str(top.get('description', '', required=False)),
         extra=dict(extra),
+        physics=_physics(top, extra, top.number('foot_radius_m', 0.0, 0.5))
+        if 'physics' in data else None,
     )
     for foot in description.feet:
         if foot.nominal_position_in_base[2] >= 0:
@@ -354,3 +414,38 @@ def load_robot_description(name_or_path: str | os.PathLike) -> RobotDescription:
             raise ConfigError(f'{path}: feet.{foot.name}.nominal_position_m: the foot must be '
                               f'below the base (z < 0), got z = {z}')
     return description
+
+
+def _foot_shape(physics: _Reader, extra: Mapping, foot_radius_m: float) -> FootShape:
+    """``physics.foot``, or the foot the rest of the YAML describes (module docstring)."""
+    if 'foot' not in physics.data:
+        sphere_radius = extra.get('foot_frame_height_m')
+        if isinstance(sphere_radius, (int, float)) and not isinstance(sphere_radius, bool) \
+                and 0 < sphere_radius <= 0.5:
+            return FootShape('sphere', (float(sphere_radius),), np.zeros(3))
+        return FootShape('cylinder', (foot_radius_m, DEFAULT_DISC_HEIGHT_M),
+                         np.array([0.0, 0.0, 0.5 * DEFAULT_DISC_HEIGHT_M]))
+    foot = physics.mapping('foot')
+    shape = foot.string('shape')
+    if shape not in FOOT_SHAPES:
+        foot.fail('shape', f'must be one of {list(FOOT_SHAPES)}, got {shape!r}')
+    size = foot.vector('size_m', FOOT_SHAPES[shape])
+    if not np.all(size > 0):
+        foot.fail('size_m', f'every size must be > 0 m, got {size.tolist()}')
+    return FootShape(shape, tuple(size.tolist()), foot.vector('centre_m', 3))
+
+
+def _physics(top: _Reader, extra: Mapping, foot_radius_m: float) -> PhysicsDescription:
+    """The ``physics`` section, validated."""
+    physics = top.mapping('physics')
+    known = {'joint_stiffness_nm_per_rad', 'joint_damping_nm_s_per_rad',
+             'joint_armature_kg_m2', 'foot_friction', 'foot'}
+    unknown = sorted(set(physics.data) - known)
+    if unknown:
+        top.fail('physics', f'unknown keys {unknown}; allowed: {sorted(known)}')
+    return PhysicsDescription(
+        joint_stiffness_nm_per_rad=physics.number('joint_stiffness_nm_per_rad', 0.0, 1e7),
+        joint_damping_nm_s_per_rad=physics.number('joint_damping_nm_s_per_rad', 0.0, 1e6),
+        joint_armature_kg_m2=physics.number('joint_armature_kg_m2', 0.0, 1e3),
+        foot_friction=physics.number('foot_friction', 0.0, 10.0),
+        foot=_foot_shape(physics, extra, foot_radius_m))

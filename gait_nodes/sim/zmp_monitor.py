@@ -266,6 +266,13 @@ class ZmpMonitor:
         """Exact signed margin [m] of the ZMP in the hull of the contact discs."""
         return self._margin(zmp_in_world, self.support(contact_points_in_world))
 
+    def margin_in(self, point_in_world, support: Support) -> float:
+        """Exact signed margin [m] of a point (its x, y) in ``support``'s polygon.
+
+        The support is one that :meth:`support` made (kept by the caller while it holds).
+        """
+        return self._margin_of(float(point_in_world[0]), float(point_in_world[1]), support)
+
     def _margin(self, zmp_in_world: np.ndarray, support: Support) -> float:
         return self._margin_of(float(zmp_in_world[0]), float(zmp_in_world[1]), support)
 
