@@ -10,8 +10,9 @@ The thesis' figures, its step-size sweep among them, come from ``python -m gait_
 
 It prints a Markdown table (also written to ``--out``). Speeds are net speeds, displacement of
 base_link in odom over a time, so a crawl's sideways sway does not count as progress: over the
-whole run (start-up and stop included), and while stepping (from the first executed lift-off
-to the last touch-down); the commanded speed is the scenario's first /cmd_vel.
+whole run (start-up and stop included), while stepping (from the first executed lift-off
+to the last touch-down), and steady (whole gait cycles after the first: inspect's ``steady``);
+the commanded speed is the scenario's first /cmd_vel.
 
     python bench/results.py [--scenarios a,b] [--out results.md] [--json rows.json]
 """
@@ -84,6 +85,7 @@ def scenario_row(name: str, summary: dict) -> dict:
         'com': scenario.settings.get('com_method', '-'),
         'commanded_m_s': commanded, 'net_speed_m_s': base.get('net_speed_m_s'),
         'stepping_speed_m_s': summary.get('stepping_speed_m_s'),
+        'steady_speed_m_s': (gait.get('steady') or {}).get('net_speed_m_s'),
         'steps': steps.get('count', 0), 'mean_step_m': steps.get('mean_length_m'),
         'margin_min_mm': None if margin.get('min_m') is None else 1000 * margin['min_m'],
         'margin_mean_mm': None if margin.get('mean_m') is None else 1000 * margin['mean_m'],
@@ -101,14 +103,14 @@ def _number(value, digits: int) -> str:
 def markdown(rows: list[dict]) -> str:
     """The results as a Markdown table."""
     lines = ['| scenario | robot | gait | swing | COM | commanded [m/s] | speed: run / '
-             'stepping [m/s] | steps (mean [m]) | ZMP margin min / mean [mm] | outside [s] '
-             '| joint vel. peak / limit | ERROR / WARN | real-time factor |',
+             'stepping / steady [m/s] | steps (mean [m]) | ZMP margin min / mean [mm] '
+             '| outside [s] | joint vel. peak / limit | ERROR / WARN | real-time factor |',
              '| --- ' * 13 + '|']
     for r in rows:
         lines.append(
             f'| `{r["scenario"]}` | {r["robot"]} | {r["gait"]} | {r["swing"]} | {r["com"]} '
             f'| {_number(r["commanded_m_s"], 3)} | {_number(r["net_speed_m_s"], 4)} / '
-            f'{_number(r["stepping_speed_m_s"], 4)} '
+            f'{_number(r["stepping_speed_m_s"], 4)} / {_number(r["steady_speed_m_s"], 4)} '
             f'| {r["steps"]} ({_number(r["mean_step_m"], 3)}) '
             f'| {_number(r["margin_min_mm"], 1)} / {_number(r["margin_mean_mm"], 1)} '
             f'| {_number(r["outside_s"], 3)} | {_number(r["joint_peak_ratio"], 2)} '

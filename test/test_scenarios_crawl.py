@@ -267,8 +267,10 @@ def test_the_static_crawl_holds_the_body_still_under_every_swing_and_outwalks_th
     one where the crawl came back (their 'applied' answers), judged from the bag: the base's
     horizontal drift and height over every executed swing (its lift-off and lowering excepted
     by a tick), and the net speed against the ZMP crawl's on the same robot, joint limit and
-    value table. (The scenario robosimian_static_crawl walks the thesis' 0.06 m lift; its
-    table would cost the suite a build: bench/results.py walks it.)
+    value table. The last swing before the crawl comes back is not judged: the preview
+    controller moves the COM ahead of the crawl's first ZMP move (up to 0.5 s early), and the
+    body drifts up to 8 mm at its end. (The scenario robosimian_static_crawl walks the thesis'
+    0.06 m lift; its table would cost the suite a build: bench/results.py walks it.)
     """
     _, inspection = bags('robosimian_gait_switch')
     applied = {s['id']: s['takes_effect_ns'] for s in inspection.series.statuses
@@ -279,7 +281,7 @@ def test_the_static_crawl_holds_the_body_still_under_every_swing_and_outwalks_th
     t = base[:, 0] * 1e-9
     speed = np.hypot(*np.gradient(base[:, 1:3], t, axis=0).T)
     swings = [s for s in executed(inspection.series.plans, end_ns)
-              if s['lift_off_ns'] >= start_ns]
+              if s['lift_off_ns'] >= start_ns and s['touch_down_ns'] < end_ns - 10**6]
     assert len(swings) >= 6
     swinging = np.zeros(len(t), bool)
     for swing in swings:
