@@ -59,6 +59,11 @@ MAX_RETIMING = 4
 LANDING_LEAD_S = 0.2
 #: Largest spacing of a static crawl's ZMP reference samples [s].
 STILL_SAMPLE_S = 0.05
+#: Sample spacing of a static crawl body move's full-model ZMP check [s].
+MULTIBODY_SAMPLE_S = 0.02
+#: Samples of a swing in that check: the swing shape's own (gait_nodes.swing.timing.
+#: needed_probe_period: about 60 over the swing).
+SWING_SHAPE_SAMPLES = 60
 #: A measured foot on the ground further than this from it [m] is planned where it is (its
 #: measured height kept) until it first steps: a foothold put this much lower in one tick would
 #: jolt the stance.
@@ -768,7 +773,8 @@ class GaitPlanner:
         """The step after ``state``; with ``timed``, its (swing, transfer) times [s].
 
         ``timed`` may hold a third item: each swing slot's own time [s] (a static crawl's, whose
-        swing then is their mean).
+        swing then is their mean), and a fourth, True when they are not to be shared again
+        (slowed for the full model's ZMP).
 
         With ``timing: joint_limit`` a step whose swings or transfer (the body's move with every
         foot down) need more time than its rhythm gives
@@ -914,7 +920,8 @@ class GaitPlanner:
         transfer = params.transfer_s(gait)
         needed_transfer = self._needed_transfer_s(state, points, params.com_height_m,
                                                   with_acceleration=still, bases=bases)
-        if still and len(needs) == len(durations) and retimed < MAX_RETIMING:
+        slowed = timed is not None and len(timed) > 3 and timed[3]
+        if still and not slowed and len(needs) == len(durations) and retimed < MAX_RETIMING:
             shares = _shared_times((transfer, *durations), (needed_transfer, *needs))
             if not np.allclose(shares, (transfer, *durations), rtol=1e-9, atol=1e-12):
                 return self._next_step(
@@ -931,7 +938,17 @@ class GaitPlanner:
                                    planned or (chosen, t_end))
         hold = START_HOLD_FRACTION * extra if kind == 'walk' else 0.0
         if bases is not None:
-            times, points, kept = self._still_body_zmp(state, slots, bases, t0 + hold, t1)
+            times, points, kept, full = self._still_body_zmp(state, slots, bases, t0 + hold, t1)
+            if full < params.zmp_margin_m and retimed < MAX_RETIMING:
+                # The swinging limbs' momentum takes the ZMP off the cart-table one by what
+                # scales as 1 / T^2: slower swings bring it back inside the margin.
+                off = max(kept - full, 1e-9)
+                factor = min(max(math.sqrt(off / max(kept - params.zmp_margin_m, 0.25 * off)),
+                                 1.05), 1.5)
+                slower = tuple(d * factor for d in durations)
+                return self._next_step(state, (float(np.mean(slower)), transfer, slower, True),
+                                       retimed + 1, planned or (chosen, t_end))
+            kept = min(kept, full)
             if hold > 0.0:
                 times, points = np.concatenate([[t0], times]), np.concatenate([points[:1],
                                                                                points])
@@ -1064,7 +1081,7 @@ class GaitPlanner:
     def _still_body_zmp(self, state: _State, slots: Sequence[SwingSlot],
                         bases: tuple[np.ndarray, np.ndarray], move_from_s: float,
                         move_to_s: float) -> tuple[np.ndarray, np.ndarray, float]:
-        """(times, points, margin) of a static-crawl step's ZMP reference.
+        """(times, points, margin, full-model margin) of a static-crawl step's ZMP reference.
 
         The base moves from ``bases[0]`` to ``bases[1]`` between ``move_from_s`` and
         ``move_to_s`` (:func:`gait_nodes.swing.still_body.body_move`, every foot down) and
@@ -1072,7 +1089,9 @@ class GaitPlanner:
         limbs' mass included,
         :meth:`gait_nodes.swing.still_body.StillBody.com`) and the reference is its cart-table
         ZMP, sampled every :data:`STILL_SAMPLE_S` or so. The margin is the least over the
-        samples of the distance inside the support polygon of the feet down then (foot discs).
+        samples of the distance inside the support polygon of the feet down then (foot discs);
+        the full-model margin is that of the ZMP with the limbs' momentum
+        (:meth:`_still_body_multibody_margin`).
         """
         from gait_nodes.swing.still_body import body_move, cart_table_zmp
 
@@ -1103,7 +1122,49 @@ class GaitPlanner:
         stances = [positions for group in stances for positions in group]
         margin = min(support.support_margin(p, positions, self.robot.foot_radius_m)
                      for p, positions in zip(points, stances, strict=True))
-        return times, points, margin
+        return times, points, margin, self._still_body_multibody_margin(
+            state, slots, bases, move_from_s, move_to_s)
+
+    def _still_body_multibody_margin(self, state: _State, slots: Sequence[SwingSlot],
+                                     bases: tuple[np.ndarray, np.ndarray], move_from_s: float,
+                                     move_to_s: float) -> float:
+        """Least margin [m] of the full model's ZMP (momentum included) over a static step.
+
+        Each phase (the body's move, each swing: rest to rest) sampled every
+        :data:`MULTIBODY_SAMPLE_S` (a swing on its shape's :data:`SWING_SHAPE_SAMPLES`) and its
+        ZMP computed as the ZMP monitor does
+        (:meth:`gait_nodes.swing.still_body.StillBody.multibody_zmp`), inside the support
+        polygon of the feet down then: the swinging limb's angular momentum moves it off the
+        cart-table ZMP of the COM (by 20-40 mm on RoboSimian's fastest swings).
+        """
+        from gait_nodes.swing.still_body import body_move
+
+        still = self._still_body()
+        yaw = float(np.angle(np.exp(1j * state.yaws).sum()))
+        feet = self._with_heights(state.positions)
+        radius = self.robot.foot_radius_m
+        margin = math.inf
+        if move_to_s > move_from_s:
+            count = max(int(math.ceil((move_to_s - move_from_s) / MULTIBODY_SAMPLE_S)), 2)
+            fraction = body_move(np.linspace(0.0, 1.0, count + 1))
+            base = bases[0] + fraction[:, None] * (bases[1] - bases[0])
+            zmp = still.multibody_zmp((move_to_s - move_from_s) / count, base, yaw,
+                                      np.repeat(feet[None], count + 1, axis=0),
+                                      np.repeat(state.yaws[None], count + 1, axis=0))
+            margin = min(support.support_margin(p, state.positions, radius) for p in zmp)
+        for (before, yaws, swings), slot in zip(self._slot_swings(state, slots), slots,
+                                                strict=True):
+            # On the swing shape's own samples (needed_probe_period): finer ones would take
+            # the finite differences of its linear interpolation for accelerations.
+            duration = slot.touch_down_s - slot.lift_off_s
+            count = SWING_SHAPE_SAMPLES
+            u = np.linspace(0.0, 1.0, count + 1)
+            placed, placed_yaws = still.source.swing_feet(swings, before, yaws, yaw, u)
+            zmp = still.multibody_zmp(duration / count, np.repeat(bases[1][None], len(u), axis=0),
+                                      yaw, placed, placed_yaws)
+            stance = before[[f for f in range(self.layout.count) if f not in slot.feet], :2]
+            margin = min(margin, *(support.support_margin(p, stance, radius) for p in zmp))
+        return margin
 
     def _needed_transfer_s(self, state: _State, zmp_points: np.ndarray,
                            com_height_m: float, probe=None,

@@ -140,6 +140,25 @@ class StillBody:
             coms[k] = pin.centerOfMass(self.robot.model, self._data, q)
         return coms
 
+    def multibody_zmp(self, dt_s: float, base_in_world: np.ndarray, body_yaw_rad: float,
+                      feet_in_world: np.ndarray, foot_yaws_rad: np.ndarray) -> np.ndarray:
+        """(N, 2) ZMP of the full model's motion sampled every ``dt_s``, at rest at both ends.
+
+        The bases (N, 3) and feet (N, F, 3) and yaws (N, F) placed as :meth:`com` takes them;
+        the ZMP from the rate of change of the whole model's momentum
+        (:func:`gait_nodes.robot.dynamics.multibody_zmp_trajectory`, as the ZMP monitor
+        computes it): the swinging limb's angular momentum included, which the cart-table ZMP
+        of the COM leaves out.
+        """
+        from gait_nodes.robot.dynamics import multibody_zmp_trajectory
+
+        base = np.asarray(base_in_world, dtype=float)
+        joints = self.joints(base, body_yaw_rad, feet_in_world, foot_yaws_rad)
+        configurations = np.array([self.robot.configuration(b, body_yaw_rad, values)
+                                   for b, values in zip(base, joints, strict=True)])
+        zmp, _ = multibody_zmp_trajectory(self.robot, configurations, dt_s)
+        return zmp
+
     def base_for_com(self, com_xy: np.ndarray, base_z_m: float, body_yaw_rad: float,
                      feet_in_world: np.ndarray, foot_yaws_rad: np.ndarray) -> np.ndarray:
         """(3,) base position whose full-model COM is over ``com_xy``, the feet where they stand.
