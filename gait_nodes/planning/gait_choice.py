@@ -20,14 +20,14 @@ few times at most). The joint limits are the planner's own: the ZMP gaits' rhyth
 velocity limit, the static crawl's at the velocity and acceleration limits. (The stricter
 probe of fixed-timing plans, :meth:`GaitPlanner.check_joint_speeds`, times every swing at the
 acceleration limit as well and finds RoboSimian's ZMP gaits 5 % short at 3 rad/s and 40 % at 4;
-walked there by the node graph they keep the ZMP inside, the joints below 0.8 of the limit and
+walked there by the node graph they keep the ZMP inside, the joints below 0.93 of the limit and
 the COM within a millimetre of its reference: :mod:`gait_nodes.walked_crossover`.) The fastest
 feasible gait is chosen; with none, the robot's first gait.
 
 The gaits are compared with :data:`COMPARED_WITH`, the footstep planner's shipped settings
 (``config/footstep_planner.yaml``: the polynomial swing, 0.1 m high), whatever the planner is
 then asked to walk with: the choice is made once per robot and limit, needs no value table, and
-no command waits for it. Planning the three RoboSimian gaits takes 3-5 s.
+no command waits for it. Planning the three RoboSimian gaits takes about 3.7 s.
 """
 
 from __future__ import annotations
