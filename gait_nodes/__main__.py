@@ -231,8 +231,12 @@ def _check_bag_directory(path: str) -> None:
                             f'{os_error_text(exc)}') from None
 
 
-def run_inproc(options, names: list[str], ros: list[str]) -> dict:
-    """All nodes in this process under one lockstep executor."""
+def run_inproc(options, names: list[str], ros: list[str], commands=None) -> dict:
+    """All nodes in this process under one lockstep executor.
+
+    ``commands``: the :class:`~gait_nodes.scenarios.TimedCommand` s to send (default: the
+    scenario's).
+    """
     from gait_nodes import runtime
 
     runtime.init(args=[PROG, *ros], runtime='inproc')
@@ -249,7 +253,8 @@ def run_inproc(options, names: list[str], ros: list[str]) -> dict:
         # run_processes, where it never sees them).
         monitor = _monitor(options, runtime)
         counter = TopicCounter(monitor)
-        driver = CommandDriver(monitor, get_scenario(options.scenario).commands)
+        driver = CommandDriver(monitor, get_scenario(options.scenario).commands
+                               if commands is None else commands)
         executor.add_node(monitor)
         driver.start()
         start = time.perf_counter()

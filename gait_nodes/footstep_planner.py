@@ -100,7 +100,7 @@ from gait_nodes.planning.supervisor import (
 )
 from gait_nodes.planning.supervisor import HorizonCut as _HorizonCut  # noqa: F401 (as above)
 from gait_nodes.planning.terrain import STAIRS_DEFAULTS, Staircase, check_walkable
-from gait_nodes.planning.timing_models import TimingModels, describe_plan
+from gait_nodes.planning.timing_models import TimingModels, auto_reason, describe_plan
 from gait_nodes.robot.description import load_robot_description
 from gait_nodes.runtime import Parameter, SetParametersResult, qos_profile_latched
 from gait_nodes.single_source import SingleSource
@@ -165,7 +165,8 @@ class FootstepPlanner(GuardedNode):
         robot_name = self.declare_parameter('robot', str(defaults.pop('robot'))).value
         self.robot = load_robot_description(robot_name)
         # The robot's defaults, unchecked: checking resolves gait 'auto', which for a robot
-        # with limb IK runs the thesis' crossover (seconds), and the settings are checked below.
+        # with limb IK plans each of its gaits at the joint limit (seconds, once per robot:
+        # planning.gait_choice), and the settings are checked below.
         robot_defaults = GaitParameters(**GaitParameters.robot_defaults(self.robot)).to_dict()
         values = {}
         for name in NODE_SETTINGS:
@@ -264,6 +265,8 @@ class FootstepPlanner(GuardedNode):
                       f'factor {params.duty_factor:g}')
         self.get_logger().info(f'{self.robot.name}: gait {params.gait} '
                                f'({params.resolved_gait(self.robot)}), {timing}')
+        if params.gait == 'auto':
+            self.get_logger().info(f'gait auto: {auto_reason(self.robot, params.timing)}')
 
     @property
     def planner(self) -> GaitPlanner:

@@ -19,8 +19,13 @@ both print the same optima. Steps end where the grid's x range does (0.6 m on x 
 optimum on the longest or shortest step is printed as "at the end of the range, not an interior
 optimum". The one-step costs are cached as the thesis command's.
 
-``python -m gait_nodes.swing_table crossover --joint-vel-limits 1 1.5 2 2.5 3`` compares the
-value-iteration crawl with the ZMP-based trot under the same joint velocity limits (thesis IV.C).
+``python -m gait_nodes.swing_table crossover [--joint-vel-limits 0.5 1 1.5 2 2.5 3 4] [--quick]
+[--keep-bags DIR]`` walks each of the robot's gaits (RoboSimian: the ZMP crawl, the static
+crawl, the trot) with the whole inproc node graph at each joint velocity limit and prints what
+each walk's bag says (thesis IV.C, Fig. 21; :mod:`gait_nodes.walked_crossover`): net speed of
+the steady cycles, step period, ZMP samples outside the support polygon, joints over the limit,
+and which gait walked fastest. Every figure is walked, none modelled; about 5 minutes on 2
+cores (``--quick``: 1 and 2.5 rad/s, shorter walks, about a minute).
 
 ``python -m gait_nodes.swing_table ik-check --robot robosimian`` counts the limb IK's solutions
 at every target of the thesis' swing workspace (by default the fine table grid on the two swing
@@ -41,7 +46,7 @@ import sys
 import numpy as np
 
 from gait_nodes.cli import ArgumentParser, fail
-from gait_nodes.errors import GaitNodesError
+from gait_nodes.errors import ArgumentError, GaitNodesError
 
 PROG = 'python -m gait_nodes.swing_table'
 
@@ -239,25 +244,33 @@ def _plot_sweep(results, path, limit, centre) -> None:
 
 
 def _crossover(options) -> int:
-    from gait_nodes.swing.crossover import compare_gaits
+    import time
 
-    for limit in options.joint_vel_limits:
-        choices = compare_gaits(options.robot, limit, family=options.family,
-                                step_height_m=options.step_height_m)
-        parts = []
-        for choice in choices:
-            if choice.speed_m_s <= 0:
-                parts.append(f'{choice.name} infeasible')
-            elif choice.step_period_s:
-                parts.append(f'{choice.name} {choice.speed_m_s:.4f} m/s (stride '
-                             f'{choice.step_length_m:.3f} m, step period '
-                             f'{choice.step_period_s:g} s)')
-            else:
-                parts.append(f'{choice.name} {choice.speed_m_s:.4f} m/s (step '
-                             f'{choice.step_length_m:.3f} m)')
-        best = max(choices, key=lambda c: c.speed_m_s)
-        print(f'{limit:g} rad/s: ' + '; '.join(parts) + f' -> {best.name} (gait {best.gait}, '
-              f'swing {best.swing})')
+    from gait_nodes import walked_crossover as walked
+
+    limits = options.joint_vel_limits or (walked.QUICK_LIMITS_RAD_S if options.quick
+                                          else walked.LIMITS_RAD_S)
+    duration = options.duration_at_1_rad_s or (walked.QUICK_DURATION_AT_1_RAD_S if options.quick
+                                                else walked.DURATION_AT_1_RAD_S)
+    settings = {**walked.WALKED_WITH, 'swing': options.swing,
+                'step_height_m': options.step_height_m}
+    for value, name in [(v, '--joint-vel-limits') for v in limits] + [
+            (duration, '--duration-at-1-rad-s'), (options.step_height_m, '--step-height-m')]:
+        if not (np.isfinite(value) and value > 0):
+            raise ArgumentError(f'{name} must be > 0, got {value:g}')
+
+    def log(message: str) -> None:
+        if not options.quiet:
+            print(f'{PROG}: {message}', file=sys.stderr, flush=True)
+
+    started = time.perf_counter()
+    rows = walked.walked_crossover(limits, options.robot, options.gaits, duration,
+                                   options.keep_bags, settings, log)
+    print(walked.format_table(rows, settings, duration))
+    if options.keep_bags:
+        print(f'\nbags: {options.keep_bags}/<gait>_w<limit> (robot copies in '
+              f'{options.keep_bags}/robots)')
+    print(f'walked in {time.perf_counter() - started:.0f} s')
     return 0
 
 
@@ -362,13 +375,27 @@ def main(args: list[str] | None = None) -> int:
     sweep.add_argument('--trials', type=int, default=50, help='perturbed copies per axis')
     sweep.add_argument('--amplitude-m', type=float, default=0.02,
                        help='largest perturbation of a waypoint [m]')
-    crossover = commands.add_parser('crossover', help='value-iteration crawl vs ZMP gait '
-                                    '(thesis IV.C)')
-    crossover.add_argument('--robot', default='robosimian')
-    crossover.add_argument('--family', type=int, default=2)
-    crossover.add_argument('--step-height-m', type=float, default=0.1)
-    crossover.add_argument('--joint-vel-limits', type=float, nargs='+',
-                           default=[1.0, 1.5, 2.0, 2.5, 3.0])
+    crossover = commands.add_parser('crossover', help='each gait walked at joint velocity '
+                                    'limits, read from its bag (thesis IV.C, Fig. 21)')
+    crossover.add_argument('--robot', default='robosimian', help='robot name or YAML path')
+    crossover.add_argument('--joint-vel-limits', type=float, nargs='+', default=None,
+                           help='joint velocity limits [rad/s] (default 0.5 1 1.5 2 2.5 3 4; '
+                           '--quick: 1 2.5)')
+    crossover.add_argument('--gaits', nargs='+', default=None,
+                           help="gaits to walk (default: the robot's)")
+    crossover.add_argument('--quick', action='store_true',
+                           help='two limits and shorter walks (about a minute)')
+    crossover.add_argument('--duration-at-1-rad-s', type=float, default=None,
+                           help='walk duration at 1 rad/s [s], divided by the limit at others '
+                           '(default 70; --quick: 45)')
+    crossover.add_argument('--swing', choices=['value_table', 'polynomial'],
+                           default='value_table', help='swing of every gait (default '
+                           'value_table)')
+    crossover.add_argument('--step-height-m', type=float, default=0.06,
+                           help="swing lift [m] (default 0.06, the thesis' best)")
+    crossover.add_argument('--keep-bags', metavar='DIR', default=None,
+                           help='keep the bags and the robot copies in DIR')
+    crossover.add_argument('--quiet', action='store_true', help='no progress lines')
     ik_check = commands.add_parser('ik-check', help='limb IK solutions per target over the '
                                    'swing workspace, checked by a multistart solver')
     ik_check.add_argument('--robot', default='robosimian', help='robot name or YAML path')

@@ -6,7 +6,7 @@ RoboSimian (every PNG marks the thesis' values in black, labelled "thesis", besi
 - Fig. 8: largest ZMP error of the simplified models against step size: the full model's ZMP
   (:mod:`gait_nodes.robot.dynamics`) when the body follows the cart-table preview COM, and after
   one multi-mass correction (:mod:`gait_nodes.com.multimass`, our stand-in for the nine-link
-  model), ZMP crawl (:mod:`gait_nodes.swing.crossover`'s plan), steady cycles only;
+  model), ZMP crawl (:mod:`gait_nodes.swing.zmp_gait`'s plan), steady cycles only;
 - Fig. 10: largest stance-limb joint speed of that ZMP crawl against step size;
 - Fig. 12: the thesis' map over the swing plane (z -0.6 m): the fastest joint's travel per
   metre of a small move along x and along y, with the thesis' grid drawn on it; printed along
@@ -19,7 +19,10 @@ RoboSimian (every PNG marks the thesis' values in black, labelled "thesis", besi
 - Figs. 15-16: the optimal swing's top view against a straight swing, and the share of the
   lift and lowering in the swing time;
 - IV.B.7 (Fig. 20): random perturbations of the optimal swing's waypoints;
-- Fig. 21: the ZMP crawl against the value-table crawl over joint velocity limits.
+- Fig. 21: every gait of the robot (RoboSimian: the static crawl, thesis eq. (2) walked; the
+  ZMP crawl; the trot) walked by the inproc node graph at joint velocity limits from 0.5 to 4
+  rad/s and read back from its bag (:mod:`gait_nodes.walked_crossover`; ``--quick``: 1 and 2.5
+  rad/s, shorter walks): walked, not modelled.
 
 The step size of a swing is its x travel; the thesis sets the goal's x "to be different" for each
 step (IV.B.3) without saying where: here every swing is centred on the middle of the thesis' x
@@ -60,8 +63,9 @@ ZMP_STEP_PERIODS_S = (1.0, 2.0)
 FAMILIES = (2, 7)
 #: The longest step the thesis' x range (0.2-0.8 m) holds [m].
 THESIS_LONGEST_STEP_M = 0.6
-#: Strides of the ZMP crawl of Fig. 21 [m] (the thesis' range; the crossover module's periods).
-ZMP_CROSSOVER_STEPS_M = (0.05, 0.1, 0.15, 0.2, 0.25, 0.3, 0.35, 0.4, 0.45, 0.5)
+#: The walked gait that is the thesis' value-iteration crawl (Fig. 21), and the ZMP gaits.
+VALUE_ITERATION_GAIT = 'static_crawl'
+ZMP_GAITS = {'crawl': 'ZMP crawl', 'trot': 'ZMP trot'}
 #: The foot's radius: the thesis' bound on a useful ZMP error (IV.A.1) [m].
 FOOT_RADIUS_M = 0.055
 
@@ -79,6 +83,8 @@ THESIS_NUMBERS = {
     'lift_share': 0.3876,                 # IV.B.5
     # IV.B.7: mean speed lost by perturbing the optimal path [ft/min].
     'perturb_loss_ft_min': {'x': 0.5026, 'y': 0.1513, 'z': 0.1803, 'xyz': 0.4353},
+    'fig21_zmp_feasible_rad_s': 1.9,      # IV.C: the ZMP gait infeasible below about 1.9 rad/s
+    'fig21_zmp_faster_rad_s': 2.4,        # and faster than value iteration above about 2.4
 }
 _N = THESIS_NUMBERS
 
@@ -119,7 +125,9 @@ class Settings:
         radii_m: Action sphere radii [m].
         azimuth_count: Azimuths per sphere.
         zmp_steps_m: Step sizes of Figs. 8 and 10 [m].
-        limits_rad_s: Joint velocity limits of Fig. 21 [rad/s].
+        limits_rad_s: Joint velocity limits the gaits of Fig. 21 are walked at [rad/s].
+        walk_at_1_rad_s: Duration of each walk of Fig. 21 at 1 rad/s [s] (over the limit at
+            the others).
         trials: Perturbed copies per axis (IV.B.7).
         amplitude_m: Largest perturbation of a waypoint [m].
         step_heights_m: Step heights [m] (the thesis' 0.1 and 0.06 m).
@@ -133,7 +141,8 @@ class Settings:
     radii_m: tuple[float, ...] = (0.025, 0.05, 0.1, 0.2)
     azimuth_count: int = 16
     zmp_steps_m: tuple[float, ...] = (0.04, 0.1, 0.15, 0.2, 0.25, 0.3, 0.35, 0.4, 0.45, 0.5)
-    limits_rad_s: tuple[float, ...] = tuple(np.round(np.arange(1.0, 3.01, 0.1), 2))
+    limits_rad_s: tuple[float, ...] = (0.5, 1.0, 1.5, 2.0, 2.5, 3.0, 4.0)
+    walk_at_1_rad_s: float = 70.0
     trials: int = 40
     amplitude_m: float = 0.02
     step_heights_m: tuple[float, ...] = THESIS_STEP_HEIGHTS_M
@@ -144,7 +153,7 @@ class Settings:
         """A coarse run (about a minute): x every 0.04 m, y every 0.05 m, 5 yaws."""
         return cls(x_count=16, y_count=6, yaw_count=5, radii_m=(0.04, 0.08, 0.16),
                    azimuth_count=8, zmp_steps_m=(0.1, 0.2, 0.3, 0.4),
-                   limits_rad_s=(1.0, 1.5, 2.0, 2.5, 3.0), trials=10,
+                   limits_rad_s=(1.0, 2.5), walk_at_1_rad_s=45.0, trials=10,
                    finer_grids=((21, 6, 5), (31, 11, 5)))
 
     @property
@@ -204,7 +213,7 @@ def zmp_crawl_plan(robot, step_m: float, step_period_s: float, cycles: int):
     """(planner, params) of a straight ZMP crawl at ``step_m`` per swing."""
     from gait_nodes.planning.footsteps import Twist2D, plan_walk
     from gait_nodes.planning.gait_params import GaitParameters
-    from gait_nodes.swing.crossover import DUTY_FACTORS
+    from gait_nodes.swing.zmp_gait import DUTY_FACTORS
 
     description = thesis_description(robot)
     params = GaitParameters.for_robot(
@@ -363,7 +372,7 @@ class Results:
     joint_travel: dict = field(default_factory=dict)     # family -> (x, rad/m along x)
     travel_maps: dict = field(default_factory=dict)      # 'x' / 'y' -> (ny, nx) rad/m
     fig14_grids: list = field(default_factory=list)      # GridOptimum, coarsest first
-    # (limit, value-table crawl, ZMP crawl limited by its stance limbs, by every limb) [m/s]
+    # Fig. 21: gait_nodes.walked_crossover.WalkedGait rows, read from the walks' bags
     crossover: list = field(default_factory=list)
     seconds: dict = field(default_factory=dict)
 
@@ -449,10 +458,10 @@ def run(robot, settings: Settings, log, convergence_grids: bool = False) -> Resu
         log: Called with progress messages.
         convergence_grids: Redo Fig. 14 on :attr:`Settings.finer_grids` too.
     """
-    from gait_nodes.swing.crossover import zmp_gait_joint_speed, zmp_gait_table_for
     from gait_nodes.swing.policy import SwingPolicy
     from gait_nodes.swing.sweep import perturbation_test
     from gait_nodes.swing.value_iteration import THESIS_GOAL_Y_M, THESIS_GOAL_Z_M
+    from gait_nodes.swing.zmp_gait import zmp_gait_joint_speed
 
     results = Results(settings)
     started = time.perf_counter()
@@ -508,17 +517,43 @@ def run(robot, settings: Settings, log, convergence_grids: bool = False) -> Resu
     results.families_q = tuple(ik.solve(point, 0.0, f)[0][0, :6] for f in FAMILIES)
 
     started = time.perf_counter()
-    per_limit = _best_speed(best) / robot.description.joint_velocity_limit_rad_s
-    stance, every = (zmp_gait_table_for(robot, 'crawl', FAMILIES[0], 0.1,
-                                        ZMP_CROSSOVER_STEPS_M, stance_only=stance_only,
-                                        description=thesis_description(robot))
-                     for stance_only in (True, False))
-    for limit in settings.limits_rad_s:
-        fastest = [table.fastest(limit) for table in (stance, every)]
-        results.crossover.append((float(limit), per_limit * limit,
-                                  *(f[0] if f else 0.0 for f in fastest)))
+    results.crossover = walk_gaits(robot, settings, log)
     results.seconds['crossover'] = time.perf_counter() - started
+    log(f'Fig. 21: {len(results.crossover)} walks in {results.seconds["crossover"]:.0f} s')
     return results
+
+
+def walk_gaits(robot, settings: Settings, log) -> list:
+    """Fig. 21: each gait of ``robot`` walked at ``settings.limits_rad_s``, from the bags."""
+    from gait_nodes.walked_crossover import describe, walked_crossover
+
+    def walked(message: str) -> None:
+        log(f'Fig. 21 walked: {message}')
+
+    rows = walked_crossover(settings.limits_rad_s, str(robot.description.path),
+                            duration_at_1_rad_s=settings.walk_at_1_rad_s, log=walked)
+    for row in rows:
+        if not row.feasible:
+            log(f'Fig. 21: {row.gait} at {row.limit_rad_s:g} rad/s {describe(row)}')
+    return rows
+
+
+def fig21_from(rows, gait: str, than: str | None = None) -> str:
+    """Where walked ``gait`` is feasible (or faster than walked ``than``), in words."""
+    limits = sorted({r.limit_rad_s for r in rows})
+    speed = {(r.gait, r.limit_rad_s): (r.speed_m_s if r.feasible else 0.0) for r in rows}
+    good = [w for w in limits if speed.get((gait, w), 0.0) > 0.0 and
+            (than is None or speed[gait, w] > speed.get((than, w), 0.0))]
+    if not good:
+        return f'never up to {limits[-1]:g} rad/s'
+    text = ', '.join(f'{w:g}' for w in good)
+    where = (f'from {good[0]:g} rad/s' if good == limits[limits.index(good[0]):] else
+             f'at {text} rad/s only')
+    if than is not None:
+        w = good[0]
+        where += (f' ({speed[gait, w]:.4f} against {speed.get((than, w), 0.0):.4f} m/s '
+                  f'there)')
+    return where
 
 
 def _best_speed(curve) -> float:
@@ -652,16 +687,17 @@ def rows(results: Results) -> list[tuple[str, str, str, str]]:
                     f'{-result.mean_loss_m_s * FT_PER_MIN:+.3f} ft/min, '
                     f'{100 * result.slower_fraction:.0f} % slower',
                     THESIS[f'perturb_{result.mode}']))
-    for column, limbs in ((2, 'stance limbs'), (3, 'every limb')):
-        feasible = [c[0] for c in results.crossover if c[column] > 0]
-        faster = [c[0] for c in results.crossover if c[column] > c[1]]
-        never = f'never up to {s.limits_rad_s[-1]:g} rad/s'
-        out.append(('Fig. 21', f'ZMP crawl ({limbs} limited) feasible',
-                    f'from {min(feasible):g} rad/s' if feasible else never,
+    walked = results.crossover
+    have = {r.gait for r in walked}
+    for gait, name in ZMP_GAITS.items():
+        if gait not in have:
+            continue
+        out.append(('Fig. 21', f'{name} feasible (walked)', fig21_from(walked, gait),
                     THESIS['fig21_zmp_feasible']))
-        out.append(('Fig. 21', f'ZMP crawl ({limbs} limited) faster than the value-table '
-                    'crawl', f'from {min(faster):g} rad/s' if faster else never,
-                    THESIS['fig21_zmp_faster']))
+        if VALUE_ITERATION_GAIT in have:
+            out.append(('Fig. 21', f'{name} faster than the static crawl (the value-iteration '
+                        'crawl; both walked)', fig21_from(walked, gait, VALUE_ITERATION_GAIT),
+                        THESIS['fig21_zmp_faster']))
     return out
 
 
@@ -885,18 +921,33 @@ def write_figures(results: Results, out_dir: Path) -> list[Path]:
     figure.suptitle('Fig. 20 (IV.B.7): perturbed copies of the optimal swing')
     save(figure, 'fig20_perturbations.png', rect=(0, 0.08, 1, 1))
 
-    figure, axes = plt.subplots(figsize=(7, 4.5))
-    limits = np.array([c[0] for c in results.crossover])
-    axes.plot(limits, np.array([c[1] for c in results.crossover]) * FT_PER_MIN, 'o-',
-              label='value-table crawl')
-    for column, label in ((2, 'ZMP crawl, stance limbs limited'),
-                          (3, 'ZMP crawl, every limb limited')):
-        zmp = np.array([c[column] for c in results.crossover])
-        axes.plot(limits, np.where(zmp > 0, zmp * FT_PER_MIN, np.nan), 's-', label=label)
-    axes.set(xlabel='joint velocity limit [rad/s]', ylabel='gait speed [ft/min]',
-             title='Fig. 21: ZMP based vs. value iteration based')
+    figure, axes = plt.subplots(figsize=(7.5, 5))
+    labels = {VALUE_ITERATION_GAIT: 'static crawl (value-iteration crawl)', **ZMP_GAITS}
+    for gait in dict.fromkeys(r.gait for r in results.crossover):
+        rows_of = [r for r in results.crossover if r.gait == gait]
+        limits = np.array([r.limit_rad_s for r in rows_of])
+        ft = np.array([r.speed_m_s for r in rows_of]) * FT_PER_MIN
+        ok = np.array([r.feasible for r in rows_of])
+        line, = axes.plot(limits, np.where(ok, ft, np.nan), 'o-',
+                          label=f'{labels.get(gait, gait)}, walked')
+        if (~ok).any():
+            axes.plot(limits[~ok], ft[~ok], 'x', ms=10, color=line.get_color(),
+                      label=f'{labels.get(gait, gait)}: infeasible walk')
+    axes.axvline(n['fig21_zmp_feasible_rad_s'], lw=1.2, ls='--', **thesis_style,
+                 label=f'thesis: ZMP gait feasible from about {n["fig21_zmp_feasible_rad_s"]:g} '
+                 'rad/s')
+    axes.axvline(n['fig21_zmp_faster_rad_s'], lw=1.2, ls=':', **thesis_style,
+                 label=f'thesis: ZMP gait faster above about {n["fig21_zmp_faster_rad_s"]:g} '
+                 'rad/s')
+    axes.set(xlabel='joint velocity limit [rad/s]', ylabel='walked speed [ft/min]',
+             title='Fig. 21: the gaits walked at each joint velocity limit')
+    axes.set_ylim(bottom=0)
     axes.grid(alpha=0.3)
-    axes.legend()
+    axes.legend(fontsize=7, loc='upper left')
+    axes.text(0.98, 0.03, textwrap.fill(
+        'walked, not modelled: the inproc node graph, each speed read from its bag '
+        '(steady cycles)', 48), transform=axes.transAxes, ha='right', va='bottom', fontsize=7,
+        bbox={'facecolor': 'w', 'alpha': 0.85, 'lw': 0.5})
     save(figure, 'fig21_zmp_vs_value_iteration.png')
     return written
 

@@ -2,6 +2,8 @@
 
 import os
 
+import pytest
+
 # Every message published under inproc is checked as rclpy's setters would check it, so that node
 # code passing here also runs on a real ROS 2 install (see gait_nodes.interfaces.validate_message).
 os.environ.setdefault('GAIT_NODES_STRICT_MESSAGES', '1')
@@ -9,3 +11,18 @@ os.environ.setdefault('GAIT_NODES_STRICT_MESSAGES', '1')
 # are small; on two cores shared with a dds graph's processes, the OpenBLAS of Jazzy's numpy
 # 1.26 (0.3.23) spends its extra threads spinning: a fifth more CPU for the same results.
 os.environ.setdefault('OPENBLAS_NUM_THREADS', '1')
+
+
+@pytest.fixture(scope='session')
+def tiny_crossover(tmp_path_factory):
+    """(folder, rows): every RoboSimian gait walked at 2.5 rad/s for 16 s, bags kept.
+
+    The walked crossover (gait_nodes.walked_crossover) on a tiny setting: one limit, short
+    walks, the polynomial swing (no value table to build); about 15 s.
+    """
+    from gait_nodes.walked_crossover import WALKED_WITH, walked_crossover
+
+    folder = tmp_path_factory.mktemp('walked_crossover')
+    settings = {**WALKED_WITH, 'swing': 'polynomial', 'step_height_m': 0.1}
+    return folder, walked_crossover((2.5,), duration_at_1_rad_s=40.0, bags_dir=folder,
+                                    settings=settings)

@@ -206,16 +206,14 @@ def test_the_id_of_a_bad_command_is_found_for_its_answer():
     assert command_id_of('not json') is None
 
 
-def test_auto_follows_the_thesis_crossover_on_the_robot_that_has_it():
-    # RoboSimian, a robot with closed-form limb IK: 'auto' is whichever of the value-table
-    # crawl and the ZMP trot is faster at its joint limit; a robot without it: its first gait.
-    from gait_nodes.planning.gait_params import auto_gait
-    from gait_nodes.robot.description import load_robot_description
-    from gait_nodes.swing.crossover import choose_gait
+def test_auto_is_the_first_gait_of_a_robot_without_limb_ik():
+    # RoboSimian, with closed-form limb IK, plans each of its gaits (test_gait_choice.py); a
+    # robot without it walks its first gait, and says so.
+    from gait_nodes.planning.gait_params import auto_choice, auto_gait
+    from gait_nodes.planning.timing_models import auto_reason
 
-    robosimian = load_robot_description('robosimian')
-    assert auto_gait(robosimian) == choose_gait(str(robosimian.path),
-                                                robosimian.joint_velocity_limit_rad_s)
     fixture = load_robot_description(Path(__file__).parent / 'data' / 'robots' /
                                      'quadruped.yaml')
+    assert auto_choice(fixture) is None
     assert auto_gait(fixture) == fixture.gaits[0]
+    assert auto_reason(fixture).startswith(f'{fixture.gaits[0]}, ')

@@ -57,3 +57,19 @@ def test_unknown_robot_lists_shipped(tmp_path):
     broken.write_text('name: [unclosed\n')
     with pytest.raises(ConfigError, match='cannot read robot YAML'):
         load_robot_description(broken)
+
+
+def test_a_copy_at_another_joint_velocity_limit_differs_in_the_limit_only(tmp_path):
+    from gait_nodes.robot.description import write_at_joint_velocity_limit
+
+    original = load_robot_description('robosimian')
+    copy = load_robot_description(write_at_joint_velocity_limit('robosimian', 2.5, tmp_path))
+    assert copy.path == tmp_path / 'robosimian_w2.5.yaml'
+    assert copy.joint_velocity_limit_rad_s == 2.5
+    assert copy.urdf_path.read_bytes() == original.urdf_path.read_bytes()
+    for field in ('name', 'gaits', 'reach', 'extra', 'body_height_m', 'com_height_m',
+                  'joint_acceleration_limit_rad_s2', 'foot_radius_m', 'joint_names'):
+        assert getattr(copy, field) == getattr(original, field), field
+    assert (copy.nominal_stance_in_base() == original.nominal_stance_in_base()).all()
+    with pytest.raises(ConfigError, match='joint velocity limit'):
+        write_at_joint_velocity_limit('robosimian', 0.0, tmp_path)

@@ -432,6 +432,44 @@ def test_default_table_is_built_once_in_the_cache(tmp_path, monkeypatch):
     assert np.array_equal(again.values_s, default_table().values_s)
 
 
+def test_a_table_at_another_limit_is_scaled_from_the_cached_one_not_built(tmp_path,
+                                                                          monkeypatch):
+    from gait_nodes.robot.description import write_at_joint_velocity_limit
+    from gait_nodes.robot.model import load_robot_model
+    from gait_nodes.swing import value_iteration
+    from gait_nodes.swing.cache import default_table_path, load_or_build
+
+    monkeypatch.setenv('XDG_CACHE_HOME', str(tmp_path))
+    slow, _ = tiny_table(1.0)
+    slow.save(default_table_path(robot(), FAMILY, STEP_HEIGHT_M, 1.0))
+
+    def no_build(*args, **kwargs):
+        raise AssertionError('a table was built')
+
+    monkeypatch.setattr(value_iteration, 'build_table', no_build)
+    # The same robot at 2.5 rad/s (a copy of its YAML with another limit, its URDF named by
+    # absolute path) names the same cached tables.
+    copy = write_at_joint_velocity_limit('robosimian', 2.5, tmp_path)
+    fast_robot = load_robot_model(str(copy))
+    messages = []
+    table, path = load_or_build(fast_robot, FAMILY, STEP_HEIGHT_M, 2.5, log=messages.append)
+    assert path == default_table_path(fast_robot, FAMILY, STEP_HEIGHT_M, 2.5) and path.is_file()
+    assert path.name.replace('_w2.5', '_w1') == default_table_path(
+        robot(), FAMILY, STEP_HEIGHT_M, 1.0).name
+    assert len(messages) == 1 and 'scaled by 1 / 2.5' in messages[0]
+    assert table.joint_velocity_limit_rad_s == 2.5
+    finite = slow.values_s < 1e3
+    np.testing.assert_allclose(table.values_s[finite], slow.values_s[finite] / 2.5)
+    # A table of another stance is another robot's: never scaled from this one.
+    text = copy.read_text()
+    wide = text.replace('- 0.5\n', '- 0.52\n', 1)
+    assert wide != text
+    other = tmp_path / 'robosimian_wide.yaml'
+    other.write_text(wide)
+    assert default_table_path(load_robot_model(str(other)), FAMILY, STEP_HEIGHT_M, 1.0) != \
+        default_table_path(robot(), FAMILY, STEP_HEIGHT_M, 1.0)
+
+
 def test_node_follows_a_commands_boundary_where_the_planner_says_and_where_it_moves_it(start):
     """An accepted command's swing settings from its boundary; a 'rescheduled' answer moves it.
 

@@ -130,3 +130,32 @@ def test_sweep_says_when_the_optimum_is_at_the_end_of_the_range(capsys):
     printed = capsys.readouterr().out
     line = next(row for row in printed.splitlines() if 'best over every goal' in row)
     assert 'optimal step 0.35 m (at the end of the range, not an interior optimum)' in line
+
+
+def test_crossover_walks_each_gait_and_prints_the_walked_table(tmp_path, capsys):
+    # A tiny setting: the trot alone at 4 rad/s for 10 s, the polynomial swing (no table).
+    bags = tmp_path / 'bags'
+    assert main(['crossover', '--joint-vel-limits', '4', '--gaits', 'trot',
+                 '--duration-at-1-rad-s', '40', '--swing', 'polynomial', '--step-height-m',
+                 '0.1', '--keep-bags', str(bags), '--quiet']) == 0
+    printed = capsys.readouterr().out
+    assert printed.startswith('Walked, not modelled: each gait walked straight ahead')
+    assert '(polynomial swing, 0.1 m lift, timing joint_limit, 40 s / (limit in rad/s) each)' \
+        in printed
+    [row] = [line for line in printed.splitlines() if line.startswith('| 4 | trot |')]
+    cells = [cell.strip() for cell in row.strip('|').split('|')]
+    assert float(cells[2]) > 0.05 and cells[-1] == 'feasible'  # planned: 0.078 m/s
+    assert cells[6] == f'0 of {cells[6].split(" of ")[1]}'  # no ZMP sample outside
+    assert '4 rad/s: fastest walked trot' in printed
+    assert (bags / 'trot_w4' / 'metadata.yaml').is_file()
+    assert (bags / 'robots' / 'robosimian_w4.yaml').is_file()
+
+
+@pytest.mark.parametrize('arguments, message', [
+    (['--joint-vel-limits', '-1'], '--joint-vel-limits must be > 0'),
+    (['--gaits', 'gallop'], 'gallop'),
+])
+def test_crossover_refuses_bad_input_with_exit_2(capsys, arguments, message):
+    assert main(['crossover', '--quiet', *arguments]) == 2
+    error = capsys.readouterr().err
+    assert message in error and len(error.strip().splitlines()) == 1

@@ -28,22 +28,33 @@ def quick_cache(tmp_path_factory):
 
 
 @pytest.fixture(scope='module')
-def quick_run(tmp_path_factory, quick_cache):
-    """(exit status, stdout, results, figure directory) of one ``--quick`` run."""
+def quick_run(tmp_path_factory, quick_cache, tiny_crossover):
+    """(exit status, stdout, results, figure directory) of one ``--quick`` run.
+
+    Fig. 21's walks are the session's tiny walked crossover (every gait at 2.5 rad/s: see
+    test_walked_crossover.py), not the quick run's own two limits (a minute of walking).
+    """
     out_dir = tmp_path_factory.mktemp('figures')
     recorded = {}
     original = thesis.run
+    walks = []
 
     def recording(*args, **kwargs):
         recorded['results'] = original(*args, **kwargs)
         return recorded['results']
 
+    def tiny_walks(robot, settings, log):
+        walks.append(settings.limits_rad_s)
+        return tiny_crossover[1]
+
     stdout = io.StringIO()
     with pytest.MonkeyPatch.context() as patch:
         patch.setenv('XDG_CACHE_HOME', str(quick_cache))
         patch.setattr(thesis, 'run', recording)
+        patch.setattr(thesis, 'walk_gaits', tiny_walks)
         with contextlib.redirect_stdout(stdout), contextlib.redirect_stderr(io.StringIO()):
             status = thesis.main(['--quick', '--out', str(out_dir)])
+    assert walks == [thesis.Settings.quick().limits_rad_s]
     return status, stdout.getvalue(), recorded['results'], out_dir
 
 
@@ -60,7 +71,7 @@ def test_the_command_prints_every_row_and_writes_every_figure(quick_run):
         assert path.read_bytes()[:8] == b'\x89PNG\r\n\x1a\n'
 
 
-def test_every_figure_but_21_marks_the_thesis_values(quick_run, tmp_path, monkeypatch):
+def test_every_figure_marks_the_thesis_values(quick_run, tmp_path, monkeypatch):
     import matplotlib.figure
 
     labels = {}
@@ -80,9 +91,11 @@ def test_every_figure_but_21_marks_the_thesis_values(quick_run, tmp_path, monkey
     thesis.write_figures(results, tmp_path)
     assert set(labels) == set(FIGURES)
     for name, texts in labels.items():
-        if name != 'fig21_zmp_vs_value_iteration.png':  # another issue's figure
-            # "thesis: ...", "thesis' ..." (not "family 2 (thesis 3)": our family, their name).
-            assert any(re.search(r"thesis(:|'|\n)", text) for text in texts), name
+        # "thesis: ...", "thesis' ..." (not "family 2 (thesis 3)": our family, their name).
+        assert any(re.search(r"thesis(:|'|\n)", text) for text in texts), name
+    # Fig. 21 says its gaits are walked, not modelled.
+    assert any('walked, not modelled' in text for text in labels[
+        'fig21_zmp_vs_value_iteration.png'])
     assert any(text.startswith('optimum not checked') for text in labels[
         'fig14_step_vs_speed.png'])
 
@@ -261,3 +274,23 @@ def test_an_out_directory_that_cannot_be_made_exits_2_before_any_work(tmp_path, 
     assert exit_info.value.code == 2
     error = capsys.readouterr().err
     assert error.count('\n') == 1 and 'cannot create the directory' in error
+
+
+def test_fig21_rows_are_the_walked_gaits_against_the_thesis(quick_run, tiny_crossover):
+    _, stdout, results, _ = quick_run
+    assert results.crossover == tiny_crossover[1]
+    fig21 = [row for row in thesis.rows(results) if row[0] == 'Fig. 21']
+    assert [row[1] for row in fig21] == [
+        'ZMP crawl feasible (walked)',
+        'ZMP crawl faster than the static crawl (the value-iteration crawl; both walked)',
+        'ZMP trot feasible (walked)',
+        'ZMP trot faster than the static crawl (the value-iteration crawl; both walked)']
+    speed = {r.gait: r.speed_m_s for r in tiny_crossover[1]}
+    assert fig21[0][2] == 'from 2.5 rad/s' and fig21[2][2] == 'from 2.5 rad/s'
+    for row, gait in ((fig21[1], 'crawl'), (fig21[3], 'trot')):
+        if speed[gait] > speed['static_crawl']:
+            assert row[2] == (f'from 2.5 rad/s ({speed[gait]:.4f} against '
+                              f'{speed["static_crawl"]:.4f} m/s there)')
+        else:
+            assert row[2] == 'never up to 2.5 rad/s'
+    assert fig21[0][3] == 'from 1.9 rad/s' and fig21[1][3] == 'above about 2.4 rad/s'

@@ -9,7 +9,7 @@ from swing_helpers import TINY_ACTIONS, TINY_GRID, fine_time, robot, tiny_table
 from gait_nodes.errors import SwingTableError
 from gait_nodes.swing.grid import SwingActions, SwingGrid, make_grid
 from gait_nodes.swing.kinematics import FEASIBLE_BELOW_S, INFEASIBLE_S, LimbTiming
-from gait_nodes.swing.value_iteration import build_table
+from gait_nodes.swing.value_iteration import at_limit, build_table
 
 
 def independent_backup(table, timing):
@@ -62,6 +62,23 @@ def test_swing_time_scales_as_one_over_the_limit():
     liftable = slow.lift_s < FEASIBLE_BELOW_S
     np.testing.assert_array_equal(fast.lift_s < FEASIBLE_BELOW_S, liftable)
     assert np.allclose(fast.lift_s[liftable] * 2.5, slow.lift_s[liftable])
+
+
+def test_a_table_scaled_to_another_limit_is_the_table_built_there():
+    slow, _ = tiny_table(1.0)
+    fast, _ = tiny_table(2.5)
+    scaled = at_limit(slow, 2.5)
+    assert scaled.joint_velocity_limit_rad_s == 2.5
+    # Feasible values to the sweeps' tolerance, infeasible ones stay infeasible.
+    np.testing.assert_array_equal(scaled.values_s < FEASIBLE_BELOW_S,
+                                  fast.values_s < FEASIBLE_BELOW_S)
+    finite = fast.values_s < FEASIBLE_BELOW_S
+    assert np.abs(scaled.values_s - fast.values_s)[finite].max() < 1e-3
+    np.testing.assert_allclose(scaled.lift_s, fast.lift_s, rtol=1e-9)
+    assert scaled.lower_s == pytest.approx(fast.lower_s, rel=1e-9)
+    np.testing.assert_allclose(at_limit(scaled, 1.0).values_s, slow.values_s, rtol=1e-12)
+    with pytest.raises(SwingTableError, match='> 0'):
+        at_limit(slow, 0.0)
 
 
 def test_lift_time_is_the_vertical_move_from_the_ground():

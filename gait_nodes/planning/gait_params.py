@@ -43,12 +43,14 @@ Admissible duty factors (open intervals):
 * trot: (25) with the ZMP on the support diagonal the whole time, i.e. ``alpha = 0``:
   ``1/2 < beta < 1``.
 * crawl, static_crawl: ``3/4 < beta < 1`` (one foot at a time, with a four-foot phase for each
-  ZMP move). The static crawl needs closed-form limb IK (the body is placed, not balanced).
+  ZMP move). The static crawl needs closed-form limb IK (the body is placed, not balanced) and
+  ``timing: joint_limit`` (its swings and moves are timed at the limbs' own speed).
 
-``gait = 'auto'`` resolves, for a robot with closed-form limb IK and both quadruped gaits, to the
-faster of the value-iteration crawl and the ZMP trot at the robot's joint velocity limit (thesis
-IV.C, :func:`gait_nodes.swing.crossover.choose_gait`, computed once per robot and cached); for
-any other robot to its first gait (its YAML ``gaits`` list).
+``gait = 'auto'`` resolves, for a robot with closed-form limb IK and more than one gait, to the
+gait whose walk, planned by the footstep planner at the robot's joint velocity limit, is the
+fastest (thesis IV.C; :mod:`gait_nodes.planning.gait_choice`, computed once per robot and limit
+and cached: :func:`auto_choice` says which and why); for any other robot to its first gait (its
+YAML ``gaits`` list).
 """
 
 from __future__ import annotations
@@ -200,8 +202,8 @@ class GaitParameters:
         return self.step_period_s - SWING_SLOTS[gait] * self.swing_s
 
     def resolved_gait(self, robot: RobotDescription) -> str:
-        """The gait to walk: ``gait``, or for 'auto' the faster one at the joint limit."""
-        return auto_gait(robot) if self.gait == 'auto' else self.gait
+        """The gait to walk: ``gait``, or for 'auto' the fastest one at the joint limit."""
+        return auto_gait(robot, self.timing) if self.gait == 'auto' else self.gait
 
     def check_robot(self, robot: RobotDescription) -> None:
         """Raise :class:`GaitParameterError` if the robot cannot walk with these parameters."""
@@ -237,6 +239,11 @@ class GaitParameters:
             raise GaitParameterError(
                 f'gait \'static_crawl\' needs closed-form limb IK (the body is held still under '
                 f'each swing); {robot.name} has none: use crawl')
+        if gait == 'static_crawl' and self.timing != 'joint_limit':
+            raise GaitParameterError(
+                f'gait \'static_crawl\' is timed at the joint velocity limit (its swings and '
+                f'body moves at the limbs\' own speed, the body placed by the swing timing '
+                f'model): it needs timing \'joint_limit\', got {self.timing!r}')
         if gait in ('crawl', 'static_crawl'):
             from gait_nodes.planning.zmp_reference import crawl_margin_feasible
 
@@ -380,19 +387,43 @@ def command_id_of(text: str) -> str | None:
 
 
 @functools.lru_cache(maxsize=8)
-def _crossover_gait(robot_path: str, joint_velocity_limit_rad_s: float) -> str | None:
+def _auto_choice(robot_path: str, joint_velocity_limit_rad_s: float):
     from gait_nodes.errors import GaitNodesError
-    from gait_nodes.swing.crossover import choose_gait
+    from gait_nodes.planning.gait_choice import compare_gaits
+    from gait_nodes.robot.model import load_robot_model
 
     try:
-        return choose_gait(robot_path, joint_velocity_limit_rad_s)
+        return compare_gaits(load_robot_model(robot_path))
     except GaitNodesError:
+        return None  # no model to plan with: the first gait
+
+
+def auto_choice(robot: RobotDescription):
+    """How ``auto`` chose on ``robot``: a :class:`gait_nodes.planning.gait_choice.GaitChoice`.
+
+    None for a robot whose ``auto`` is its first gait without a comparison (no closed-form limb
+    IK, one gait, or no model to plan with).
+    """
+    if robot.extra.get('limb_ik') is None or len(robot.gaits) < 2:
         return None
+    return _auto_choice(str(robot.path), robot.joint_velocity_limit_rad_s)
 
 
-def auto_gait(robot: RobotDescription) -> str:
-    """The gait ``auto`` walks on ``robot`` (see the module docstring)."""
-    if robot.extra.get('limb_ik') is None or not {'crawl', 'trot'} <= set(robot.gaits):
-        return robot.gaits[0]
-    chosen = _crossover_gait(str(robot.path), robot.joint_velocity_limit_rad_s)
-    return chosen if chosen in robot.gaits else robot.gaits[0]
+#: Gaits only a timing from the joint velocity limit can walk.
+JOINT_LIMIT_GAITS = ('static_crawl',)
+
+
+def auto_gait(robot: RobotDescription, timing: str = 'joint_limit') -> str:
+    """The gait ``auto`` walks on ``robot`` (see the module docstring).
+
+    With ``timing: fixed`` the fastest of the gaits that fixed timing can walk (not
+    :data:`JOINT_LIMIT_GAITS`).
+    """
+    allowed = [gait for gait in robot.gaits
+               if timing == 'joint_limit' or gait not in JOINT_LIMIT_GAITS] or list(robot.gaits)
+    choice = auto_choice(robot)
+    if choice is not None:
+        for candidate in choice.candidates:
+            if candidate.feasible and candidate.gait in allowed:
+                return candidate.gait
+    return allowed[0]

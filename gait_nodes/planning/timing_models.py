@@ -18,7 +18,12 @@ from collections.abc import Callable
 
 from gait_nodes.errors import GaitNodesError, GaitParameterError
 from gait_nodes.planning.footsteps import GaitPlanner
-from gait_nodes.planning.gait_params import GaitParameters, parameters_from_mapping
+from gait_nodes.planning.gait_params import (
+    GaitParameters,
+    auto_choice,
+    auto_gait,
+    parameters_from_mapping,
+)
 from gait_nodes.planning.online import UNCHANGED
 from gait_nodes.planning.terrain import Staircase
 
@@ -140,11 +145,20 @@ class TimingModels:
 
 
 def describe_plan(robot, planner: GaitPlanner) -> dict:
-    """What the planner's 'gait' report says of ``planner`` (made in the worker)."""
+    """What the planner's 'gait' report says of ``planner`` (made in the worker).
+
+    With ``gait: auto``, ``auto`` says which gait it walks and why
+    (:func:`gait_nodes.planning.gait_params.auto_choice`: each gait's planned speed at the
+    joint limit, or why it cannot walk).
+    """
     params = planner.params
     steps = planner.steps
     kept = min((step.zmp_margin_kept_m for step in steps), default=math.inf)
+    auto = {}
+    if params.gait == 'auto':
+        auto['auto'] = auto_reason(robot, params.timing)
     return {
+        **auto,
         'gait': params.gait, 'resolved_gait': params.resolved_gait(robot),
         'mode': steps[-1].state_after.mode if steps else 'standing',
         'applied_twist': planner.twist.as_tuple(),
@@ -153,6 +167,20 @@ def describe_plan(robot, planner: GaitPlanner) -> dict:
         'stairs_count': planner.terrain.count,
         'stairs_total_rise_m': planner.terrain.total_rise_m,
         **rhythm_values(planner)}
+
+
+def auto_reason(robot, timing: str = 'joint_limit') -> str:
+    """Which gait ``gait: auto`` walks on ``robot`` with ``timing``, and why, in one line."""
+    choice = auto_choice(robot)
+    if choice is None:
+        return (f'{robot.gaits[0]}, the first of {list(robot.gaits)}: {robot.name} has no '
+                f'closed-form limb IK to plan its gaits at the joint limit with'
+                if len(robot.gaits) > 1 else f'{robot.gaits[0]}, its only gait')
+    walked = auto_gait(robot, timing)
+    if walked == choice.gait:
+        return choice.describe()
+    return (f'{walked}: {choice.describe()}; {choice.gait} needs timing joint_limit, the '
+            f'timing is {timing}')
 
 
 def rhythm_values(planner: GaitPlanner) -> dict:

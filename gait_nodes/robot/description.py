@@ -258,6 +258,47 @@ def _resolve_urdf(yaml_path: Path, text: str) -> Path:
     return path
 
 
+def write_at_joint_velocity_limit(name_or_path: str | os.PathLike,
+                                  joint_velocity_limit_rad_s: float,
+                                  directory: str | os.PathLike) -> Path:
+    """A copy of a robot YAML whose joints are limited to ``joint_velocity_limit_rad_s``.
+
+    For walking the same robot at another limit (the walked crossover, thesis Fig. 21): the
+    copy is written into ``directory`` as ``<name>_w<limit>.yaml``, its URDF named by absolute
+    path (or example-robot-data's, as it was) and any per-joint limits scaled in proportion. A
+    value table does not depend on the limits but through its time scale, so the copy shares
+    the original's cached tables (:func:`gait_nodes.swing.cache.robot_digest`).
+
+    Returns:
+        The path of the copy (a valid robot YAML; give it wherever a robot name goes).
+
+    Raises:
+        ConfigError: The robot YAML is not valid, or the limit is not in (0, 100] rad/s.
+    """
+    description = load_robot_description(name_or_path)
+    limit = joint_velocity_limit_rad_s
+    if isinstance(limit, bool) or not isinstance(limit, (int, float)) or \
+            not 0.0 < limit <= MAX_VELOCITY_RAD_S:
+        raise ConfigError(f'joint velocity limit must be in (0, {MAX_VELOCITY_RAD_S:g}] rad/s, '
+                          f'got {limit!r}')
+    data = yaml.safe_load(description.path.read_text())
+    factor = float(limit) / description.joint_velocity_limit_rad_s
+    data['description'] = (f'{description.name} with its joints limited to {float(limit):g} '
+                           f'rad/s, a copy of {description.path}: {data.get("description", "")}')
+    data['joint_velocity_limit_rad_s'] = float(limit)
+    if data.get('joint_velocity_limits_rad_s'):
+        data['joint_velocity_limits_rad_s'] = {
+            joint: float(value) * factor
+            for joint, value in data['joint_velocity_limits_rad_s'].items()}
+    if not str(data['urdf']).startswith(EXAMPLE_ROBOT_DATA_PREFIX):
+        data['urdf'] = str(description.urdf_path.resolve())
+    path = Path(directory) / f'{description.name}_w{float(limit):g}.yaml'
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(yaml.safe_dump(data, sort_keys=False))
+    load_robot_description(path)  # the copy is checked as any robot YAML
+    return path
+
+
 class _Reader:
     """Typed access to a YAML mapping whose errors name the file and the key."""
 

@@ -2,13 +2,17 @@
 
 A node asked for ``swing: value_table`` without a ``table`` file uses
 ``$XDG_CACHE_HOME/gait_nodes/`` (default ``~/.cache/gait_nodes/``), one file per robot (its
-URDF, its YAML and the limb IK's family numbering), family, step height and joint velocity
-limit, built with the default grid when missing.
+URDF, what its YAML says but the joint limits, and the limb IK's family numbering), family,
+step height and joint velocity limit. A missing table is made from the same robot's table at
+another limit when there is one (every time scales as ``1 / W``:
+:func:`gait_nodes.swing.value_iteration.at_limit`, a fraction of a second), else built with
+the default grid.
 """
 
 from __future__ import annotations
 
 import hashlib
+import json
 import os
 from collections.abc import Callable
 from pathlib import Path
@@ -23,10 +27,29 @@ def cache_dir() -> Path:
     return Path(base) / 'gait_nodes'
 
 
+#: Robot YAML keys a value table does not depend on: the joint limits (the file name carries
+#: the velocity limit; a table times its moves at that limit only), the prose and the URDF's
+#: path (its bytes are hashed).
+TABLE_FREE_KEYS = ('joint_velocity_limit_rad_s', 'joint_velocity_limits_rad_s',
+                   'joint_acceleration_limit_rad_s2', 'joint_acceleration_limits_rad_s2',
+                   'description', 'urdf')
+
+
 def robot_digest(robot) -> str:
-    """12 hex digits naming the robot's URDF, YAML and the limb IK's family numbering."""
+    """12 hex digits naming what a robot's tables depend on.
+
+    The URDF's bytes, the robot YAML's content but :data:`TABLE_FREE_KEYS` (comments and
+    layout do not count), and the limb IK's family numbering: the same robot at another joint
+    velocity limit (a copy of its YAML with another limit) has the same digest, and its table
+    is scaled, not built again.
+    """
+    import yaml
+
     identity = hashlib.sha256(Path(robot.description.urdf_path).read_bytes())
-    identity.update(Path(robot.description.path).read_bytes())
+    content = yaml.safe_load(Path(robot.description.path).read_text())
+    if isinstance(content, dict):
+        content = {key: value for key, value in content.items() if key not in TABLE_FREE_KEYS}
+    identity.update(json.dumps(content, sort_keys=True, default=str).encode())
     identity.update(FAMILY_NUMBERING.encode())
     return identity.hexdigest()[:12]
 
@@ -35,8 +58,9 @@ def default_table_path(robot, family: int, step_height_m: float,
                        joint_velocity_limit_rad_s: float) -> Path:
     """The cache file of a table for these settings (the robot's hash is in the name).
 
-    The hash covers the URDF, the robot YAML (ground height, stance) and the limb IK's family
-    numbering, so a table of another robot, stance or family is never taken for this one.
+    The hash covers the URDF, the robot YAML (ground height, stance; not its joint limits) and
+    the limb IK's family numbering, so a table of another robot, stance or family is never taken
+    for this one (:func:`robot_digest`).
     """
     digest = robot_digest(robot)
     return cache_dir() / (f'swing_{robot.name}_{digest}_f{family}_h{step_height_m:g}'
@@ -46,7 +70,10 @@ def default_table_path(robot, family: int, step_height_m: float,
 def load_or_build(robot, family: int, step_height_m: float, joint_velocity_limit_rad_s: float,
                   path: str | os.PathLike | None = None,
                   log: Callable[[str], None] | None = None) -> tuple[ValueTable, Path]:
-    """Load a table (checked against robot, limit and family) or build the default one.
+    """Load a table (checked against robot, limit and family) or make the default one.
+
+    The default one is the same robot's table at another limit, scaled (see the module
+    docstring), when the cache holds one; otherwise it is built.
 
     Args:
         robot: The RobotModel.
@@ -54,7 +81,7 @@ def load_or_build(robot, family: int, step_height_m: float, joint_velocity_limit
         step_height_m: Step height [m] (only used to name and build the default table).
         joint_velocity_limit_rad_s: Joint velocity limit [rad/s].
         path: A table file; None or '' for the cache file, built when missing.
-        log: Called with a message when a table is being built.
+        log: Called with a message when a table is being built or scaled.
 
     Raises:
         SwingTableError: A given file is missing or refused, or the build fails.
@@ -64,6 +91,10 @@ def load_or_build(robot, family: int, step_height_m: float, joint_velocity_limit
         return load_table(path, robot, joint_velocity_limit_rad_s, family), path
     path = default_table_path(robot, family, step_height_m, joint_velocity_limit_rad_s)
     if not path.is_file():
+        scaled = _scaled_from_another_limit(robot, family, step_height_m,
+                                            joint_velocity_limit_rad_s, path, log)
+        if scaled is not None:
+            return scaled, path
         from gait_nodes.swing.value_iteration import build_table
 
         if log is not None:
@@ -73,6 +104,32 @@ def load_or_build(robot, family: int, step_height_m: float, joint_velocity_limit
         table, _ = build_table(robot, family, step_height_m, joint_velocity_limit_rad_s)
         table.save(path)
     return load_table(path, robot, joint_velocity_limit_rad_s, family), path
+
+
+def _scaled_from_another_limit(robot, family: int, step_height_m: float,
+                               joint_velocity_limit_rad_s: float, path: Path,
+                               log: Callable[[str], None] | None) -> ValueTable | None:
+    """The same robot's cached table at another limit, scaled and saved at ``path``.
+
+    Same family and step height; None when the cache holds no such table.
+    """
+    from gait_nodes.errors import SwingTableError
+    from gait_nodes.swing.value_iteration import at_limit
+
+    pattern = path.name.replace(f'_w{joint_velocity_limit_rad_s:g}.npz', '_w*.npz')
+    for source in sorted(path.parent.glob(pattern)):
+        try:
+            table = load_table(source, robot, family=family)
+        except SwingTableError:
+            continue  # a corrupt or foreign file: another source, or a build
+        if log is not None:
+            log(f'swing value table {path}: the table at {table.joint_velocity_limit_rad_s:g} '
+                f'rad/s ({source.name}) with every time scaled by '
+                f'{table.joint_velocity_limit_rad_s:g} / {joint_velocity_limit_rad_s:g}')
+        scaled = at_limit(table, joint_velocity_limit_rad_s)
+        scaled.save(path)
+        return load_table(path, robot, joint_velocity_limit_rad_s, family)
+    return None
 
 
 def cached_one_step_costs(robot, family: int, joint_velocity_limit_rad_s: float, grid,

@@ -372,3 +372,32 @@ def with_step_height(table: ValueTable, robot, step_height_m: float,
                               f'in IK family {table.family}')
     return replace(table, step_height_m=float(step_height_m), ground_z_m=timing.ground_z_m,
                    lift_s=lift, lower_s=lower, _total=None)
+
+
+def at_limit(table: ValueTable, joint_velocity_limit_rad_s: float) -> ValueTable:
+    """The table at another joint velocity limit ``W``: every feasible time times ``W0 / W``.
+
+    Every move costs ``max_j |dq_j| / W`` (thesis III.C.1), the lift and the lowering too, so
+    the Bellman equation's fixed point at ``W`` is the one at ``W0`` scaled by ``W0 / W`` and
+    its policy is the same (the thesis: the gait's speed grows linearly with the limit). A
+    table built at ``W`` agrees to the sweeps' tolerance. Infeasible values (at or above
+    :data:`~gait_nodes.swing.kinematics.FEASIBLE_BELOW_S`) stay as they are.
+
+    Raises:
+        SwingTableError: ``joint_velocity_limit_rad_s`` is not a finite number > 0.
+    """
+    from gait_nodes.swing.kinematics import FEASIBLE_BELOW_S
+
+    limit = joint_velocity_limit_rad_s
+    if not (isinstance(limit, (int, float)) and np.isfinite(limit) and limit > 0):
+        raise SwingTableError(f'joint velocity limit must be a finite number > 0 rad/s, got '
+                              f'{limit!r}')
+    factor = table.joint_velocity_limit_rad_s / float(limit)
+
+    def scaled(times: np.ndarray) -> np.ndarray:
+        return np.where(times < FEASIBLE_BELOW_S, times * factor, times)
+
+    return replace(table, joint_velocity_limit_rad_s=float(limit),
+                   values_s=scaled(table.values_s), lift_s=scaled(table.lift_s),
+                   lower_s=table.lower_s * factor, max_change_s=table.max_change_s * factor,
+                   _total=None)
