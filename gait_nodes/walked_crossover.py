@@ -133,11 +133,12 @@ def walk(robot_yaml: str | Path, gait: str, duration_s: float, bag: str | Path,
     values = {'robot': str(robot_yaml), 'cmd_vel_timeout_s': 2.0,
               **(WALKED_WITH if settings is None else settings), 'gait': gait}
     options = argparse.Namespace(record=str(bag), scenario=DEFAULT_SCENARIO,
-                                 duration=float(duration_s), namespace_args=[])
+                                 duration=float(duration_s), namespace_args=[],
+                                 simulator='kinematic', robot=None)
     with tempfile.TemporaryDirectory(prefix='gait_nodes_walk_') as tmp:
         params = Path(tmp) / 'params.yaml'
         params.write_text(yaml.safe_dump({'/**': {'ros__parameters': values}}))
-        return run_inproc(options, graph.available_nodes(),
+        return run_inproc(options, graph.graph_nodes('kinematic'),
                           ['--ros-args', '--params-file', str(params)],
                           commands=(TimedCommand(0.0, velocity=(COMMANDED_SPEED_M_S, 0.0, 0.0)),))
 
