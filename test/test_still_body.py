@@ -159,3 +159,53 @@ def test_a_static_crawl_plan_keeps_its_zmp_inside_and_its_body_still_between_mov
     fastest_static, _ = planner.set_velocity(Twist2D(0.2), 25.0)
     fastest_crawl, _ = crawl.set_velocity(Twist2D(0.2), 0.0)
     assert fastest_static.vx_m_s > 1.5 * fastest_crawl.vx_m_s
+
+
+def test_a_static_step_keeps_its_full_model_zmp_inside_and_moves_its_com_point_for_it(
+        still, monkeypatch):
+    """The swinging limb's momentum, which the cart-table ZMP leaves out, is planned for."""
+    import gait_nodes.planning.footsteps as footsteps
+    from gait_nodes.geometry import disc_support_margin
+    from gait_nodes.robot.dynamics import multibody_zmp_trajectory
+
+    model = robot()
+    params = GaitParameters.for_robot(model.description, gait='static_crawl',
+                                      timing='joint_limit', step_height_m=0.06)
+
+    def walk():
+        planner = GaitPlanner(model.description, params, swing_timing=still.source)
+        planner.set_velocity(Twist2D(0.1), 0.0)
+        planner.advance(16.0)
+        return planner, [step for step in planner.steps if step.slots]
+
+    planner, steps = walk()
+    radius = model.description.foot_radius_m
+    for step in steps:
+        # The step reports the smaller of its cart-table and full-model margins: recomputed
+        # here for its swings, independently, at 5 ms on the placed swing.
+        slot = step.slots[0]
+        duration = slot.touch_down_s - slot.lift_off_s
+        count = int(round(duration / 0.005))
+        u = np.linspace(0.0, 1.0, count + 1)
+        foot = slot.feet[0]
+        swing = Swing(model.foot_names[foot], slot.lift_off_s, slot.touch_down_s,
+                      planner._with_heights(step.positions_start)[foot],
+                      planner._with_heights(slot.positions_after)[foot], 0.0, 0.0)
+        placed, yaws = still.source.swing_feet({foot: swing},
+                                              planner._with_heights(step.positions_start),
+                                              step.yaws_start, 0.0, u)
+        joints = still.joints(np.repeat(step.bases[1][None], len(u), axis=0), 0.0, placed,
+                              yaws)
+        q = np.array([model.configuration(step.bases[1], 0.0, j) for j in joints])
+        zmp, _ = multibody_zmp_trajectory(model, q, duration / count)
+        stance = step.positions_start[[f for f in range(4) if f != foot], :2]
+        assert disc_support_margin(zmp, stance, radius).min() > 0.0
+        assert 0.0 < step.zmp_margin_kept_m
+    # Asked for more full-model margin than these swings keep at the crawl's point, the planner
+    # moves the COM point (sideways, toward the support) and keeps more.
+    before = min(step.zmp_margin_kept_m for step in steps)
+    monkeypatch.setattr(footsteps, 'KNOT_MARGIN_M', 0.08)
+    _, moved = walk()
+    assert min(step.zmp_margin_kept_m for step in moved) > before + 0.005
+    assert any(np.abs(a.bases[1] - b.bases[1]).max() > 0.004
+               for a, b in zip(steps, moved, strict=False))
