@@ -9,3 +9,7 @@ os.environ.setdefault('GAIT_NODES_STRICT_MESSAGES', '1')
 # are small; on two cores shared with a dds graph's processes, the OpenBLAS of Jazzy's numpy
 # 1.26 (0.3.23) spends its extra threads spinning: a fifth more CPU for the same results.
 os.environ.setdefault('OPENBLAS_NUM_THREADS', '1')
+# MuJoCo renders the walks' videos offscreen: EGL (Mesa) on a machine without a display. MuJoCo
+# reads this once, when first imported (by any test).
+if not (os.environ.get('DISPLAY') or os.environ.get('WAYLAND_DISPLAY')):
+    os.environ.setdefault('MUJOCO_GL', 'egl')
