@@ -175,6 +175,7 @@ class _Listener(runtime.Node):
         self.messages = {}
         topics = {'/tf': graph.TOPICS['/tf'], '/gait/cop': graph.TOPICS['/gait/cop'],
                   '/gait/com': graph.TOPICS['/gait/com'],
+                  '/gait/markers': graph.TOPICS['/gait/markers'],
                   '/joint_states': graph.TOPICS['/joint_states'], **graph.foot_topics(feet)}
         for topic, type_name in topics.items():
             self.messages[topic] = []
@@ -229,6 +230,17 @@ def test_robosimian_stands_still_on_its_feet():
             assert sum(w.force[2] for w in wrenches) == pytest.approx(weight, rel=0.02)
     efforts = messages['/joint_states'][-1].effort
     assert len(efforts) == len(robot.joint_names) and max(map(abs, efforts)) > 1.0
+    # /gait/markers: the kinematic simulator's three and the CoP's sphere, at /gait/cop of the
+    # same stamp (20 Hz).
+    cops = {time_msg_to_ns(m.header.stamp): m.point for m in messages['/gait/cop']}
+    arrays = messages['/gait/markers']
+    assert len(arrays) >= 59
+    for array in arrays:
+        assert [m.id for m in array.markers] == [0, 1, 2, 3]
+        sphere = array.markers[3]
+        stamp = time_msg_to_ns(sphere.header.stamp)
+        assert sphere.type == sphere.SPHERE and sphere.action == sphere.ADD
+        assert sphere.pose.position == cops[stamp]
 
 
 def test_the_physics_simulator_declares_the_parameters_known_before_start():
