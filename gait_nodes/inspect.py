@@ -177,7 +177,9 @@ def main(args: list[str] | None = None) -> int:
                              'topics; needed when it holds several)')
     video = parser.add_argument_group('video', 'render the walk with MuJoCo (headless: '
                                                'MUJOCO_GL=egl, the default without a display)')
-    video.add_argument('--video', metavar='FILE', help='write the walk as FILE (.mp4 or .gif)')
+    video.add_argument('--video', metavar='FILE',
+                       help='write the walk as FILE (.mp4 or .gif; .png: a still of the frame '
+                            'at --from)')
     video.add_argument('--fps', type=float, default=15.0, help='frames per second (default 15)')
     video.add_argument('--size', default='640x480', metavar='WxH',
                        help='frame size in pixels (default 640x480)')

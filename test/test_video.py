@@ -113,6 +113,22 @@ def test_inspect_renders_a_gif_played_faster(walk, tmp_path):
     _check_walk_frames(frames, 64, 48)
 
 
+def test_a_png_is_the_still_at_the_start_of_the_range(walk, tmp_path):
+    from gait_nodes.inspect import main
+
+    bag, _ = walk
+    still = tmp_path / 'still.png'
+    assert main([str(bag), '--video', str(still), '--size', '64x48', '--from', '1.5']) == 0
+    image = np.asarray(imageio.imread(still))[..., :3]
+    assert image.shape == (48, 64, 3) and image.std() > 5.0
+    # The 1.5 s frame of a video of the walk.
+    video = tmp_path / 'around.mp4'
+    assert main([str(bag), '--video', str(video), '--size', '64x48', '--fps', '2',
+                 '--from', '1.5', '--to', '1.5']) == 0
+    (frame,) = _frames(video)
+    assert np.abs(frame.astype(float) - image).mean() < 5.0  # H.264 is lossy
+
+
 def test_frame_times_cover_the_range_at_the_rate_and_speed(walk):
     recorded = read_walk(walk[0])
     times = frame_times_s(recorded, VideoSettings(fps=4, start_s=1.0, end_s=2.0, speed=2.0))

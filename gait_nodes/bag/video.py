@@ -24,12 +24,14 @@ Frames are ``speed / fps`` seconds of walk apart (``speed`` 2 plays twice as fas
 ``start_s`` to ``end_s``, in seconds from the walk's first base pose. Rendering is MuJoCo's
 (``mujoco.Renderer``, offscreen OpenGL: on a machine without a display EGL, or OSMesa with
 ``MUJOCO_GL=osmesa``); encoding is imageio's: ``.mp4`` through its ffmpeg plugin (H.264,
-``imageio-ffmpeg``), ``.gif`` through Pillow. Both are optional dependencies, imported when a
-video is asked for (``pip install mujoco "imageio[ffmpeg]"``).
+``imageio-ffmpeg``), ``.gif`` through Pillow; a ``.png`` is a still, the frame at ``start_s``.
+MuJoCo and imageio are optional dependencies, imported when a video is asked for (``pip
+install mujoco "imageio[ffmpeg]"``).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
 from collections.abc import Callable, Iterator
@@ -41,7 +43,7 @@ import numpy as np
 from gait_nodes.errors import GaitNodesError
 
 #: Video formats by file suffix -> what encodes them.
-FORMATS = {'.mp4': 'imageio-ffmpeg', '.gif': 'pillow'}
+FORMATS = {'.mp4': 'imageio-ffmpeg', '.gif': 'pillow', '.png': 'pillow'}
 #: How far around ``t`` the camera averages the base's position [s].
 CAMERA_WINDOW_S = 1.0
 #: Colours (RGBA) of what is drawn over the robot.
@@ -83,7 +85,8 @@ def import_encoder(path: str | Path):
     """``imageio.v2``, checked to encode ``path``'s format; VideoUnavailableError otherwise."""
     suffix = Path(path).suffix.lower()
     if suffix not in FORMATS:
-        raise VideoError(f'{path}: a video is .mp4 or .gif, got {suffix or "no suffix"!r}')
+        raise VideoError(f'{path}: a video is .mp4 or .gif (or .png, a still), got '
+                         f'{suffix or "no suffix"!r}')
     install = 'pip install "imageio[ffmpeg]" (or pip install "gait_nodes[physics]")'
     try:
         import imageio.v2 as imageio
@@ -549,7 +552,7 @@ class VideoReport:
 def write_video(bag: str | Path, output: str | Path, settings: VideoSettings | None = None,
                 robot: str | None = None, staircase=None, namespace: str | None = None,
                 progress: Callable[[int], None] | None = None) -> VideoReport:
-    """Render the walk of ``bag`` into ``output`` (``.mp4`` or ``.gif``).
+    """Render the walk of ``bag`` into ``output`` (``.mp4``, ``.gif``, or a ``.png`` still).
 
     Args:
         bag: Bag directory or ``.mcap`` file.
@@ -580,8 +583,16 @@ def write_video(bag: str | Path, output: str | Path, settings: VideoSettings | N
         raise VideoError(f'{bag}: the bag does not name its robot (no /diagnostics): give it '
                          f'(--robot NAME)')
     model = load_robot_model(name)
-    times = frame_times_s(walk, settings)
     output = Path(output)
+    still = output.suffix.lower() == '.png'
+    if still:  # the frame at start_s
+        settings = dataclasses.replace(settings, end_s=settings.start_s)
+    times = frame_times_s(walk, settings)
+    if still:
+        (image,) = render_frames(walk, model, settings, staircase)
+        imageio.imwrite(output, image)
+        return VideoReport(str(output), 1, settings.width, settings.height, settings.fps,
+                           float(times[0]), float(times[0]), time.perf_counter() - started)
     if output.suffix.lower() == '.mp4':
         writer = imageio.get_writer(output, format='FFMPEG', mode='I', fps=settings.fps,
                                     codec='libx264', pixelformat='yuv420p', quality=7,
