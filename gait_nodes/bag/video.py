@@ -374,7 +374,7 @@ class WalkRenderer:
         self.camera.type = mujoco.mjtCamera.mjCAMERA_FREE
         self.camera.distance = 1.7 * self.size_m
         self.camera.azimuth = 125.0  # from the front left of a robot walking along +x
-        self.camera.elevation = -25.0
+        self.camera.elevation = -35.0
         self._bodies = [(b, int(model.body_parentid[b])) for b in range(1, model.nbody)
                         if model.body_parentid[b] > 0]
 
