@@ -184,3 +184,22 @@ def test_a_video_needs_a_recording_and_a_known_format(tmp_path, capsys):
     assert 'add --record' in capsys.readouterr().err
     assert inspect([str(tmp_path), '--video', str(tmp_path / 'walk.avi')]) == 2
     assert '.mp4 or .gif' in capsys.readouterr().err
+
+
+def test_a_broken_opengl_backend_is_named(monkeypatch):
+    """MuJoCo fails at import (not with ImportError) when MUJOCO_GL's library is missing."""
+    import builtins
+
+    from gait_nodes.bag.video import VideoUnavailableError, check_dependencies
+
+    real_import = builtins.__import__
+
+    def failing(name, *args, **kwargs):
+        if name == 'mujoco':
+            raise AttributeError("'NoneType' object has no attribute 'glGetError'")
+        return real_import(name, *args, **kwargs)
+
+    monkeypatch.setattr(builtins, '__import__', failing)
+    monkeypatch.setenv('MUJOCO_GL', 'osmesa')
+    with pytest.raises(VideoUnavailableError, match='MUJOCO_GL=osmesa .*libosmesa6'):
+        check_dependencies('walk.mp4')

@@ -22,9 +22,10 @@ is what the bag holds that is drawn, nothing is simulated. Each frame, at bag ti
 
 Frames are ``speed / fps`` seconds of walk apart (``speed`` 2 plays twice as fast), from
 ``start_s`` to ``end_s``, in seconds from the walk's first base pose. Rendering is MuJoCo's
-(``mujoco.Renderer``, offscreen OpenGL: on a machine without a display EGL, or OSMesa with
-``MUJOCO_GL=osmesa``); encoding is imageio's: ``.mp4`` through its ffmpeg plugin (H.264,
-``imageio-ffmpeg``), ``.gif`` through Pillow; a ``.png`` is a still, the frame at ``start_s``.
+(``mujoco.Renderer``, offscreen OpenGL: on a machine without a display EGL, or OSMesa where
+EGL's library is missing or with ``MUJOCO_GL=osmesa``); encoding is imageio's: ``.mp4`` through
+its ffmpeg plugin (H.264, ``imageio-ffmpeg``), ``.gif`` through Pillow; a ``.png`` is a still,
+the frame at ``start_s``.
 MuJoCo and imageio are optional dependencies, imported when a video is asked for (``pip
 install mujoco "imageio[ffmpeg]"``).
 """
@@ -71,14 +72,32 @@ class VideoUnavailableError(VideoError):
     """A dependency of the video (MuJoCo, imageio, its ffmpeg plugin) is not installed."""
 
 
+def headless_gl_backend() -> str | None:
+    """The ``MUJOCO_GL`` backend to render with on a machine without a display, or None.
+
+    EGL where its library is installed, else OSMesa where its is; None with a display (MuJoCo's
+    default, GLFW, works there) or without either library (MuJoCo fails at import when
+    ``MUJOCO_GL`` names a backend whose library is missing).
+    """
+    if os.environ.get('DISPLAY') or os.environ.get('WAYLAND_DISPLAY'):
+        return None
+    from ctypes.util import find_library
+
+    for backend, library in (('egl', 'EGL'), ('osmesa', 'OSMesa')):
+        if find_library(library):
+            return backend
+    return None
+
+
 def prefer_headless_gl() -> None:
-    """Choose EGL for MuJoCo's rendering on a machine without a display, unless told otherwise.
+    """Choose MuJoCo's offscreen backend on a machine without a display, unless told otherwise.
 
     MuJoCo reads ``MUJOCO_GL`` once, when it is first imported: call this before. A value the
-    user set is kept, and so is the default (GLFW) where there is a display.
+    user set is kept (:func:`headless_gl_backend` otherwise).
     """
-    if not (os.environ.get('DISPLAY') or os.environ.get('WAYLAND_DISPLAY')):
-        os.environ.setdefault('MUJOCO_GL', 'egl')
+    backend = headless_gl_backend()
+    if backend is not None:
+        os.environ.setdefault('MUJOCO_GL', backend)
 
 
 def import_encoder(path: str | Path):

@@ -97,6 +97,13 @@ def import_mujoco():
             f'the physics simulator needs MuJoCo, which is not installed ({exc}): pip install '
             f'mujoco (or pip install "gait_nodes[physics]"; on a ROS machine, into the venv '
             f'or with --break-system-packages: MuJoCo has no rosdep key)') from None
+    except Exception as exc:  # noqa: BLE001 (PyOpenGL fails with AttributeError, among others)
+        backend = os.environ.get('MUJOCO_GL')
+        raise PhysicsUnavailableError(
+            f'MuJoCo cannot be imported ({type(exc).__name__}: {exc})'
+            + (f': MUJOCO_GL={backend} names an OpenGL backend whose library is missing (EGL: '
+               f'apt-get install libegl1; OSMesa: apt-get install libosmesa6), or unset it'
+               if backend else '')) from None
     return mujoco
 
 
