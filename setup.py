@@ -144,8 +144,9 @@ setup(
     # option and warns on every build. colcon reads the 'test' extra the same way.
     extras_require={
         # The tests also check the real robot models, so they need example-robot-data.
-        # ...and the physics simulator, so they need MuJoCo.
-        'test': ['pytest', 'hypothesis', 'ruff', 'example-robot-data', 'mujoco'],
+        # ...and the physics simulator and the walks' videos, so they need MuJoCo and imageio.
+        'test': ['pytest', 'hypothesis', 'ruff', 'example-robot-data', 'mujoco',
+                 'imageio[ffmpeg]'],
         'robots': ['example-robot-data'],
         # The physics simulator (MuJoCo) and, for the walks' videos, an ffmpeg writer.
         'physics': ['mujoco', 'imageio[ffmpeg]'],

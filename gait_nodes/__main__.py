@@ -78,6 +78,10 @@ def build_parser() -> ArgumentParser:
                      help='with --record: write the PNG plots into DIR (default: the bag '
                           "directory's name + '_plots')")
     run.add_argument('--no-plot', action='store_true', help='with --record: write no plots')
+    run.add_argument('--video', metavar='FILE', default=None,
+                     help='with --record: render the recorded walk as FILE (.mp4 or .gif) after '
+                          'the summary, as python -m gait_nodes.inspect BAG --video FILE does '
+                          '(pip install mujoco "imageio[ffmpeg]")')
     run.add_argument('--robot', default=None,
                      help="robot name in config/robots/ or a robot YAML (default: the "
                           "scenario's)")
@@ -491,6 +495,13 @@ def main(args: list[str] | None = None) -> int:
             options.runtime = 'inproc'
         runtime_name = select_runtime(options.runtime)
         names = _selected_nodes(options)
+        if options.video is not None:
+            if options.record is None:
+                raise ArgumentError('--video renders the recorded walk: add --record')
+            from gait_nodes.bag.video import check_dependencies, prefer_headless_gl
+
+            prefer_headless_gl()  # before MuJoCo is imported (the physics simulator imports it)
+            check_dependencies(options.video)  # before anything starts, as below
         if options.simulator == 'physics':
             from gait_nodes.sim.mujoco_model import import_mujoco
 
@@ -539,10 +550,30 @@ def main(args: list[str] | None = None) -> int:
             summary['topics'] = summary['inspect'].get('topics', {})
         if 'plot_error' in summary['inspect']:
             print(f'{PROG}: error: {summary["inspect"]["plot_error"]}', file=sys.stderr)
+    video_status = 0
+    if options.video is not None and options.json:
+        video_status = _render_video(options, summary)
     print_summary(summary, options.json)
+    if options.video is not None and not options.json:
+        video_status = _render_video(options, summary)
+        if 'video' in summary:
+            print(f'  video: {summary["video"]["description"]}')
     failed = [name for name, code in summary['exit_codes'].items() if code != 0]
     incomplete = summary.get('recording_error') or 'plot_error' in summary.get('inspect', {})
-    return 1 if failed or incomplete else 0
+    return 1 if failed or incomplete or video_status else 0
+
+
+def _render_video(options, summary: dict) -> int:
+    """Render the recorded walk as ``options.video`` (0), or say why not on stderr (1)."""
+    from gait_nodes.bag.video import VideoSettings
+    from gait_nodes.inspect import render_video, scenario_staircase
+
+    if 'error' in summary.get('inspect', {}):
+        print(f'{PROG}: error: --video {options.video}: the bag cannot be read', file=sys.stderr)
+        return 1
+    staircase = scenario_staircase(get_scenario(options.scenario))
+    return render_video(options.record, options.video, (VideoSettings(), staircase),
+                        options.robot, summary['namespace'], summary, prog=PROG)
 
 
 if __name__ == '__main__':

@@ -1,6 +1,7 @@
 """inspect: what a rosbag2 MCAP bag (or a lone .mcap) holds, and how the gait in it went.
 
-``python -m gait_nodes.inspect BAG [--json] [--plot DIR] [--robot NAME] [--namespace NS]``
+``python -m gait_nodes.inspect BAG [--json] [--plot DIR] [--robot NAME] [--namespace NS]
+[--video FILE [--fps N] [--size WxH] [--from S] [--to S] [--speed X] [--scenario NAME]]``
 
 Prints topics, types, counts, rates and duration for any ROS 2 MCAP bag; for gait bags also the
 distance walked, net speed, step lengths, ZMP stability margin (min, mean, time outside the
@@ -9,8 +10,12 @@ level (definitions in :mod:`gait_nodes.bag.analysis`). A bag of a graph run in a
 (``/robot1/gait/footsteps``...) is read as such: the namespace is found from its topics, or
 given with ``--namespace`` when the bag holds several graphs. A truncated or damaged bag is
 read up to the damage, and what was lost is said. ``--json`` prints one JSON object instead;
-``--plot DIR`` writes PNGs. Exit status: 0 when the bag was read (even partly), 2 when the path
-is not a bag or the arguments are wrong.
+``--plot DIR`` writes PNGs. ``--video FILE`` (``.mp4`` or ``.gif``) renders the walk headless with
+MuJoCo: the robot posed from /tf and /joint_states, its footholds, the ZMP, the centre of pressure
+and the support polygon, the camera following the base (:mod:`gait_nodes.bag.video`; needs
+``pip install mujoco "imageio[ffmpeg]"``). Exit status: 0 when the bag was read (even partly)
+and the video, if asked for, written; 1 when the video could not be made; 2 when the path is not
+a bag or the arguments are wrong.
 """
 
 from __future__ import annotations
@@ -170,12 +175,34 @@ def main(args: list[str] | None = None) -> int:
     parser.add_argument('--namespace', metavar='NS',
                         help="the graph's ROS namespace (default: the bag's, found from its "
                              'topics; needed when it holds several)')
+    video = parser.add_argument_group('video', 'render the walk with MuJoCo (headless: '
+                                               'MUJOCO_GL=egl, the default without a display)')
+    video.add_argument('--video', metavar='FILE',
+                       help='write the walk as FILE (.mp4 or .gif; .png: a still of the frame '
+                            'at --from)')
+    video.add_argument('--fps', type=float, default=15.0, help='frames per second (default 15)')
+    video.add_argument('--size', default='640x480', metavar='WxH',
+                       help='frame size in pixels (default 640x480)')
+    video.add_argument('--from', dest='start_s', type=float, default=0.0, metavar='S',
+                       help="first frame, seconds from the walk's first base pose (default 0)")
+    video.add_argument('--to', dest='end_s', type=float, default=None, metavar='S',
+                       help="last frame at most, seconds from the same origin (default: the "
+                            "walk's end)")
+    video.add_argument('--speed', type=float, default=1.0,
+                       help='playback speed: 2 plays the walk twice as fast (default 1)')
+    video.add_argument('--scenario', metavar='NAME',
+                       help="the scenario the bag walked, for its terrain (a scenario's "
+                            "staircase is not in the bag; default: flat ground)")
     progress_group = parser.add_mutually_exclusive_group()
     progress_group.add_argument('--progress', dest='progress', action='store_true',
                                 default=None, help='always show a progress bar on stderr')
     progress_group.add_argument('--no-progress', dest='progress', action='store_false',
                                 help='never show one')
     options = parser.parse_args(args)
+    try:
+        video = _video_request(options)
+    except GaitNodesError as error:
+        return fail(PROG, error)
 
     from gait_nodes.bag.analysis import inspect_bag, robot_limits
     from gait_nodes.bag.reader import BagReader
@@ -206,12 +233,86 @@ def main(args: list[str] | None = None) -> int:
         return fail(PROG, error)
     except OSError as error:
         return fail(PROG, GaitNodesError(f'{options.bag}: {error.strerror or error}'))
+    status = 0
+    if video is not None:
+        status = render_video(options.bag, options.video, video, options.robot,
+                              report.get('namespace'), report)
     if options.json:
         print(json.dumps(report, indent=1))
     else:
         print(format_report(report))
         for plot in report.get('plots', []):
             print(f'plot:      {plot}')
+        if 'video' in report:
+            print(f'video:     {report["video"]["description"]}')
+    return status
+
+
+def _video_request(options):
+    """``(settings, staircase)`` of the video asked for on the command line, or None."""
+    if options.video is None:
+        return None
+    from gait_nodes.bag.video import (
+        VideoSettings,
+        check_dependencies,
+        parse_size,
+        prefer_headless_gl,
+    )
+    from gait_nodes.planning.terrain import Staircase
+
+    prefer_headless_gl()  # before MuJoCo is imported
+    check_dependencies(options.video)
+    width, height = parse_size(options.size)
+    settings = VideoSettings(fps=options.fps, width=width, height=height,
+                             start_s=options.start_s, end_s=options.end_s, speed=options.speed)
+    staircase = Staircase()
+    if options.scenario:
+        from gait_nodes.scenarios import get_scenario
+
+        staircase = scenario_staircase(get_scenario(options.scenario))
+    return settings, staircase
+
+
+def scenario_staircase(scenario):
+    """The staircase a scenario walks on (flat ground without one)."""
+    from gait_nodes.planning.terrain import STAIRS_DEFAULTS, Staircase
+
+    return Staircase.from_parameters({**STAIRS_DEFAULTS, **scenario.settings})
+
+
+def render_video(bag, output, request, robot: str | None, namespace: str | None,
+                 report: dict, prog: str = PROG) -> int:
+    """Write the walk of ``bag`` as ``output``; its account in ``report['video']``.
+
+    Args:
+        bag: The bag.
+        output: The video file.
+        request: ``(VideoSettings, Staircase)``.
+        robot: Robot name or YAML (None: the bag's).
+        namespace: The graph's namespace in the bag (None: found from its topics).
+        report: Where to put the video's account.
+        prog: The command named in an error message.
+
+    Returns:
+        0 when written, 1 (the reason on stderr) when not.
+    """
+    from tqdm import tqdm
+
+    from gait_nodes.bag.video import write_video
+
+    settings, staircase = request
+    try:
+        with tqdm(unit='frame', desc='video', disable=not sys.stderr.isatty(), file=sys.stderr,
+                  leave=False) as bar:
+            written = write_video(bag, output, settings, robot=robot, staircase=staircase,
+                                  namespace=namespace, progress=bar.update)
+    except GaitNodesError as error:
+        fail(prog, error)
+        return 1
+    except OSError as error:
+        fail(prog, GaitNodesError(f'--video {output}: cannot write it: {os_error_text(error)}'))
+        return 1
+    report['video'] = {**written.__dict__, 'description': written.describe()}
     return 0
 
 

@@ -23,6 +23,9 @@ by :mod:`gait_nodes.sim.mujoco_model`), and what it publishes is measured there:
 - /gait/contact_wrench/<foot> (geometry_msgs/WrenchStamped, the foot frame): the ground's force
   on each foot and its moment about the foot frame's origin, mean over the tick, as a
   force-torque sensor at the sole reports it;
+- /gait/markers: the kinematic simulator's (ZMP and COM spheres, support polygon outline) and a
+  magenta sphere at the centre of pressure (id 3, deleted while nothing touches the ground), all
+  of the monitor's sample's stamp;
 - /diagnostics: the kinematic simulator's stability and input reports; every
   ``diagnostics_period_s`` a summary with the drives at their effort limit ('torque
   saturation'), the contacts (touch-downs, stance-foot slip, the centre of pressure's least
@@ -38,6 +41,7 @@ from __future__ import annotations
 
 import math
 import sys
+from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
@@ -63,6 +67,8 @@ from gait_nodes.sim.physics import PhysicsSettings, PhysicsSimulation
 NODE_NAME = 'physics_simulator'
 #: Largest mismatch [s] between the control period and a whole number of physics steps.
 PERIOD_TOLERANCE_S = 1e-9
+#: /gait/markers id of the centre of pressure's sphere (after the ZMP, COM and polygon).
+COP_MARKER_ID = 3
 
 
 @dataclass(frozen=True)
@@ -153,6 +159,9 @@ class PhysicsSimulator(KinematicSimulator):
                                     strict=True)]
         self._cop = self.create_publisher(get_message('geometry_msgs/msg/PointStamped'),
                                           'gait/cop', 10)
+        # (odom header, CoP [x, y, z] or None) of the last two ticks: the markers are of the
+        # monitor's sample, one tick behind the measurement.
+        self._recent_cops: deque = deque(maxlen=2)
         self.get_logger().info(f'MuJoCo model {physics.mjcf_path} ({physics.model.nbody} bodies, '
                                f'{physics.model.nu} drives, {params.timestep_s * 1e3:g} ms steps)')
         return PhysicsSimulation(self.robot, physics, q_initial, params.simulation_settings())
@@ -179,7 +188,9 @@ class PhysicsSimulator(KinematicSimulator):
     def _publish_measurements(self, now_ns: int, step, header) -> None:
         new = self._new
         x, y, z = step.cop_in_world.tolist()
-        if math.isfinite(x) and math.isfinite(y):
+        finite = math.isfinite(x) and math.isfinite(y)
+        self._recent_cops.append((header, [x, y, z] if finite else None))
+        if finite:
             self._cop.publish(new['PointStamped'](header, new['Point'](x, y, z)))
             if len(step.contact_points_in_world):
                 support = self._support_of(step.contact_points_in_world)
@@ -190,6 +201,30 @@ class PhysicsSimulator(KinematicSimulator):
         for (frame, publisher), wrench in zip(self._wrench_topics, step.foot_wrenches_in_foot,
                                               strict=True):
             publisher.publish(contact_wrench_to_msg(now_ns, frame, wrench))
+
+    # -- markers -------------------------------------------------------------------------------
+
+    def _marker_parts(self) -> dict:
+        parts = super()._marker_parts()
+        new = self._new
+        parts[COP_MARKER_ID] = (new['Vector3'](0.04, 0.04, 0.04),
+                                new['ColorRGBA'](0.85, 0.1, 0.85, 1.0))
+        return parts
+
+    def _marker_array(self, header, zmp: list | None, com: list | None, outline_points: list):
+        """The kinematic simulator's markers and the CoP's sphere, of ``header``'s stamp."""
+        array = super()._marker_array(header, zmp, com, outline_points)
+        cop = next((xyz for held, xyz in self._recent_cops if held is header), None)
+        marker_type, parts = self._msg['Marker'], self._marker_parts_cache
+        if cop is None:
+            marker = self._marker(header, COP_MARKER_ID, marker_type.SPHERE, marker_type.DELETE,
+                                  parts['origin'], parts['empty'])
+        else:
+            marker = self._marker(header, COP_MARKER_ID, marker_type.SPHERE, marker_type.ADD,
+                                  self._new['Pose'](self._new['Point'](*cop),
+                                                    parts['orientation']), parts['empty'])
+        array.markers.append(marker)
+        return array
 
     # -- diagnostics ---------------------------------------------------------------------------
 

@@ -11,6 +11,11 @@ os.environ.setdefault('GAIT_NODES_STRICT_MESSAGES', '1')
 # are small; on two cores shared with a dds graph's processes, the OpenBLAS of Jazzy's numpy
 # 1.26 (0.3.23) spends its extra threads spinning: a fifth more CPU for the same results.
 os.environ.setdefault('OPENBLAS_NUM_THREADS', '1')
+# MuJoCo renders the walks' videos offscreen: EGL (or OSMesa) on a machine without a display,
+# where its library is installed (MuJoCo reads this once, when first imported by any test).
+from gait_nodes.bag.video import prefer_headless_gl  # noqa: E402
+
+prefer_headless_gl()
 
 
 @pytest.fixture(scope='session')

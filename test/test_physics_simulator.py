@@ -175,6 +175,7 @@ class _Listener(runtime.Node):
         self.messages = {}
         topics = {'/tf': graph.TOPICS['/tf'], '/gait/cop': graph.TOPICS['/gait/cop'],
                   '/gait/com': graph.TOPICS['/gait/com'],
+                  '/gait/markers': graph.TOPICS['/gait/markers'],
                   '/joint_states': graph.TOPICS['/joint_states'], **graph.foot_topics(feet)}
         for topic, type_name in topics.items():
             self.messages[topic] = []
@@ -229,6 +230,17 @@ def test_robosimian_stands_still_on_its_feet():
             assert sum(w.force[2] for w in wrenches) == pytest.approx(weight, rel=0.02)
     efforts = messages['/joint_states'][-1].effort
     assert len(efforts) == len(robot.joint_names) and max(map(abs, efforts)) > 1.0
+    # /gait/markers: the kinematic simulator's three and the CoP's sphere, at /gait/cop of the
+    # same stamp (20 Hz).
+    cops = {time_msg_to_ns(m.header.stamp): m.point for m in messages['/gait/cop']}
+    arrays = messages['/gait/markers']
+    assert len(arrays) >= 59
+    for array in arrays:
+        assert [m.id for m in array.markers] == [0, 1, 2, 3]
+        sphere = array.markers[3]
+        stamp = time_msg_to_ns(sphere.header.stamp)
+        assert sphere.type == sphere.SPHERE and sphere.action == sphere.ADD
+        assert sphere.pose.position == cops[stamp]
 
 
 def test_the_physics_simulator_declares_the_parameters_known_before_start():
@@ -300,3 +312,38 @@ def test_a_short_crawl_in_physics_walks_forward_and_records_what_physics_measure
     loads = {topic: [m.wrench.force.z for m in decoded[topic]]
              for topic in graph.foot_topics(robot.foot_names)}
     assert any(min(values) < 1.0 for values in loads.values())
+
+
+def _walk(tmp_path, scenario: str, simulator: str) -> dict:
+    """Walk ``scenario`` with ``simulator``; its bag's base poses, CoP and polygons by stamp."""
+    from gait_nodes.__main__ import main
+    from gait_nodes.bag.analysis import read_gait_series
+
+    bag = tmp_path / f'{scenario}_{simulator}'
+    assert main(['run', '--fast', '--scenario', scenario, '--simulator', simulator,
+                 '--record', str(bag), '--no-plot', '--json']) == 0
+    series = read_gait_series(bag, topics=('/tf', '/gait/cop', '/gait/support_polygon'))
+    return {'base': {stamp: pose for stamp, *pose in series.base_poses},
+            'cop': {stamp: (x, y) for stamp, x, y, _ in series.cop},
+            'polygons': dict(series.polygons)}
+
+
+def test_the_biped_walks_in_physics_as_planned(tmp_path):
+    """biped_walk's 21 s, open loop at kp 3000 / kd 100: upright, on the plan, CoP inside."""
+    kinematic = _walk(tmp_path, 'biped_walk', 'kinematic')['base']
+    physics = _walk(tmp_path, 'biped_walk', 'physics')
+    base = physics['base']
+    stamps = sorted(set(kinematic) & set(base))
+    assert len(stamps) > 2000
+    for stamp in stamps:
+        x, y, z, qx, qy, qz, qw = base[stamp]
+        roll, pitch = roll_pitch_deg([0, 0, 0, qx, qy, qz, qw])
+        assert abs(roll) < 3.0 and abs(pitch) < 3.0
+        assert abs(z - kinematic[stamp][2]) < 0.03
+        assert math.hypot(x - kinematic[stamp][0], y - kinematic[stamp][1]) < 0.05
+    walked = base[stamps[-1]][0] - base[stamps[0]][0]
+    planned = kinematic[stamps[-1]][0] - kinematic[stamps[0]][0]
+    assert planned > 0.9 and walked == pytest.approx(planned, rel=0.05)
+    margins = [signed_distance(np.array([cop]), physics['polygons'][stamp])[0]
+               for stamp, cop in physics['cop'].items() if stamp in physics['polygons']]
+    assert len(margins) > 2000 and min(margins) > -1e-6

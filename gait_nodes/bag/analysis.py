@@ -63,7 +63,8 @@ ZMP_REFERENCE_KEPT_NS = 200_000_000
 #: Topics whose messages inspect decodes (when their type is the contract's).
 GAIT_TOPICS = ('/tf', '/gait/zmp', '/gait/com', '/gait/support_polygon', '/gait/footsteps',
                '/gait/zmp_reference', '/gait/com_reference', '/gait/swing_trajectory',
-               '/joint_states', '/joint_commands', '/gait/command_status', '/diagnostics')
+               '/joint_states', '/joint_commands', '/gait/command_status', '/diagnostics',
+               '/gait/cop')
 
 
 @dataclass
@@ -87,6 +88,7 @@ class GaitSeries:
     zmp_plane_heights_m: dict[int, float] = field(default_factory=dict)
     zmp: list[tuple[int, float, float]] = field(default_factory=list)
     com: list[tuple[int, float, float, float]] = field(default_factory=list)
+    cop: list[tuple[int, float, float, float]] = field(default_factory=list)
     polygons: list[tuple[int, np.ndarray]] = field(default_factory=list)
     zmp_reference: list[tuple[int, float, float]] = field(default_factory=list)
     zmp_reference_last: contract.ZmpReference | None = None
@@ -142,6 +144,9 @@ class _Collector:
 
     def _gait_com(self, msg) -> None:
         self.series.com.append((_stamp(msg.header), msg.point.x, msg.point.y, msg.point.z))
+
+    def _gait_cop(self, msg) -> None:
+        self.series.cop.append((_stamp(msg.header), msg.point.x, msg.point.y, msg.point.z))
 
     def _gait_support_polygon(self, msg) -> None:
         vertices = np.array([(p.x, p.y) for p in msg.polygon.points], dtype=float)
@@ -300,7 +305,8 @@ def executed_swings(plans: list[contract.FootstepPlan], until_ns: int | None) ->
         length = float(np.linalg.norm((swing.end_in_world - swing.start_in_world)[:2]))
         swings.append({'foot': swing.foot, 'lift_off_ns': lift_ns, 'touch_down_ns': land_ns,
                        'start': swing.start_in_world.tolist(),
-                       'end': swing.end_in_world.tolist(), 'length_m': length})
+                       'end': swing.end_in_world.tolist(), 'end_yaw_rad': swing.end_yaw_rad,
+                       'length_m': length})
     return swings
 
 
@@ -612,6 +618,35 @@ def inspect_bag(path: str | Path, robot: str | None = None,
     if series.undecodable:
         report['undecodable'] = dict(series.undecodable)
     return Inspection(report, series)
+
+
+def read_gait_series(path: str | Path, namespace: str | None = None,
+                     topics: tuple[str, ...] = GAIT_TOPICS) -> GaitSeries:
+    """The decoded series of a bag's gait topics, without the report (see :func:`inspect_bag`).
+
+    Args:
+        path: Bag directory or ``.mcap`` file.
+        namespace: The graph's ROS namespace (default: the bag's, found from its topics).
+        topics: The contract topics to decode (of :data:`GAIT_TOPICS`).
+
+    Raises:
+        NotABagError: The path is not a bag.
+        GaitNodesError: The bag holds several namespaced graphs and ``namespace`` is None.
+    """
+    reader = BagReader(path)
+    collector = _Collector()
+    names: dict[str, str] = {}
+    seen: set[str] = set()
+    wanted = set(topics)
+    for channel, _, _, data in reader.messages():
+        if channel.topic not in seen:  # the topics known so far decide the names (once)
+            seen.add(channel.topic)
+            namespace = bag_namespace(_known_topics(reader) | seen, namespace)
+            names = contract_topics(_known_topics(reader) | seen, namespace)
+        contract_topic = names.get(channel.topic)
+        if contract_topic in wanted and channel.message_encoding == 'cdr':
+            collector.message(contract_topic, channel.type_name, data)
+    return collector.series
 
 
 def gait_report(series: GaitSeries, robot: str | None = None) -> dict:

@@ -6,15 +6,18 @@ what a URDF does not say, all of it from the robot YAML's ``physics`` section
 
 - a free joint on the root link (the floating base);
 - the feet's contact shapes on the foot frames (disc, sphere or sole box), with the YAML's
-  friction; the URDF's own geometry is kept for display only (it collides with nothing), and
-  the feet collide with the ground only, not with each other;
-- a floor plane at z = 0 and, with a staircase (:class:`gait_nodes.planning.terrain.Staircase`),
+  friction; the URDF's own geometry, visual and collision, is kept for display only (it
+  collides with nothing and weighs nothing; meshes MuJoCo cannot decode, such as COLLADA
+  ``.dae``, are left out), and the feet collide with the ground only, not with each other;
+- a floor plane at z = 0 (a checker texture, 0.5 m squares, so that a video shows the robot
+  moving) and, with a staircase (:class:`gait_nodes.planning.terrain.Staircase`),
   one box per stair up to the stair's tread height, reaching ``STAIRS_LENGTH_M`` past its riser;
 - per 1-DOF joint, a position-controlled actuator as a ros2_control position interface drives
   it: ``tau = kp (q_ref - q) + kd (qd_ref - qd)`` (one MuJoCo ``general`` actuator with an
   affine bias, fed ``ctrl = q_ref + kd / kp qd_ref``), its force clamped at the URDF's effort
   limit, the joint's armature (rotor inertia) from the YAML (the URDF's own joint damping and
   friction, where it gives any, are kept);
+- one directional light from above (for rendering: :mod:`gait_nodes.bag.video`);
 - 1 kHz steps by default, MuJoCo's ``implicitfast`` integrator (the actuators' damping is
   integrated implicitly, as stiff PD gains need) and elliptic friction cones.
 
@@ -22,7 +25,8 @@ The URDF's inertias are used as they are (``inertiafromgeom`` off: display geome
 nothing); links joined by fixed joints stay bodies (``fusestatic`` off), so that every foot frame
 is a body whose pose MuJoCo reports. ``package://`` mesh URIs are resolved under the share folders
 of the installed packages (example-robot-data's, ``AMENT_PREFIX_PATH``'s); a mesh that cannot be
-found is left out of the display geometry.
+found or decoded is left out of the display geometry. Nothing added for display (geometry,
+texture, light) changes the dynamics.
 
 The compiled model is cached in ``$XDG_CACHE_HOME/gait_nodes/physics/`` (as the swing value
 tables are), one ``.mjb`` (MuJoCo's exact binary model, what the simulator runs) and its ``.xml``
@@ -47,7 +51,7 @@ from gait_nodes.planning.terrain import Staircase
 from gait_nodes.robot.description import RobotDescription
 
 #: Changes whenever the model this module builds changes (part of the cache key).
-BUILDER_VERSION = '1'
+BUILDER_VERSION = '2'
 #: Default physics step [s] (1 kHz, a legged robot's joint servo rate).
 DEFAULT_TIMESTEP_S = 0.001
 #: How far each stair reaches past its riser [m]: the landing, to walk on for long.
@@ -62,13 +66,20 @@ FOOT_CONTYPE, GROUND_CONAFFINITY = 1, 1
 #: MuJoCo geom group of the feet's contact shapes and of the URDF's display geometry.
 FOOT_GROUP, DISPLAY_GROUP = 3, 1
 #: MuJoCo's ``<mujoco>`` extension of the URDF: keep fixed links as bodies, full mesh paths,
-#: the URDF's collision geometry (display only here) without its visuals, the URDF's inertias.
+#: the URDF's visual and collision geometry (display only here), the URDF's inertias.
 COMPILER_EXTENSION = ('<mujoco><compiler fusestatic="false" strippath="false" '
-                      'discardvisual="true" inertiafromgeom="false" balanceinertia="true" '
+                      'discardvisual="false" inertiafromgeom="false" balanceinertia="true" '
                       'autolimits="true" angle="radian"/></mujoco>')
 #: Name prefixes of what the builder adds.
 FOOT_GEOM_PREFIX = 'gait_foot_'
 GROUND_GEOM = 'gait_ground'
+GROUND_MATERIAL = 'gait_ground'
+#: Mesh files MuJoCo decodes (others are left out of the display geometry).
+MESH_SUFFIXES = ('.stl', '.obj', '.msh')
+#: Colour of the URDF's display geometry where the URDF gives none (MuJoCo's default grey).
+DISPLAY_RGBA = (0.72, 0.74, 0.8, 1.0)
+#: Side of the floor's checker squares [m].
+GROUND_SQUARE_M = 0.5
 STAIR_GEOM_PREFIX = 'gait_stair_'
 ACTUATOR_PREFIX = 'gait_servo_'
 
@@ -86,6 +97,13 @@ def import_mujoco():
             f'the physics simulator needs MuJoCo, which is not installed ({exc}): pip install '
             f'mujoco (or pip install "gait_nodes[physics]"; on a ROS machine, into the venv '
             f'or with --break-system-packages: MuJoCo has no rosdep key)') from None
+    except Exception as exc:  # noqa: BLE001 (PyOpenGL fails with AttributeError, among others)
+        backend = os.environ.get('MUJOCO_GL')
+        raise PhysicsUnavailableError(
+            f'MuJoCo cannot be imported ({type(exc).__name__}: {exc})'
+            + (f': MUJOCO_GL={backend} names an OpenGL backend whose library is missing (EGL: '
+               f'apt-get install libegl1; OSMesa: apt-get install libosmesa6), or unset it'
+               if backend else '')) from None
     return mujoco
 
 
@@ -207,23 +225,27 @@ def build_spec(description: RobotDescription, joint_names, staircase: Staircase 
     except ValueError as exc:
         raise ConfigError(f'{urdf_path}: MuJoCo cannot read the URDF: {exc}') from exc
     spec.modelname = description.name
-    # The visuals were left out as the URDF was read; at compile time discardvisual would drop
-    # every geom that collides with nothing, the display geometry kept below.
+    # At compile time discardvisual would drop every geom that collides with nothing: the display
+    # geometry kept below.
     spec.compiler.discardvisual = False
     spec.option.timestep = float(timestep_s)
     spec.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
     spec.option.cone = mujoco.mjtCone.mjCONE_ELLIPTIC
     spec.option.impratio = IMPRATIO
 
-    # The URDF's geometry: display only. A mesh that cannot be found is dropped with its geoms.
+    # The URDF's geometry: display only. A mesh that cannot be found or decoded is dropped with
+    # its geoms.
     missing = {mesh.name for mesh in spec.meshes
-               if not os.path.isabs(mesh.file) or not os.path.isfile(mesh.file)}
+               if not os.path.isabs(mesh.file) or not os.path.isfile(mesh.file)
+               or not mesh.file.lower().endswith(MESH_SUFFIXES)}
     for geom in list(spec.geoms):
         if geom.type == mujoco.mjtGeom.mjGEOM_MESH and geom.meshname in missing:
             spec.delete(geom)
             continue
         geom.contype = geom.conaffinity = 0
         geom.group = DISPLAY_GROUP
+        if list(geom.rgba) == [0.5, 0.5, 0.5, 1.0]:
+            geom.rgba = DISPLAY_RGBA
     for mesh in list(spec.meshes):
         if mesh.name in missing:
             spec.delete(mesh)
@@ -259,8 +281,20 @@ def build_spec(description: RobotDescription, joint_names, staircase: Staircase 
 
     ground = dict(contype=0, conaffinity=GROUND_CONAFFINITY,
                   friction=[physics.foot_friction, 0.005, 0.0001])
+    # Display only: a checker floor and a light. A checker texture is 2 x 2 squares, repeated
+    # per metre (texuniform).
+    repeat = 1.0 / (2.0 * GROUND_SQUARE_M)
+    spec.add_texture(name=GROUND_MATERIAL, type=mujoco.mjtTexture.mjTEXTURE_2D,
+                     builtin=mujoco.mjtBuiltin.mjBUILTIN_CHECKER, rgb1=[0.82, 0.82, 0.82],
+                     rgb2=[0.68, 0.69, 0.72], width=256, height=256)
+    material = spec.add_material(name=GROUND_MATERIAL, texuniform=True,
+                                 texrepeat=[repeat, repeat])
+    material.textures[mujoco.mjtTextureRole.mjTEXROLE_RGB] = GROUND_MATERIAL
+    spec.worldbody.add_light(type=mujoco.mjtLightType.mjLIGHT_DIRECTIONAL, pos=[0.0, 0.0, 10.0],
+                             dir=[0.3, 0.2, -1.0], diffuse=[0.6, 0.6, 0.6],
+                             specular=[0.1, 0.1, 0.1], castshadow=False)
     spec.worldbody.add_geom(name=GROUND_GEOM, type=mujoco.mjtGeom.mjGEOM_PLANE,
-                            size=[0.0, 0.0, 1.0], rgba=[0.8, 0.8, 0.8, 1.0], **ground)
+                            size=[0.0, 0.0, 1.0], material=GROUND_MATERIAL, **ground)
     staircase = staircase or Staircase()
     for k in range(staircase.count):
         top = (k + 1) * staircase.rise_m
