@@ -39,6 +39,7 @@ Exit status: 0 on success, 2 on bad input (one line on stderr).
 
 from __future__ import annotations
 
+import math
 import sys
 import textwrap
 import time
@@ -63,6 +64,8 @@ ZMP_STEP_PERIODS_S = (1.0, 2.0)
 FAMILIES = (2, 7)
 #: The longest step the thesis' x range (0.2-0.8 m) holds [m].
 THESIS_LONGEST_STEP_M = 0.6
+#: The thesis' ground below RoboSimian's body [m]: its lower swing plane (II.D).
+THESIS_BODY_HEIGHT_M = 0.7
 #: The walked gait that is the thesis' value-iteration crawl (Fig. 21), and the ZMP gaits.
 VALUE_ITERATION_GAIT = 'static_crawl'
 ZMP_GAITS = {'crawl': 'ZMP crawl', 'trot': 'ZMP trot'}
@@ -191,6 +194,24 @@ class ZmpErrors:
 
     cart_table_m: float
     corrected_m: float
+
+
+def thesis_robot(robot):
+    """``robot`` on the thesis' stance: ground :data:`THESIS_BODY_HEIGHT_M` below its body.
+
+    The thesis' tables and swings are on its swing planes, 0.6 and 0.7 m below the body
+    (II.D); the walker may stand otherwise (RoboSimian's YAML: 0.77 m, its static crawl's
+    fastest stance, ``bench/stance.py``). A robot at another height is copied to the thesis'
+    (:func:`gait_nodes.robot.stance.write_stance`, under the cache directory).
+    """
+    from gait_nodes.robot.model import load_robot_model
+    from gait_nodes.robot.stance import write_stance
+    from gait_nodes.swing.cache import cache_dir
+
+    if math.isclose(robot.description.body_height_m, THESIS_BODY_HEIGHT_M, abs_tol=1e-9):
+        return robot
+    return load_robot_model(write_stance(robot.description.path, cache_dir() / 'thesis',
+                                         THESIS_BODY_HEIGHT_M))
 
 
 def thesis_description(robot):
@@ -463,6 +484,7 @@ def run(robot, settings: Settings, log, convergence_grids: bool = False) -> Resu
     from gait_nodes.swing.value_iteration import THESIS_GOAL_Y_M, THESIS_GOAL_Z_M
     from gait_nodes.swing.zmp_gait import zmp_gait_joint_speed
 
+    robot = thesis_robot(robot)
     results = Results(settings)
     started = time.perf_counter()
     for period in ZMP_STEP_PERIODS_S:

@@ -1,0 +1,75 @@
+"""The static crawl's stance: RoboSimian walked at body heights and rear-foot widths.
+
+The walker's stance (``config/robots/robosimian.yaml``: the feet's nominal places and the
+body's height) decides how fast the limbs move their feet (the limb's own speed map) and how
+much room the ZMP keeps in the support triangles of the static crawl's swings. This script
+walks the default scenario (``robosimian_static_crawl``) on copies of the robot YAML that
+differ only in the ground's depth below the body and the rear feet's lateral place, with the
+project's own command, one inproc run each (deterministic; the copies from
+:func:`gait_nodes.robot.stance.write_stance`):
+
+    python -m gait_nodes run --fast --robot COPY.yaml --record BAG --no-plot --json
+
+and prints, per stance, the steady speed (inspect's: whole gait cycles after the first) and
+the least ZMP margin on the full model, as a Markdown table. The shipped stance is the
+fastest that keeps the margin the rectangle at 0.7 m kept.
+
+    python bench/stance.py [--heights 0.7,0.77] [--rear-widths 0.5,0.52] [--keep DIR]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from gait_nodes.robot.stance import write_stance  # noqa: E402
+
+
+def walk(robot_yaml: Path, bag: Path) -> dict:
+    """The run's gait summary (inspect's numbers)."""
+    command = [sys.executable, '-m', 'gait_nodes', 'run', '--fast', '--robot', str(robot_yaml),
+               '--record', str(bag), '--no-plot', '--json']
+    done = subprocess.run(command, capture_output=True, text=True, check=False)
+    if done.returncode != 0:
+        raise RuntimeError(f'{" ".join(command)} failed: {done.stderr[-2000:]}')
+    summary = json.loads(done.stdout)
+    return summary['inspect']['gait']
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Walk each stance; print the table."""
+    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    parser.add_argument('--heights', default='0.65,0.7,0.73,0.75,0.77,0.8,0.85',
+                        help='ground depths below the body [m]')
+    parser.add_argument('--rear-widths', default='0.5,0.52',
+                        help="rear feet's lateral places [m]")
+    parser.add_argument('--keep', default=None, help='keep the YAML copies and bags here')
+    options = parser.parse_args(argv)
+    heights = [float(v) for v in options.heights.split(',')]
+    widths = [float(v) for v in options.rear_widths.split(',')]
+    rows = ['| ground below the body [m] | rear feet out [m] | steady speed [m/s] (ft/min) '
+            '| ZMP margin min [mm] | joint vel. peak / limit |', '| --- ' * 5 + '|']
+    with tempfile.TemporaryDirectory(prefix='gait_nodes_stance_') as tmp:
+        folder = Path(options.keep or tmp)
+        folder.mkdir(parents=True, exist_ok=True)
+        for height in heights:
+            for width in widths:
+                copy = write_stance('robosimian', folder, height, width)
+                gait = walk(copy, folder / f'{copy.stem}_bag')
+                speed = gait['steady']['net_speed_m_s']
+                margin = gait['zmp_margin']['min_m']
+                peak = gait['joint_velocity']['/joint_states']['peak_ratio_to_limit']
+                rows.append(f'| {height:g} | {width:g} | {speed:.4f} ({speed * 196.85:.2f}) '
+                            f'| {1000 * margin:.1f} | {peak:.2f} |')
+                print(rows[-1], file=sys.stderr, flush=True)
+    print('\n'.join(rows))
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
