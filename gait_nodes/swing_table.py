@@ -21,7 +21,8 @@ optimum". The one-step costs are cached as the thesis command's.
 
 ``python -m gait_nodes.swing_table crossover [--joint-vel-limits 0.5 1 1.5 2 2.5 3 4] [--quick]
 [--keep-bags DIR]`` walks each of the robot's gaits (RoboSimian: the ZMP crawl, the static
-crawl, the trot) with the whole inproc node graph at each joint velocity limit and prints what
+crawl, the trot), on the thesis' stance (:func:`gait_nodes.thesis.thesis_robot`: ground 0.7 m
+below the body), with the whole inproc node graph at each joint velocity limit and prints what
 each walk's bag says (thesis IV.C, Fig. 21; :mod:`gait_nodes.walked_crossover`): net speed of
 the steady cycles, step period, ZMP samples outside the support polygon, joints over the limit,
 and which gait walked fastest. Every figure is walked, none modelled; about 5 minutes on 2
@@ -263,9 +264,15 @@ def _crossover(options) -> int:
         if not options.quiet:
             print(f'{PROG}: {message}', file=sys.stderr, flush=True)
 
+    from gait_nodes.robot.model import load_robot_model
+    from gait_nodes.thesis import thesis_robot
+
     started = time.perf_counter()
-    rows = walked.walked_crossover(limits, options.robot, options.gaits, duration,
-                                   options.keep_bags, settings, log)
+    # The thesis' experiment (Fig. 21) on the thesis' stance, as python -m gait_nodes.thesis
+    # walks it: one answer for one robot.
+    robot = thesis_robot(load_robot_model(options.robot))
+    rows = walked.walked_crossover(limits, str(robot.description.path), options.gaits,
+                                   duration, options.keep_bags, settings, log)
     print(walked.format_table(rows, settings, duration))
     if options.keep_bags:
         print(f'\nbags: {options.keep_bags}/<gait>_w<limit> (robot copies in '

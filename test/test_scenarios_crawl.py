@@ -313,7 +313,9 @@ def test_the_steady_speed_is_measured_over_whole_cycles_and_shown_beside_the_the
     """The steady speed of inspect: the base from a foot's 2nd lift-off to its last."""
     _, inspection = bags('robosimian_crawl')
     steady = inspection.report['gait']['steady']
-    swings = executed(inspection.series.plans)
+    series = inspection.series
+    until = max(s[0] for s in [*series.base, *series.zmp, *series.com])  # the bag's last
+    swings = executed(series.plans, until)  # (swings landed by then)
     feet = {s['foot'] for s in swings}
     counts = {foot: sum(s['foot'] == foot for s in swings) for foot in feet}
     foot = max(feet, key=lambda f: (counts[f], f))  # ties: the last by name
