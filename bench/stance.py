@@ -10,9 +10,10 @@ project's own command, one inproc run each (deterministic; the copies from
 
     python -m gait_nodes run --fast --robot COPY.yaml --record BAG --no-plot --json
 
-and prints, per stance, the steady speed (inspect's: whole gait cycles after the first) and
-the least ZMP margin on the full model, as a Markdown table. The shipped stance is the
-fastest that keeps the margin the rectangle at 0.7 m kept.
+and prints, per stance, the steady speed (inspect's: whole gait cycles after the first), the
+least ZMP margin on the full model, the joints' peak speed and the seconds in which the
+simulator reported commands beyond a joint's velocity or acceleration limit, as a Markdown
+table.
 
     python bench/stance.py [--heights 0.7,0.77] [--rear-widths 0.5,0.52] [--keep DIR]
 """
@@ -53,7 +54,8 @@ def main(argv: list[str] | None = None) -> int:
     heights = [float(v) for v in options.heights.split(',')]
     widths = [float(v) for v in options.rear_widths.split(',')]
     rows = ['| ground below the body [m] | rear feet out [m] | steady speed [m/s] (ft/min) '
-            '| ZMP margin min [mm] | joint vel. peak / limit |', '| --- ' * 5 + '|']
+            '| ZMP margin min [mm] | joint vel. peak / limit | commands over a limit [s] |',
+            '| --- ' * 6 + '|']
     with tempfile.TemporaryDirectory(prefix='gait_nodes_stance_') as tmp:
         folder = Path(options.keep or tmp)
         folder.mkdir(parents=True, exist_ok=True)
@@ -64,8 +66,12 @@ def main(argv: list[str] | None = None) -> int:
                 speed = gait['steady']['net_speed_m_s']
                 margin = gait['zmp_margin']['min_m']
                 peak = gait['joint_velocity']['/joint_states']['peak_ratio_to_limit']
+                # The simulator's once-a-second reports of commands beyond a joint's velocity
+                # or acceleration limit (it follows them within the limits).
+                over = gait['diagnostics']['by_name'].get(
+                    'kinematic_simulator: velocity saturation', {}).get('WARN', 0)
                 rows.append(f'| {height:g} | {width:g} | {speed:.4f} ({speed * 196.85:.2f}) '
-                            f'| {1000 * margin:.1f} | {peak:.2f} |')
+                            f'| {1000 * margin:.1f} | {peak:.2f} | {over} |')
                 print(rows[-1], file=sys.stderr, flush=True)
     print('\n'.join(rows))
     return 0

@@ -200,8 +200,8 @@ def thesis_robot(robot):
     """``robot`` on the thesis' stance: ground :data:`THESIS_BODY_HEIGHT_M` below its body.
 
     The thesis' tables and swings are on its swing planes, 0.6 and 0.7 m below the body
-    (II.D); the walker may stand otherwise (RoboSimian's YAML: 0.77 m, its static crawl's
-    fastest stance, ``bench/stance.py``). A robot at another height is copied to the thesis'
+    (II.D); a walker may stand otherwise (``bench/stance.py`` walks RoboSimian's static crawl
+    at other heights). A robot at another height is copied to the thesis'
     (:func:`gait_nodes.robot.stance.write_stance`, under the cache directory).
     """
     from gait_nodes.robot.model import load_robot_model

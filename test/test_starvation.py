@@ -28,8 +28,8 @@ from gait_nodes.robot.model import load_robot_model
 from gait_nodes.starvation import InprocGraph
 
 NS_PER_S = 10**9
-#: The crawl's first swing (rear left) is in the air from about 4.4 s to 6.6 s.
-STARVED_AT_S = 5.3
+#: The crawl's first swing (rear left) is in the air from about 3.1 s to 6.0 s.
+STARVED_AT_S = 4.5
 #: Longer than the IK's horizon (0.3 s) and the simulator's stale_after_s (0.25 s): the
 #: trajectory runs out, the walk pauses (a shorter gap is ridden through on the horizon).
 STARVED_FOR_S = 0.6

@@ -96,10 +96,10 @@ def test_perturbed_paths_are_slower_on_average():
 
 def test_speed_curve_has_an_interior_optimum():
     # The default table (the node's; its goal 0.75 m ahead, every start behind it reachable) on
-    # the thesis' stance (ground 0.7 m below the body): eq. (2) peaks at a 0.45 m step and drops
-    # for the longer ones, which are still feasible, so the optimum is interior because of the
-    # swing times, not because of the grid's reach. (On the walker's 0.77 m it rises to the
-    # range's end: eq. (2) counts no body move, the static crawl's stride is 0.2 m.)
+    # the thesis' stance (ground 0.7 m below the body, RoboSimian's own): eq. (2) peaks at a
+    # 0.45 m step and drops for the longer ones, which are still feasible, so the optimum is
+    # interior because of the swing times, not because of the grid's reach. (With the body
+    # 0.77 m up it rises to the range's end: eq. (2) counts no body move.)
     from gait_nodes.thesis import thesis_robot
 
     table = build_table(thesis_robot(robot()), FAMILY, STEP_HEIGHT_M, 1.0)[0]
