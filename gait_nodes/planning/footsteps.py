@@ -35,7 +35,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from gait_nodes.contract import FootstepPlan, ZmpReference
-from gait_nodes.errors import GaitParameterError, SwingPolicyError, TerrainError
+from gait_nodes.errors import GaitParameterError, TerrainError
 from gait_nodes.planning import rhythm as rhythm_module
 from gait_nodes.planning import support, zmp_reference
 from gait_nodes.planning.gait_params import GaitParameters
@@ -59,13 +59,6 @@ MAX_RETIMING = 4
 LANDING_LEAD_S = 0.2
 #: Largest spacing of a static crawl's ZMP reference samples [s].
 STILL_SAMPLE_S = 0.05
-#: Largest move of a static step's COM point for the full model's ZMP [m], and its grid.
-KNOT_SHIFT_M = 0.03
-KNOT_SHIFT_STEP_M = 0.005
-#: The full-model ZMP margin a static step's COM point is moved for [m]: computed on the swing
-#: shape's samples it reads about 12 mm more than the ZMP monitor measures on the walk (whose
-#: joints follow the IK's knots).
-KNOT_MARGIN_M = 0.03
 #: Sample spacing of a static crawl body move's full-model ZMP check [s].
 MULTIBODY_SAMPLE_S = 0.02
 #: Samples of a swing in that check: the swing shape's own (gait_nodes.swing.timing.
@@ -414,6 +407,7 @@ class GaitPlanner:
         zmp = zmp_reference.stand_point(self.layout, positions)
         self._airborne: tuple[np.ndarray, float] | None = None
         self._kept_heights: tuple[np.ndarray, np.ndarray] | None = None
+        self._bases: dict[tuple, tuple[np.ndarray, np.ndarray]] = {}
         if start is not None:
             positions, yaws, zmp = start.check(self.layout.count)
             self._keep_heights(start, positions)
@@ -798,7 +792,6 @@ class GaitPlanner:
         offsets = self.layout.offsets(params.step_width_m)
         t0 = state.time_s
         params = self.timed(params, twist)
-        rhythm_swing_s = params.swing_s
         if timed is not None:
             params = Rhythm(*timed[:2], len(groups[0]), self._timing.name).apply(params)
         if twist.is_zero():
@@ -917,8 +910,7 @@ class GaitPlanner:
             next_group=group_index + 1, rest_pose=rest, last_anchor=last_anchor,
             measured=(state.measured.difference(*(slot.feet for slot in slots))
                       if mode == 'walking' else frozenset()), **path)
-        bases = (self._still_bases(state, slots,
-                                   self._still_knot(state, slots, points[1], rhythm_swing_s))
+        bases = (self._still_bases(state, slots, points[1])
                  if gait == 'static_crawl' and slots else None)
         # (A static crawl is timed for the joints' acceleration limits too: its swings and
         # moves run at the limits, the limb's own, with nothing else to slow them.)
@@ -1069,63 +1061,6 @@ class GaitPlanner:
                                      'limb IK): the body is placed under each swing')
         return still_body_of(probe)
 
-    def _still_knot(self, state: _State, slots: Sequence[SwingSlot], knot: np.ndarray,
-                    swing_s: float) -> np.ndarray:
-        """The static step's COM point during its swings: ``knot`` moved for the full model.
-
-        The swinging limbs' momentum takes the full model's ZMP off the COM (by 20-40 mm on
-        RoboSimian's fastest swings, the same way every swing of a foot). With the body over
-        ``knot`` and each swing lasting ``swing_s`` (the rhythm's: the same point for every
-        re-timing of the step), that excursion is computed
-        (:meth:`gait_nodes.swing.still_body.StillBody.multibody_zmp`); when the full-model
-        ZMP's least margin in the support polygons of the swings is under
-        :data:`KNOT_MARGIN_M`, the point moves the least (up to :data:`KNOT_SHIFT_M`) that
-        brings it there, or, if none does, where it is largest. A move that would take a foot
-        out of its limb's reach is not made. (Moving the body sideways slows the limbs: the
-        point moves no further than it must.)
-        """
-        from gait_nodes.geometry import disc_support_margin
-
-        still = self._still_body()
-        knot = np.asarray(knot, dtype=float)[:2]
-        base = self._still_bases(state, slots, knot)[1]
-        yaw = float(np.angle(np.exp(1j * state.yaws).sum()))
-        u = np.linspace(0.0, 1.0, SWING_SHAPE_SAMPLES + 1)
-        steps = np.arange(-KNOT_SHIFT_M, KNOT_SHIFT_M + 1e-9, KNOT_SHIFT_STEP_M)
-        shifts = np.stack(np.meshgrid(steps, steps), axis=-1).reshape(-1, 2)
-        worst = np.full(len(shifts), np.inf)
-        try:
-            for before, yaws, swings in self._slot_swings(state, slots):
-                placed, placed_yaws = still.source.swing_feet(swings, before, yaws, yaw, u)
-                zmp = still.multibody_zmp(swing_s / SWING_SHAPE_SAMPLES,
-                                          np.repeat(base[None], len(u), axis=0), yaw, placed,
-                                          placed_yaws)
-                stance = before[[f for f in range(self.layout.count) if f not in swings], :2]
-                points = (zmp[None] + shifts[:, None]).reshape(-1, 2)
-                margins = disc_support_margin(points, stance, self.robot.foot_radius_m)
-                worst = np.minimum(worst, margins.reshape(len(shifts), len(u)).min(axis=1))
-        except SwingPolicyError:
-            return knot
-        centre = len(shifts) // 2  # (no shift)
-        if worst[centre] >= KNOT_MARGIN_M:
-            return knot
-        enough = np.flatnonzero(worst >= KNOT_MARGIN_M)
-        distance = np.hypot(*shifts.T)
-        best = (enough[np.argmin(distance[enough])] if len(enough)
-                else np.lexsort((distance, -np.round(worst, 4)))[0])
-        if worst[best] <= worst[centre] + 1e-3:
-            return knot
-        moved = knot + shifts[best]
-        try:
-            moved_base = self._still_bases(state, slots, moved)[1]
-            for before, yaws, swings in self._slot_swings(state, slots):
-                placed, placed_yaws = still.source.swing_feet(swings, before, yaws, yaw, u)
-                still.joints(np.repeat(moved_base[None], len(u), axis=0), yaw, placed,
-                             placed_yaws)
-        except SwingPolicyError:
-            return knot
-        return moved
-
     def _still_bases(self, state: _State, slots: Sequence[SwingSlot], knot: np.ndarray
                      ) -> tuple[np.ndarray, np.ndarray]:
         """(base before the body's move, base during the swings) of a static-crawl step [m].
@@ -1134,15 +1069,22 @@ class GaitPlanner:
         starts, and over its knot (:func:`zmp_reference.crawl_knots`, the thesis' ZMP) with the
         feet between the swings.
         """
-        still = self._still_body()
-        feet = self._with_heights(state.positions)
-        height = self.robot.body_height_m + feet[:, 2].min()
-        yaw = float(np.angle(np.exp(1j * state.yaws).sum()))
-        before = still.base_for_com(state.zmp, height, yaw, feet, state.yaws)
-        between = still.base_for_com(knot, height, yaw,
-                                     self._with_heights(slots[0].positions_after),
-                                     slots[0].yaws_after)
-        return before, between
+        key = (state.zmp.tobytes(), state.positions.tobytes(), state.yaws.tobytes(),
+               np.asarray(knot, dtype=float).tobytes(), slots[0].positions_after.tobytes(),
+               slots[0].yaws_after.tobytes())
+        if key not in self._bases:  # (a re-timed step asks again: the same places)
+            if len(self._bases) > 64:
+                self._bases.clear()
+            still = self._still_body()
+            feet = self._with_heights(state.positions)
+            height = self.robot.body_height_m + feet[:, 2].min()
+            yaw = float(np.angle(np.exp(1j * state.yaws).sum()))
+            before = still.base_for_com(state.zmp, height, yaw, feet, state.yaws)
+            between = still.base_for_com(knot, height, yaw,
+                                         self._with_heights(slots[0].positions_after),
+                                         slots[0].yaws_after)
+            self._bases[key] = (before, between)
+        return self._bases[key]
 
     def _still_body_zmp(self, state: _State, slots: Sequence[SwingSlot],
                         bases: tuple[np.ndarray, np.ndarray], move_from_s: float,
