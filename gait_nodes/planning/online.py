@@ -419,7 +419,10 @@ class OnlinePlanner:
                     if not later_s > at_s:
                         break
                     at_s = later_s + BOUNDARY_EPSILON_S  # the step from there is kept too
-            self._work_s = time.monotonic() - started
+            # The worker's own time delays the join only when it runs beside the clock: the
+            # deterministic caller plans between ticks, in no simulated time (so a slower
+            # machine walks the same plan).
+            self._work_s = time.monotonic() - started if self._threaded else 0.0
             if error is not None:
                 self._refuse(job, str(error) if isinstance(error, GaitNodesError)
                              else f'{type(error).__name__}: {error}')
