@@ -97,7 +97,7 @@ def test_a_swing_with_the_body_still_puts_its_fastest_joint_at_the_limit(still):
     swings = {foot: Swing('rear_left', 0.0, 1.0, feet[foot], end, 0.0, 0.0)}
     duration_s = still.step_s(swings, feet, yaws, 0.0, base)
     u = np.linspace(0.0, 1.0, 241)
-    placed, placed_yaws = still.source.swing_feet(swings, feet, yaws, 0.0, u)
+    _, placed, placed_yaws = still.source.swing_feet(swings, feet, yaws, 0.0, u)
     joints, _ = held_base_joints(model, np.repeat(base[None], len(u), axis=0), placed,
                                  placed_yaws)
     rates = np.abs(np.diff(joints, axis=0)) / (np.diff(u) * duration_s)[:, None]
@@ -189,9 +189,9 @@ def test_a_static_step_keeps_its_full_model_zmp_inside_and_slows_its_swings_for_
         swing = Swing(model.foot_names[foot], slot.lift_off_s, slot.touch_down_s,
                       planner._with_heights(step.positions_start)[foot],
                       planner._with_heights(slot.positions_after)[foot], 0.0, 0.0)
-        placed, yaws = still.source.swing_feet({foot: swing},
-                                              planner._with_heights(step.positions_start),
-                                              step.yaws_start, 0.0, u)
+        _, placed, yaws = still.source.swing_feet({foot: swing},
+                                                 planner._with_heights(step.positions_start),
+                                                 step.yaws_start, 0.0, u)
         joints = still.joints(np.repeat(step.bases[1][None], len(u), axis=0), 0.0, placed,
                               yaws)
         q = np.array([model.configuration(step.bases[1], 0.0, j) for j in joints])

@@ -1119,7 +1119,7 @@ class GaitPlanner:
                         2)
             t = np.linspace(slot.lift_off_s, slot.touch_down_s, count + 1)[1:]
             u = (t - slot.lift_off_s) / (slot.touch_down_s - slot.lift_off_s)
-            placed, placed_yaws = still.source.swing_feet(swings, before, yaws, yaw, u)
+            _, placed, placed_yaws = still.source.swing_feet(swings, before, yaws, yaw, u)
             times.append(t)
             coms.append(still.com(np.repeat(bases[1][None], len(t), axis=0), yaw, placed,
                                   placed_yaws))
@@ -1167,7 +1167,7 @@ class GaitPlanner:
             duration = slot.touch_down_s - slot.lift_off_s
             count = SWING_SHAPE_SAMPLES
             u = np.linspace(0.0, 1.0, count + 1)
-            placed, placed_yaws = still.source.swing_feet(swings, before, yaws, yaw, u)
+            _, placed, placed_yaws = still.source.swing_feet(swings, before, yaws, yaw, u)
             zmp = still.multibody_zmp(duration / count, np.repeat(bases[1][None], len(u), axis=0),
                                       yaw, placed, placed_yaws)
             stance = before[[f for f in range(self.layout.count) if f not in slot.feet], :2]

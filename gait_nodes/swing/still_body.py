@@ -186,7 +186,9 @@ class StillBody:
                with_acceleration: bool = False) -> float:
         """Least time [s] of planned swings made together, the body still at ``base_in_world``.
 
-        The swinging limbs' joints on :data:`STILL_PROBE_SAMPLES` samples, times
+        The swinging limbs' joints on :data:`STILL_PROBE_SAMPLES` samples (with
+        ``with_acceleration``, on the swings' own samples
+        :data:`gait_nodes.swing.timing.ACCELERATION_PROBE_PERIOD_S` apart), times
         ``1 + TRACKING_MARGIN`` (the IK's COM tracking moves the body a little).
 
         Args:
@@ -197,9 +199,9 @@ class StillBody:
             base_in_world: (3,) the base's position [m].
             with_acceleration: Long enough for the joints' acceleration limits too.
         """
-        u = np.linspace(0.0, 1.0, STILL_PROBE_SAMPLES)
-        feet, yaws = self.source.swing_feet(swings, feet_in_world, foot_yaws_rad, body_yaw_rad,
-                                            u)
+        u = None if with_acceleration else np.linspace(0.0, 1.0, STILL_PROBE_SAMPLES)
+        u, feet, yaws = self.source.swing_feet(swings, feet_in_world, foot_yaws_rad,
+                                               body_yaw_rad, u, fine=with_acceleration)
         base = np.repeat(np.asarray(base_in_world, dtype=float)[None], len(u), axis=0)
         joints = self.joints(base, body_yaw_rad, feet, yaws, limbs=list(swings))
         return (1.0 + TRACKING_MARGIN) * self.factor * joint_path_time_s(
@@ -247,7 +249,7 @@ class StillBody:
         if key not in self._swing_s:
             if len(self._swing_s) > 4096:
                 self._swing_s.clear()
-            u, states = self.source.shape(np.array(key[:2]), key[2])
+            u, states = self.source.shape(np.array(key[:2]), key[2], fine=True)
             states[:, :2] += offset
             q, feasible = self.source.timing.joints(states)
             if not feasible.all():

@@ -78,6 +78,11 @@ _CORNERS = np.array([[(corner >> axis) & 1 for axis in range(3)] for corner in r
 _CORNER_TUPLES = [tuple(int(v) for v in corner) for corner in _CORNERS]
 #: Samples of a polynomial swing when its joint speeds are measured.
 POLYNOMIAL_PROBE_SAMPLES = 61
+#: Sample spacing [s] of a value-table swing whose joint accelerations are measured: the
+#: swing's waypoints and the whole-body IK's commands are this far apart, and the smoothed
+#: swing changes acceleration within a tenth of a second. On the shape's ~60 samples (25 ms)
+#: RoboSimian's hip accelerations read 10 % below what the IK then commands.
+ACCELERATION_PROBE_PERIOD_S = 0.005
 #: Factor on the polynomial swing's times when they stand in for a value table not built yet
 #: (the table's smoothed swings are up to a few per cent slower than the polynomial's).
 STAND_IN_FACTOR = 1.25
@@ -195,13 +200,14 @@ class SwingTiming:
         self._cache: dict[tuple[int, int, int], float] = {}
         self._transfer_cache: dict[tuple[int, int], float] = {}  # see steady_transfer_s
 
-    def shape(self, step_in_base: np.ndarray, turn_rad: float
-              ) -> tuple[np.ndarray, np.ndarray]:
+    def shape(self, step_in_base: np.ndarray, turn_rad: float,
+              fine: bool = False) -> tuple[np.ndarray, np.ndarray]:
         """The swing by ``step_in_base`` as ``(u, states)``.
 
-        ``u`` (N,) runs from 0 to 1 in the swing's own time law; ``states`` (N, 4) are the
-        front-right foot's (x, y, z, yaw) in its base frame at the nominal stance (ground at
-        ``-body_height_m``).
+        ``u`` (N,) runs from 0 to 1 in the swing's own time law, evenly; ``states`` (N, 4) are
+        the front-right foot's (x, y, z, yaw) in its base frame at the nominal stance (ground
+        at ``-body_height_m``). ``fine``: sampled finely enough for the joints' accelerations
+        (:data:`ACCELERATION_PROBE_PERIOD_S`), not only their speeds.
         """
         raise NotImplementedError
 
@@ -255,11 +261,12 @@ class SwingTiming:
         return joint_path_time_s(self.robot, u, np.array(joints), acceleration,
                                  velocity_factor)
 
-    def world_shape(self, swing: Swing, body_yaw_rad: float) -> tuple[np.ndarray, np.ndarray]:
+    def world_shape(self, swing: Swing, body_yaw_rad: float,
+                    fine: bool = False) -> tuple[np.ndarray, np.ndarray]:
         """The swing published for a planned ``swing``, as ``(u, states)``.
 
-        ``u`` runs from 0 to 1 in the swing's time law; ``states`` (N, 4) are world positions
-        and yaws.
+        ``u`` runs from 0 to 1 in the swing's time law, evenly; ``states`` (N, 4) are world
+        positions and yaws; ``fine`` as in :meth:`shape`.
         """
         raise NotImplementedError
 
@@ -284,8 +291,10 @@ class SwingTiming:
         """
         from gait_nodes.robot.whole_body_ik import IkTargets, seed_configuration
 
-        u = np.linspace(0.0, 1.0, STEP_PROBE_SAMPLES)
-        feet, yaws = self.swing_feet(swings, feet_in_world, foot_yaws_rad, body_yaw_rad, u)
+        # Accelerations are read on the swings' own fine samples (ACCELERATION_PROBE_PERIOD_S).
+        u = None if with_acceleration else np.linspace(0.0, 1.0, STEP_PROBE_SAMPLES)
+        u, feet, yaws = self.swing_feet(swings, feet_in_world, foot_yaws_rad, body_yaw_rad, u,
+                                        fine=with_acceleration)
         first = IkTargets(feet[0], yaws[0], body_yaw_rad, com_in_world=np.asarray(com_in_world))
         q = seed_configuration(self.robot, first, self.family)
         q = self._seed_solver.solve(first, q).q
@@ -294,22 +303,27 @@ class SwingTiming:
             'path' if with_acceleration else None)
 
     def swing_feet(self, swings: dict[int, Swing], feet_in_world: np.ndarray,
-                   foot_yaws_rad: np.ndarray, body_yaw_rad: float, u: np.ndarray
-                   ) -> tuple[np.ndarray, np.ndarray]:
-        """(N, F, 3) feet and (N, F) yaws at ``u`` (N,) of the swings' time law (0 to 1).
+                   foot_yaws_rad: np.ndarray, body_yaw_rad: float, u: np.ndarray | None,
+                   fine: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(u, feet, yaws)``: (N, F, 3) feet and (N, F) yaws at ``u`` (N,) of the time law.
 
         The swinging feet on their swings as :meth:`world_shape` makes them (each stretched
-        to the common duration), the others at ``feet_in_world`` (F, 3), ``foot_yaws_rad``.
+        to the common duration; ``fine`` as there), the others at ``feet_in_world`` (F, 3),
+        ``foot_yaws_rad``. ``u`` None: the finest swing's own samples (a swing alone is then
+        taken on its samples, not interpolated between them).
         """
+        shapes = {foot: self.world_shape(swing, body_yaw_rad, fine)
+                  for foot, swing in swings.items()}
+        if u is None:
+            u = np.linspace(0.0, 1.0, max(len(own_u) for own_u, _ in shapes.values()))
         feet = np.repeat(np.asarray(feet_in_world, dtype=float)[None], len(u), axis=0)
         yaws = np.repeat(np.asarray(foot_yaws_rad, dtype=float)[None], len(u), axis=0)
-        for foot, swing in swings.items():
-            own_u, states = self.world_shape(swing, body_yaw_rad)
+        for foot, (own_u, states) in shapes.items():
             own_u = own_u / own_u[-1]
             feet[:, foot] = np.column_stack([np.interp(u, own_u, states[:, i])
                                              for i in range(3)])
             yaws[:, foot] = np.interp(u, own_u, states[:, 3])
-        return feet, yaws
+        return u, feet, yaws
 
     def transfer_s(self, feet_in_world: np.ndarray, foot_yaws_rad: np.ndarray,
                    body_yaw_rad: float, com_from: np.ndarray, com_to: np.ndarray,
@@ -435,7 +449,7 @@ class TableSwingTiming(SwingTiming):
                          'the swing value table')
         self.policy = policy
 
-    def shape(self, step_in_base, turn_rad):
+    def shape(self, step_in_base, turn_rad, fine=False):
         """The table's greedy path for the step, smoothed (see :meth:`SwingTiming.shape`).
 
         The path ends on the table's goal; it is moved (as the swing-leg policy moves it onto a
@@ -445,14 +459,14 @@ class TableSwingTiming(SwingTiming):
         path, _ = self.policy.path_for_step(step_in_base, turn_rad)
         polyline = SwingTrajectory('probe', 0, path.times_s, path.states[:, :3],
                                    path.states[:, 3])
-        smoothed, needed = smooth_trajectory(polyline, None, needed_probe_period(path))
+        smoothed, needed = smooth_trajectory(polyline, None, needed_probe_period(path, fine))
         states = np.column_stack([smoothed.positions_in_world, smoothed.yaws_rad])
         nominal = self.robot.description.feet[self._reference].nominal_position_in_base
         states[:, :2] += np.asarray(nominal[:2]) - 0.5 * (states[0, :2] + states[-1, :2])
         return smoothed.times_s / needed, states
 
 
-    def world_shape(self, swing, body_yaw_rad):
+    def world_shape(self, swing, body_yaw_rad, fine=False):
         """The smoothed table swing placed on ``swing`` (see :meth:`SwingTiming.world_shape`)."""
         from gait_nodes.swing.policy import limb_step, place_swing
 
@@ -462,7 +476,7 @@ class TableSwingTiming(SwingTiming):
         path, _ = self.policy.path_for_step(step, turn)
         polyline, _ = place_swing(path, swing, 0, mirror, body_yaw_rad,
                                   self.policy.table.ground_z_m)
-        smoothed, needed = smooth_trajectory(polyline, None, needed_probe_period(path))
+        smoothed, needed = smooth_trajectory(polyline, None, needed_probe_period(path, fine))
         states = np.column_stack([smoothed.positions_in_world, np.unwrap(smoothed.yaws_rad)])
         return smoothed.times_s / needed, states
 
@@ -486,16 +500,22 @@ def joint_path_time_s(robot, u: np.ndarray, joints: np.ndarray,
         return time_s
     accelerations = np.asarray(robot.acceleration_limits_rad_s2, dtype=float)
     if acceleration == 'path':
-        curvature = np.abs(np.gradient(np.gradient(joints, u, axis=0), u, axis=0))
+        # Three-point second differences: what the commands' own samples show (a gradient of
+        # the gradient averages over four spacings and reads a peak low).
+        h0, h1 = np.diff(u)[:-1, None], np.diff(u)[1:, None]
+        curvature = np.abs(2.0 * (h0 * joints[2:] - (h0 + h1) * joints[1:-1] + h1 * joints[:-2])
+                           / (h0 * h1 * (h0 + h1)))
     else:
         peak = MIN_JERK_PEAK_ACCELERATION if acceleration == 'min_jerk' else float(acceleration)
         curvature = peak * rates
     return max(time_s, math.sqrt(float((curvature / accelerations).max())))
 
 
-def needed_probe_period(path) -> float:
-    """Sample spacing [s] for timing a swing (about 60 samples)."""
-    return max(path.duration_s / 60.0, 0.005)
+def needed_probe_period(path, fine: bool = False) -> float:
+    """Sample spacing [s] for timing a swing: about 60 samples; ``fine``: for accelerations."""
+    if fine:
+        return ACCELERATION_PROBE_PERIOD_S
+    return max(path.duration_s / 60.0, ACCELERATION_PROBE_PERIOD_S)
 
 
 class PolynomialSwingTiming(SwingTiming):
@@ -520,8 +540,11 @@ class PolynomialSwingTiming(SwingTiming):
         self.nominal = np.asarray(feet[self._reference].nominal_position_in_base, dtype=float)
         self.step_height_m = float(step_height_m)
 
-    def shape(self, step_in_base, turn_rad):
-        """The sixth-order swing around the nominal foot (see :meth:`SwingTiming.shape`)."""
+    def shape(self, step_in_base, turn_rad, fine=False):
+        """The sixth-order swing around the nominal foot (see :meth:`SwingTiming.shape`).
+
+        A polynomial: its samples are exact, fine or not.
+        """
         from gait_nodes.swing.polynomial import evaluate, sixth_order_coefficients
 
         step = np.array([step_in_base[0], step_in_base[1], 0.0, turn_rad])
@@ -533,8 +556,11 @@ class PolynomialSwingTiming(SwingTiming):
         u = np.linspace(0.0, 1.0, POLYNOMIAL_PROBE_SAMPLES)
         return u / self.factor, evaluate(coefficients, u)
 
-    def world_shape(self, swing, body_yaw_rad):
-        """The sixth-order swing of ``swing`` (see :meth:`SwingTiming.world_shape`)."""
+    def world_shape(self, swing, body_yaw_rad, fine=False):
+        """The sixth-order swing of ``swing`` (see :meth:`SwingTiming.world_shape`).
+
+        A polynomial: its samples are exact, fine or not.
+        """
         from gait_nodes.swing.polynomial import polynomial_swing
 
         trajectory, _ = polynomial_swing(swing, 0, self.step_height_m, POLYNOMIAL_PROBE_SAMPLES)
