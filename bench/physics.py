@@ -31,7 +31,7 @@ one process per run; the figures come from its bag and its summary:
   pitch within 3 degrees at every stamp, distance within 5 %, the simulator's slip under 5 mm,
   the CoP inside the contact polygon at every sample, no drive at its effort limit.
 
-The table at the end is Markdown (the README's).
+The table at the end is Markdown (docs/physics.md's).
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""The README's results table: every scenario walked and inspected (the thesis: gait_nodes.thesis).
+"""The results table of docs/benchmarks.md: every scenario walked and inspected.
 
 Runs, with the project's own commands and nothing else:
 

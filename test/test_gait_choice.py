@@ -49,8 +49,8 @@ def test_auto_walks_the_static_crawl_on_robosimian_at_1_rad_s_and_says_why(robos
     assert params.gait == 'auto' and params.resolved_gait(robosimian) == 'static_crawl'
     speed = {c.gait: c.speed_m_s for c in choice.candidates}
     # Thesis IV.C: below about 1.9 rad/s the value-iteration crawl outwalks the ZMP gaits; the
-    # static crawl (README: 0.0267 m/s walked with the value table's swing) more than twice
-    # the ZMP crawl (0.0113 m/s with the polynomial swing).
+    # static crawl (docs/robosimian.md: 0.0281 m/s walked with the value table's swing) more than
+    # twice the ZMP crawl (0.0113 m/s with the polynomial swing).
     assert 0.02 < speed['static_crawl'] < 0.03
     assert speed['static_crawl'] > 2 * speed['crawl']
     why = choice.describe()

@@ -208,7 +208,8 @@ def test_the_sweep_command_gives_the_thesis_commands_optimum_on_its_grid(quick_r
 def test_gait_speed_has_an_interior_maximum_over_step_size(quick_run):
     _, _, results, _ = quick_run
     # Fig. 14 (thesis' 3rd family, 0.1 m step height), swings centred on the stance. On the
-    # default grid this optimum lies at 0.56 m, one node short of the longest step (README).
+    # default grid this optimum lies at 0.56 m, one node short of the longest step
+    # (docs/thesis.md).
     curve = results.centred[2, 0.1]
     k = curve.best
     assert 0 < k < len(curve.steps_m) - 1
@@ -227,7 +228,7 @@ def test_every_kind_of_perturbation_is_slower_on_average(quick_run):
     for result in results.perturbations:
         assert len(result.speeds_m_s) == results.settings.trials
         # The thesis' claim (IV.B.7) is the mean loss per kind; single copies can win where
-        # the value is interpolated across the 0.1 m between the two swing planes (README).
+        # the value is interpolated across the 0.1 m between the two swing planes (docs/thesis.md).
         assert result.mean_loss_m_s > 0, result.mode
         assert result.slower_fraction > 0.5, result.mode
 
