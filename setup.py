@@ -37,8 +37,9 @@ PROGRAMS = [
     'inspect',
     'replay',
     'swing_table',
-    'view',
 ]
+# Not gait_nodes.view (python -m gait_nodes.view): a `view` script in a venv's bin would hide
+# vim's `view`, and under ROS 2 foxglove_bridge serves the graph.
 
 
 def _files_under(root):
