@@ -319,3 +319,18 @@ def test_bad_view_arguments_are_refused(view_main, args, says):
     assert status == 2
     assert says in err and len(err.strip().splitlines()) == 1
 
+
+def test_run_view_refuses_a_taken_port_and_a_graph_not_over_dds(capsys):
+    from gait_nodes.__main__ import main
+
+    with socket.socket() as taken:
+        taken.bind(('127.0.0.1', 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        assert main(['run', '--runtime', 'dds', '--view', str(port)]) == 2
+    err = capsys.readouterr().err
+    assert f'127.0.0.1:{port}' in err and 'Address already in use' in err
+    assert main(['run', '--fast', '--view']) == 2
+    assert '--runtime dds' in capsys.readouterr().err
+    assert main(['run', '--runtime', 'dds', '--view', 'localhost:port']) == 2
+    assert 'HOST:PORT' in capsys.readouterr().err
