@@ -20,11 +20,13 @@ import time
 
 from gait_nodes import graph
 from gait_nodes.cli import run_node
+from gait_nodes.errors import LiveViewError
 from gait_nodes.foxglove_relay import DEFAULT_HOST, DEFAULT_PORT, FoxgloveRelay
 from gait_nodes.interfaces import get_message
 from gait_nodes.replay import replay_qos
 from gait_nodes.runtime import DurabilityPolicy, Node
 from gait_nodes.runtime.qos import offered_qos_yaml
+from gait_nodes.runtime.selection import active_runtime
 
 PROG = 'python -m gait_nodes.view'
 #: Topics of the contract published by a robot state publisher, latched (transient local) as
@@ -188,9 +190,14 @@ def main(args: list[str] | None = None) -> int:
                             help="also serve this robot's per-foot topics "
                                  '(/gait/contact_wrench/<foot>, the physics simulator\'s)')
 
-    return run_node(lambda options: LiveView(host=options.host, port=options.port,
-                                             namespace=options.namespace, robot=options.robot),
-                    args, prog=PROG, description=__doc__.split('\n\n')[0],
+    def factory(options) -> LiveView:
+        if active_runtime() == 'inproc':
+            raise LiveViewError('the inproc runtime has no graph outside this process to '
+                                'serve: serve a dds graph (--runtime dds)')
+        return LiveView(host=options.host, port=options.port, namespace=options.namespace,
+                        robot=options.robot)
+
+    return run_node(factory, args, prog=PROG, description=__doc__.split('\n\n')[0],
                     add_arguments=add_arguments)
 
 

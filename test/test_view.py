@@ -313,6 +313,7 @@ def test_a_taken_port_is_refused_with_what_to_do(view_main):
     (['--namespace', 'robot 1'], 'robot 1'),
     (['--port', '70000'], '[0, 65535]'),
     (['--host', '192.0.2.1'], '--host'),  # TEST-NET-1: no address of this machine
+    (['--runtime', 'inproc'], '--runtime dds'),
 ])
 def test_bad_view_arguments_are_refused(view_main, args, says):
     status, err = view_main(*args)
