@@ -30,7 +30,7 @@ from gait_nodes.runtime.selection import active_runtime
 
 PROG = 'python -m gait_nodes.view'
 #: Topics of the contract published by a robot state publisher, latched (transient local) as
-#: ROS's robot_state_publisher has them; served once they have a publisher.
+#: ROS's robot_state_publisher has them; offered to clients before anything publishes them.
 DESCRIPTION_TOPICS = {'/robot_description': 'std_msgs/msg/String',
                       '/tf_static': 'tf2_msgs/msg/TFMessage'}
 #: How often the clients' subscriptions are followed [s]: the delay before a channel that a

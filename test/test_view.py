@@ -282,6 +282,26 @@ def test_a_namespaced_view_serves_the_topics_of_that_namespace(graph, start_view
     assert view.stop(signal.SIGTERM) == 0
 
 
+def test_the_view_reads_a_topic_latched_and_reliable_only_when_every_publisher_offers_it():
+    from gait_nodes.runtime import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+    from gait_nodes.runtime.qos import offered_qos_yaml
+    from gait_nodes.view import SUBSCRIPTION_DEPTH, subscription_qos
+
+    latched = offered_qos_yaml(qos_profile_latched)
+    volatile = offered_qos_yaml(QoSProfile(depth=10))
+    best_effort = offered_qos_yaml(QoSProfile(depth=5,
+                                              reliability=ReliabilityPolicy.BEST_EFFORT))
+    profile = subscription_qos([latched, latched])
+    assert profile.durability == DurabilityPolicy.TRANSIENT_LOCAL
+    assert profile.reliability == ReliabilityPolicy.RELIABLE
+    assert profile.depth == SUBSCRIPTION_DEPTH
+    # A transient-local reader does not match a volatile writer, nor a reliable one a
+    # best-effort writer: the reader asks for what all of them offer.
+    assert subscription_qos([latched, volatile]).durability == DurabilityPolicy.VOLATILE
+    assert subscription_qos([volatile, best_effort]).reliability == \
+        ReliabilityPolicy.BEST_EFFORT
+
+
 @pytest.fixture
 def view_main(monkeypatch, capsys):
     """``main(args)`` of the view in this process: ``(status, stderr)``."""
