@@ -21,6 +21,9 @@ DATA_PACKAGES = {
     package_name + '.config': 'config',
 }
 
+# The Foxglove SDK of the live view (gait_nodes.view): its WebSocket server.
+VIEW_REQUIREMENT = 'foxglove-sdk>=0.8'
+
 # Command-line programs, each gait_nodes/<name>.py or gait_nodes/<name>/__main__.py with main().
 PROGRAMS = [
     'footstep_planner',
@@ -35,6 +38,8 @@ PROGRAMS = [
     'replay',
     'swing_table',
 ]
+# Not gait_nodes.view (python -m gait_nodes.view): a `view` script in a venv's bin would hide
+# vim's `view`, and under ROS 2 foxglove_bridge serves the graph.
 
 
 def _files_under(root):
@@ -145,11 +150,16 @@ setup(
     extras_require={
         # The tests also check the real robot models, so they need example-robot-data.
         # ...and the physics simulator and the walks' videos, so they need MuJoCo and imageio.
+        # ...and the live view, so they need the Foxglove SDK and a WebSocket client to talk to
+        # it: the SDK ships a server only, and the sync client of websockets is the
+        # client the test speaks the Foxglove protocol with. Used by the tests alone.
         'test': ['pytest', 'hypothesis', 'ruff', 'example-robot-data', 'mujoco',
-                 'imageio[ffmpeg]'],
+                 'imageio[ffmpeg]', VIEW_REQUIREMENT, 'websockets>=13'],
         'robots': ['example-robot-data'],
         # The physics simulator (MuJoCo) and, for the walks' videos, an ffmpeg writer.
         'physics': ['mujoco', 'imageio[ffmpeg]'],
+        # The live view in Foxglove without ROS (python -m gait_nodes.view, run --view).
+        'view': [VIEW_REQUIREMENT],
     },
     zip_safe=True,
     maintainer='gait_nodes maintainers',

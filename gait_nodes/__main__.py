@@ -32,6 +32,7 @@ from gait_nodes.cli import (
     split_args,
 )
 from gait_nodes.errors import ArgumentError, GaitNodesError, os_error_text
+from gait_nodes.foxglove_relay import DEFAULT_HOST, DEFAULT_PORT
 from gait_nodes.node_parameters import RECORDER, check_overrides
 from gait_nodes.runtime.args import parse_ros_args
 from gait_nodes.scenarios import DEFAULT_SCENARIO, SCENARIOS, CommandDriver, get_scenario
@@ -101,6 +102,12 @@ def build_parser() -> ArgumentParser:
                           'gets -r __ns:=NS, and /tf, /tf_static and /diagnostics are remapped '
                           'into it (/clock stays global), so that graphs in different '
                           'namespaces share a ROS_DOMAIN_ID without mixing')
+    run.add_argument('--view', metavar='[HOST:]PORT', nargs='?', const=str(DEFAULT_PORT),
+                     default=None,
+                     help='with --runtime dds: serve the live graph to Foxglove over its '
+                          'WebSocket protocol (python -m gait_nodes.view as one more process); '
+                          f'open ws://localhost:PORT in Foxglove (default port {DEFAULT_PORT}, '
+                          f'host {DEFAULT_HOST}; 0.0.0.0:PORT serves every interface)')
     run.add_argument('--json', action='store_true', help='print the summary as JSON')
     return parser
 
@@ -235,6 +242,40 @@ def _check_bag_directory(path: str) -> None:
                             f'{os_error_text(exc)}') from None
 
 
+def _check_view(address: str, runtime_name: str) -> tuple[str, int]:
+    """``(host, port)`` of ``run --view``, refused at once if the view could not serve there.
+
+    Args:
+        address: ``PORT`` or ``HOST:PORT``.
+        runtime_name: The graph's runtime: only a dds graph is served.
+    """
+    if runtime_name == 'rclpy':
+        raise ArgumentError('--view serves a dds graph; under ROS 2 run foxglove_bridge '
+                            '(ros2 launch foxglove_bridge foxglove_bridge_launch.xml)')
+    if runtime_name != 'dds':
+        raise ArgumentError(f'--view serves a graph of node processes over DDS: add --runtime '
+                            f'dds (the {runtime_name} graph runs in this process, in '
+                            f'simulated time)')
+    from gait_nodes.foxglove_relay import import_sdk, parse_address, probe_port, serve_error
+
+    host, port = parse_address(address, '--view')
+    import_sdk()
+    reason = probe_port(host, port)
+    if reason is not None:
+        raise serve_error(host, port, reason, '--view [HOST:]PORT')
+    return host, port
+
+
+def _view_command(options, runtime_name: str) -> list[str]:
+    """The command of the live view process of ``run --view``: the graph's namespace."""
+    host, port = options.view
+    robot = _recorded_robot(options)
+    return [sys.executable, '-m', 'gait_nodes.view', '--runtime', runtime_name,
+            '--host', host, '--port', str(port),
+            *(['--namespace', options.namespace] if options.namespace else []),
+            *(['--robot', robot] if robot else [])]
+
+
 def run_inproc(options, names: list[str], ros: list[str], commands=None) -> dict:
     """All nodes in this process under one lockstep executor.
 
@@ -286,6 +327,8 @@ def run_processes(options, names: list[str], ros: list[str], runtime_name: str) 
     if options.record:
         commands['recorder'] = [sys.executable, '-m', 'gait_nodes.recorder', '--runtime',
                                 runtime_name, *_record_args(options)]
+    if options.view:
+        commands['view'] = _view_command(options, runtime_name)
     runtime.init(args=[PROG], runtime=runtime_name)
     processes: dict[str, subprocess.Popen] = {}
     exit_codes: dict[str, int] = {}
@@ -494,6 +537,8 @@ def main(args: list[str] | None = None) -> int:
                                     f'with --runtime {options.runtime}')
             options.runtime = 'inproc'
         runtime_name = select_runtime(options.runtime)
+        if options.view is not None:  # a port taken: before anything starts
+            options.view = _check_view(options.view, runtime_name)
         names = _selected_nodes(options)
         if options.video is not None:
             if options.record is None:

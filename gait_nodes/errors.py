@@ -76,6 +76,13 @@ class TerrainError(ParameterError):
     """
 
 
+class LiveViewError(GaitNodesError):
+    """The live view cannot serve: its port is taken, its host unknown, the Foxglove SDK missing.
+
+    The message says what was wrong and what to do.
+    """
+
+
 def os_error_text(error: OSError) -> str:
     """An OSError on one line without the file name: ``[Errno 28] No space left on device``."""
     if error.errno is not None and error.strerror:
