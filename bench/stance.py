@@ -1,11 +1,11 @@
-"""The static crawl's stance: RoboSimian walked at body heights and rear-foot widths.
+"""The static crawl's stance: RoboSimian walked at body heights and feet places.
 
 The walker's stance (``config/robots/robosimian.yaml``: the feet's nominal places and the
 body's height) decides how fast the limbs move their feet (the limb's own speed map) and how
 much room the ZMP keeps in the support triangles of the static crawl's swings. This script
 walks the default scenario (``robosimian_static_crawl``) on copies of the robot YAML that
-differ only in the ground's depth below the body and the rear feet's lateral place, with the
-project's own command, one inproc run each (deterministic; the copies from
+differ only in the ground's depth below the body, the rear feet's lateral place and the front
+feet's place ahead of the base, with the project's own command, one inproc run each (deterministic; the copies from
 :func:`gait_nodes.robot.stance.write_stance`):
 
     python -m gait_nodes run --fast --robot COPY.yaml --record BAG --no-plot --json
@@ -15,12 +15,14 @@ least ZMP margin on the full model, the joints' peak speed and the seconds in wh
 simulator reported commands beyond a joint's velocity or acceleration limit, as a Markdown
 table.
 
-    python bench/stance.py [--heights 0.7,0.77] [--rear-widths 0.5,0.52] [--keep DIR]
+    python bench/stance.py [--heights 0.7,0.77] [--rear-widths 0.5,0.52] [--front-x 0.56,0.6]
+                           [--keep DIR]
 """
 
 from __future__ import annotations
 
 import argparse
+import itertools
 import json
 import subprocess
 import sys
@@ -45,34 +47,37 @@ def walk(robot_yaml: Path, bag: Path) -> dict:
 def main(argv: list[str] | None = None) -> int:
     """Walk each stance; print the table."""
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
-    parser.add_argument('--heights', default='0.65,0.7,0.73,0.75,0.77,0.8,0.85',
+    parser.add_argument('--heights', default='0.7,0.75,0.77,0.8',
                         help='ground depths below the body [m]')
-    parser.add_argument('--rear-widths', default='0.5,0.52',
+    parser.add_argument('--rear-widths', default='0.5',
                         help="rear feet's lateral places [m]")
+    parser.add_argument('--front-x', default='0.52,0.56,0.6',
+                        help="front feet's places ahead of the base [m]")
     parser.add_argument('--keep', default=None, help='keep the YAML copies and bags here')
     options = parser.parse_args(argv)
     heights = [float(v) for v in options.heights.split(',')]
     widths = [float(v) for v in options.rear_widths.split(',')]
-    rows = ['| ground below the body [m] | rear feet out [m] | steady speed [m/s] (ft/min) '
-            '| ZMP margin min [mm] | joint vel. peak / limit | commands over a limit [s] |',
-            '| --- ' * 6 + '|']
+    fronts = [float(v) for v in options.front_x.split(',')]
+    rows = ['| ground below the body [m] | rear feet out [m] | front feet ahead [m] '
+            '| steady speed [m/s] (ft/min) | ZMP margin min [mm] | joint vel. peak / limit '
+            '| commands over a limit [s] |',
+            '| --- ' * 7 + '|']
     with tempfile.TemporaryDirectory(prefix='gait_nodes_stance_') as tmp:
         folder = Path(options.keep or tmp)
         folder.mkdir(parents=True, exist_ok=True)
-        for height in heights:
-            for width in widths:
-                copy = write_stance('robosimian', folder, height, width)
-                gait = walk(copy, folder / f'{copy.stem}_bag')
-                speed = gait['steady']['net_speed_m_s']
-                margin = gait['zmp_margin']['min_m']
-                peak = gait['joint_velocity']['/joint_states']['peak_ratio_to_limit']
-                # The simulator's once-a-second reports of commands beyond a joint's velocity
-                # or acceleration limit (it follows them within the limits).
-                over = gait['diagnostics']['by_name'].get(
-                    'kinematic_simulator: velocity saturation', {}).get('WARN', 0)
-                rows.append(f'| {height:g} | {width:g} | {speed:.4f} ({speed * 196.85:.2f}) '
-                            f'| {1000 * margin:.1f} | {peak:.2f} | {over} |')
-                print(rows[-1], file=sys.stderr, flush=True)
+        for height, width, front in itertools.product(heights, widths, fronts):
+            copy = write_stance('robosimian', folder, height, width, front)
+            gait = walk(copy, folder / f'{copy.stem}_bag')
+            speed = gait['steady']['net_speed_m_s']
+            margin = gait['zmp_margin']['min_m']
+            peak = gait['joint_velocity']['/joint_states']['peak_ratio_to_limit']
+            # The simulator's once-a-second reports of commands beyond a joint's velocity or
+            # acceleration limit (it follows them within the limits).
+            over = gait['diagnostics']['by_name'].get(
+                'kinematic_simulator: velocity saturation', {}).get('WARN', 0)
+            rows.append(f'| {height:g} | {width:g} | {front:g} | {speed:.4f} '
+                        f'({speed * 196.85:.2f}) | {1000 * margin:.1f} | {peak:.2f} | {over} |')
+            print(rows[-1], file=sys.stderr, flush=True)
     print('\n'.join(rows))
     return 0
 

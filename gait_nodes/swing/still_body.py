@@ -54,8 +54,10 @@ GRAVITY_M_S2 = 9.81
 #: Share of a body move spent speeding up (and as much slowing down): the base's speed rises
 #: along a half cosine, cruises, and falls the same way (:func:`body_move`). Its speed peaks
 #: ``1 / (1 - RAMP_FRACTION)`` times above the mean, where a minimum-jerk move's peaks 1.875
-#: times: the move needs that much less time at the joint limit.
-RAMP_FRACTION = 0.25
+#: times: the move needs that much less time at the joint limit. Shorter ramps need less time
+#: at the velocity limit and more at the acceleration limit: 0.2 makes them meet on RoboSimian's
+#: half-stride move (0.468 s; 0.499 s at 0.25, 0.480 s at 0.15).
+RAMP_FRACTION = 0.2
 #: Peak speed over mean speed of :func:`body_move`.
 BODY_MOVE_PEAK_FACTOR = 1.0 / (1.0 - RAMP_FRACTION)
 #: Peak acceleration of :func:`body_move` over a unit move in unit time.
