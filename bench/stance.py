@@ -5,8 +5,8 @@ body's height) decides how fast the limbs move their feet (the limb's own speed 
 much room the ZMP keeps in the support triangles of the static crawl's swings. This script
 walks the default scenario (``robosimian_static_crawl``) on copies of the robot YAML that
 differ only in the ground's depth below the body, the rear feet's lateral place and the front
-feet's place ahead of the base, with the project's own command, one inproc run each (deterministic; the copies from
-:func:`gait_nodes.robot.stance.write_stance`):
+feet's place ahead of the base, with the project's own command, one inproc run each
+(deterministic; the copies from :func:`gait_nodes.robot.stance.write_stance`):
 
     python -m gait_nodes run --fast --robot COPY.yaml --record BAG --no-plot --json
 

@@ -35,6 +35,7 @@ from gait_nodes.swing.timing import (
     LATTICE,
     TRANSFER_PROBE_SAMPLES,
     joint_path_time_s,
+    lattice_interpolated,
 )
 
 #: Relative extra time of the steady rhythm's swings and body moves over their probe at the
@@ -84,7 +85,8 @@ class StillBody:
         self._data = self.robot.new_data()
         self._limbs = [(foot.name, self.robot.indices(foot.joints))
                        for foot in self.robot.description.feet]
-        self._swing_s: dict[tuple[float, float, float], float] = {}
+        #: Lattice node and the swing's centre offset -> least swing time at the node [s].
+        self._swing_s: dict[tuple, float] = {}
         self._transfer_s: dict[tuple[int, int], float] = {}
         self._q_posture = self.robot.joint_positions(
             self.robot.configuration(np.zeros(3), 0.0))
@@ -93,6 +95,12 @@ class StillBody:
         self._feet = self.robot.nominal_feet_in_world(self._base, 0.0)
         self._reference_xy = np.asarray(self.robot.description.feet[
             timing._reference].nominal_position_in_base[:2], dtype=float)
+        # Each foot swings around its own nominal place: its offset from the front-right
+        # limb's, in that limb's (mirrored) coordinates (a stance need not be a rectangle).
+        self._offsets = [tuple(np.round(np.asarray(foot.nominal_position_in_base[:2], dtype=float)
+                                        * mirror - self._reference_xy, 6).tolist())
+                         for foot, mirror in zip(self.robot.description.feet,
+                                                 timing._mirror_floats, strict=True)]
 
     @property
     def factor(self) -> float:
@@ -165,8 +173,8 @@ class StillBody:
                      feet_in_world: np.ndarray, foot_yaws_rad: np.ndarray) -> np.ndarray:
         """(3,) base position whose full-model COM is over ``com_xy``, the feet where they stand.
 
-        A few fixed-point steps (the COM moves with the base less than one for one: the feet
-        stay).
+        A few secant steps (the COM moves with the base less than one for one: the feet stay;
+        how much less depends on the stance, so each step takes the ratio the last one met).
         """
         target = np.asarray(com_xy, dtype=float)[:2]
         feet = np.asarray(feet_in_world, dtype=float)[None]
@@ -174,11 +182,19 @@ class StillBody:
         base = np.array([*target, base_z_m])
         base[:2] += self._base[:2] - self.com(self._base[None], 0.0, self._feet[None],
                                               np.zeros((1, len(self._feet))))[0, :2]
-        for _ in range(8):
-            error = target - self.com(base[None], body_yaw_rad, feet, yaws)[0, :2]
+        gain = 1.4  # the base moves ~1.4 m per metre of COM at RoboSimian's first stance
+        previous = None
+        for _ in range(12):
+            com = self.com(base[None], body_yaw_rad, feet, yaws)[0, :2]
+            error = target - com
             if float(np.hypot(*error)) < 1e-7:
                 break
-            base[:2] += 1.4 * error  # the base moves ~1.4 m per metre of COM (RoboSimian)
+            if previous is not None:
+                moved_com = com - previous[1]
+                if float(moved_com @ moved_com) > 1e-18:
+                    gain = float((base[:2] - previous[0]) @ moved_com / (moved_com @ moved_com))
+            previous = (base[:2].copy(), com)
+            base[:2] += gain * error
         return base
 
     # --- planned steps -------------------------------------------------------------------------
@@ -236,30 +252,32 @@ class StillBody:
         """Least time [s] of foot ``foot``'s swing by ``step_in_base`` at the nominal stance.
 
         The front-right limb's mirrored step, its shape (:meth:`SwingTiming.shape`) timed
-        through its own limb IK, times ``1 + STILL_MARGIN``; cached on :data:`LATTICE`'s
-        resolution (a quarter of it).
+        through its own limb IK, times ``1 + STILL_MARGIN``; interpolated between the nodes of
+        :data:`LATTICE` (each timed once): continuous in the step, so that the rhythm's search
+        of the fastest velocity meets no steps, and a handful of limb IK runs serve it.
         """
         mirror = self.source._mirror_floats[foot]
-        key = tuple(round(v / (0.25 * step), 0) * 0.25 * step for v, step in zip(
-            (float(step_in_base[0]) * mirror[0], float(step_in_base[1]) * mirror[1],
-             mirror[0] * mirror[1] * float(turn_rad)), LATTICE, strict=True))
-        # The swing around this foot's own nominal place, in the front-right limb's coordinates
-        # (a stance need not be a rectangle).
-        offset = np.asarray(self.robot.description.feet[foot].nominal_position_in_base[:2],
-                            dtype=float) * mirror - self._reference_xy
-        key = (*key, *np.round(offset, 6))
+        point = (float(step_in_base[0]) * mirror[0], float(step_in_base[1]) * mirror[1],
+                 mirror[0] * mirror[1] * float(turn_rad))
+        offset = self._offsets[foot]
+        return (1.0 + STILL_MARGIN) * self.factor * lattice_interpolated(
+            point, lambda node: self._node_swing_s(node, offset))
+
+    def _node_swing_s(self, node: tuple[int, int, int], offset: tuple[float, float]) -> float:
+        """Least swing time [s] at lattice node ``node``, the swing centred ``offset`` away."""
+        key = (*node, *offset)
         if key not in self._swing_s:
             if len(self._swing_s) > 4096:
                 self._swing_s.clear()
-            u, states = self.source.shape(np.array(key[:2]), key[2], fine=True)
+            step = np.array(node, dtype=float) * LATTICE
+            u, states = self.source.shape(step[:2], float(step[2]), fine=True)
             states[:, :2] += offset
             q, feasible = self.source.timing.joints(states)
             if not feasible.all():
-                raise SwingPolicyError(f'a swing by {np.round(key[:2], 3).tolist()} m leaves the '
+                raise SwingPolicyError(f'a swing by {np.round(step[:2], 3).tolist()} m leaves the '
                                        f'reach of the limb (IK family {self.family})')
             reference = self._limbs[self.source._reference][1][:q.shape[1]]
-            self._swing_s[key] = (1.0 + STILL_MARGIN) * self.factor * joint_path_time_s(
-                _Limb(self.robot, reference), u, q, 'path')
+            self._swing_s[key] = joint_path_time_s(_Limb(self.robot, reference), u, q, 'path')
         return self._swing_s[key]
 
     def lift_and_lower_s(self) -> float:

@@ -355,36 +355,18 @@ class SwingTiming:
     def _lattice_s(self, step_in_base: np.ndarray, turn_rad: float) -> float:
         """:meth:`raw_s` interpolated on :data:`LATTICE` (cached; the planner asks often)."""
         # A swing backwards is the forward one reversed: the same joint speeds, the same time.
-        # Plain floats (the planner asks thousands of times when it times a velocity): the
-        # trilinear weights multiply in np.prod's order, so the result is the numpy form's to
-        # the bit (test_swing_timing).
         point = (float(step_in_base[0]), float(step_in_base[1]), float(turn_rad))
         if point[0] < 0 or (point[0] == 0 and (point[1] < 0 or (point[1] == 0
                                                                   and point[2] < 0))):
             point = (-point[0], -point[1], -point[2])
-        point = [value / spacing for value, spacing in zip(point, LATTICE, strict=True)]
-        low = [math.floor(value) for value in point]
-        weight = [value - corner for value, corner in zip(point, low, strict=True)]
-        fx, fy, fz = [(1.0 - w, w) for w in weight]
-        total = 0.0
-        # The corners in _CORNER_TUPLES' order (i fastest), those with a zero factor skipped
-        # (a straight walk has no y and no turn: 2 corners of 8): their weight is 0.
-        for k in (0, 1):
-            if fz[k] == 0.0:
-                continue
-            for j in (0, 1):
-                if fy[j] == 0.0:
-                    continue
-                for i in (0, 1):
-                    w = fx[i] * fy[j] * fz[k]
-                    if w == 0.0:
-                        continue
-                    key = (low[0] + i, low[1] + j, low[2] + k)
-                    if key not in self._cache:
-                        node = np.array(key, dtype=float) * LATTICE
-                        self._cache[key] = self.raw_s(node[:2], float(node[2]))
-                    total += w * self._cache[key]
-        return total
+        return lattice_interpolated(point, self._node_s)
+
+    def _node_s(self, key: tuple[int, int, int]) -> float:
+        """:meth:`raw_s` at lattice node ``key`` (cached)."""
+        if key not in self._cache:
+            node = np.array(key, dtype=float) * LATTICE
+            self._cache[key] = self.raw_s(node[:2], float(node[2]))
+        return self._cache[key]
 
     def swing_s(self, foot: int, step_in_base: np.ndarray, turn_rad: float = 0.0) -> float:
         """Least time [s] of foot ``foot``'s swing by ``step_in_base`` (its own base frame).
@@ -511,6 +493,34 @@ def joint_path_time_s(robot, u: np.ndarray, joints: np.ndarray,
         peak = MIN_JERK_PEAK_ACCELERATION if acceleration == 'min_jerk' else float(acceleration)
         curvature = peak * rates
     return max(time_s, math.sqrt(float((curvature / accelerations).max())))
+
+
+def lattice_interpolated(point, node_value: Callable[[tuple[int, int, int]], float]) -> float:
+    """Trilinear interpolation on :data:`LATTICE` of ``node_value`` (a node's integer key -> s).
+
+    ``point`` is (step x [m], step y [m], turn [rad]). Plain floats (the planner asks thousands
+    of times when it times a velocity): the weights multiply in np.prod's order, so the result is
+    the numpy form's to the bit (test_swing_timing). The corners go in _CORNER_TUPLES' order (i
+    fastest); those with a zero factor are skipped (a straight walk has no y and no turn: 2
+    corners of 8) and never asked of ``node_value``.
+    """
+    point = [value / spacing for value, spacing in zip(point, LATTICE, strict=True)]
+    low = [math.floor(value) for value in point]
+    weight = [value - corner for value, corner in zip(point, low, strict=True)]
+    fx, fy, fz = [(1.0 - w, w) for w in weight]
+    total = 0.0
+    for k in (0, 1):
+        if fz[k] == 0.0:
+            continue
+        for j in (0, 1):
+            if fy[j] == 0.0:
+                continue
+            for i in (0, 1):
+                w = fx[i] * fy[j] * fz[k]
+                if w == 0.0:
+                    continue
+                total += w * node_value((low[0] + i, low[1] + j, low[2] + k))
+    return total
 
 
 def needed_probe_period(path, fine: bool = False) -> float:
