@@ -32,6 +32,7 @@ PROGRAMS = [
     'swing_leg_policy',
     'kinematic_simulator',
     'physics_simulator',
+    'robot_state_publisher',
     'recorder',
     'command',
     'inspect',

@@ -93,6 +93,10 @@ def build_parser() -> ArgumentParser:
                      help='kinematic: kinematic_simulator, exact and fast (default); physics: '
                           'physics_simulator, the robot in MuJoCo with contacts, joint gains and '
                           'effort limits (pip install mujoco)')
+    run.add_argument('--no-state-publisher', action='store_true',
+                     help='leave out robot_state_publisher (/robot_description, /tf_static and '
+                          "the links' /tf), to run ROS's own robot_state_publisher instead "
+                          '(docs/ros_tools.md)')
     run.add_argument('--nodes', default=None,
                      help=f'comma-separated subset of {",".join(graph.NODES)} (with '
                           f'--simulator physics, physics_simulator for kinematic_simulator)')
@@ -151,9 +155,14 @@ def _prepare_value_table(values: dict, names: list[str]) -> None:
 
 def _selected_nodes(options) -> list[str]:
     available = graph.graph_nodes(options.simulator)
+    if options.no_state_publisher:
+        available = [name for name in available if name != graph.STATE_PUBLISHER]
     if options.nodes is None:
         return available
     wanted = [name.strip() for name in options.nodes.split(',') if name.strip()]
+    if options.no_state_publisher and graph.STATE_PUBLISHER in wanted:
+        raise ArgumentError(f'--nodes {graph.STATE_PUBLISHER} and --no-state-publisher '
+                            f'contradict each other: choose one')
     for name in wanted:
         if name not in available and name in graph.SIMULATORS.values():
             raise ArgumentError(f'node {name!r} is not the chosen simulator: --simulator '
@@ -170,14 +179,18 @@ class TopicCounter:
 
     def __init__(self, node):
         from gait_nodes.interfaces import get_message
+        from gait_nodes.runtime import DurabilityPolicy, QoSProfile
 
         self.counts = {topic: 0 for topic in graph.TOPICS}
         self.first_ns: dict[str, int] = {}
         self.last_ns: dict[str, int] = {}
         self._clock = node.get_clock()
+        # A latched topic's message may be older than this node (inproc builds it last).
+        latched = QoSProfile(depth=100, durability=DurabilityPolicy.TRANSIENT_LOCAL)
         for topic, type_name in graph.TOPICS.items():
             node.create_subscription(get_message(type_name), graph.node_topic_name(topic),
-                                     self._counter(topic), 100, raw=True)
+                                     self._counter(topic),
+                                     latched if topic in graph.LATCHED_TOPICS else 100, raw=True)
 
     def _counter(self, topic: str):
         def count(_data) -> None:

@@ -215,7 +215,9 @@ class FootstepPlanner(GuardedNode):
                                       supervisor_settings(self.settings), start_ns,
                                       joining=self.context.runtime != 'inproc',
                                       load_model=self._model)
-        self.sources = SingleSource(self, ['/joint_states', '/tf'], 'not reading the robot',
+        # /joint_states only: /tf has many publishers by tf2's design (the simulator's odom ->
+        # base_link, robot_state_publisher's links); a second robot shows on /joint_states.
+        self.sources = SingleSource(self, ['/joint_states'], 'not reading the robot',
                                     watchdog=self.core.inputs, on_change=self._on_sources_changed)
         self._measured_subscriptions: list = []
         self._pending: tuple[dict, dict, Staircase | None] | None = None

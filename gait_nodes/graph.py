@@ -14,7 +14,11 @@ NODES: dict[str, str] = {
     'swing_leg_policy': 'gait_nodes.swing_leg_policy:SwingLegPolicy',
     'whole_body_ik': 'gait_nodes.whole_body_ik:WholeBodyIk',
     'kinematic_simulator': 'gait_nodes.kinematic_simulator:KinematicSimulator',
+    'robot_state_publisher': 'gait_nodes.robot_state_publisher:RobotStatePublisher',
 }
+#: The node that publishes /robot_description, /tf_static and the links' /tf; ``run
+#: --no-state-publisher`` (launch: ``state_publisher:=false``) leaves it out, for ROS's own.
+STATE_PUBLISHER = 'robot_state_publisher'
 RECORDER = 'gait_nodes.recorder:Recorder'
 #: Nodes that can take a node's place in the graph, started only when chosen.
 ALTERNATIVE_NODES: dict[str, str] = {
@@ -37,6 +41,8 @@ TOPICS: dict[str, str] = {
     '/joint_commands': 'trajectory_msgs/msg/JointTrajectory',
     '/joint_states': 'sensor_msgs/msg/JointState',
     '/tf': 'tf2_msgs/msg/TFMessage',
+    '/tf_static': 'tf2_msgs/msg/TFMessage',
+    '/robot_description': 'std_msgs/msg/String',
     '/gait/zmp': 'geometry_msgs/msg/PointStamped',
     '/gait/com': 'geometry_msgs/msg/PointStamped',
     '/gait/support_polygon': 'geometry_msgs/msg/PolygonStamped',
@@ -45,6 +51,9 @@ TOPICS: dict[str, str] = {
     '/clock': 'rosgraph_msgs/msg/Clock',
     '/gait/cop': 'geometry_msgs/msg/PointStamped',
 }
+#: Contract topics whose publishers are latched (reliable, transient local, depth 1): a late
+#: subscriber gets the last message, and a bag records their QoS so that playback latches them.
+LATCHED_TOPICS = ('/gait/footsteps', '/robot_description', '/tf_static')
 #: Topic families with one topic per foot of the robot, ``<prefix><foot name>``
 #: (``/gait/contact_wrench/front_left``) -> message type.
 FOOT_TOPICS: dict[str, str] = {

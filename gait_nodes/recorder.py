@@ -23,7 +23,7 @@ from gait_nodes.runtime import DurabilityPolicy, Node, QoSProfile
 from gait_nodes.runtime.qos import offered_qos_yaml
 
 #: Topics whose publishers are latched (transient local) in the contract.
-LATCHED_TOPICS = ('/gait/footsteps',)
+LATCHED_TOPICS = graph.LATCHED_TOPICS
 #: Period of the ERROR report after the bag failed [s].
 FAILURE_REPORT_PERIOD_S = 1.0
 

@@ -3,10 +3,11 @@
 Two gait graphs started on one ROS_DOMAIN_ID in the same namespace (or none) merge in silence:
 each simulator would follow both whole-body IKs. A node names the inputs that exactly one node
 may feed (the simulator its /joint_commands, the IK its references, the COM controller its ZMP
-reference, the planner the robot's /joint_states and /tf) to a :class:`SingleSource`. Once a
-``period_s`` (a timer, not per message) it counts the publishers of each, less the node's own,
-with the ROS graph API (``Node.count_publishers``, ``Node.get_publishers_info_by_topic``: rclpy's
-own under rclpy; the whole DDS domain under ``dds``; the process under ``inproc``). An input
+reference, the planner the robot's /joint_states; not /tf, which tf2 meant for many
+publishers) to a :class:`SingleSource`. Once a ``period_s`` (a timer, not per message) it
+counts the publishers of each, less the node's own, with the ROS graph API
+(``Node.count_publishers``, ``Node.get_publishers_info_by_topic``: rclpy's own under rclpy; the
+whole DDS domain under ``dds``; the process under ``inproc``). An input
 with more than one is *refused*: the node drops its messages and holds (what holding means is the
 node's: the simulator holds the robot where it stands, the IK its last command), and the node's
 ``<node>: inputs`` status (:class:`gait_nodes.watchdog.InputWatchdog`, which lists a refused

@@ -7,12 +7,18 @@ Usage::
     ros2 launch gait_nodes gait.launch.py robot:=biped gait:=biped swing:=polynomial
     ros2 launch gait_nodes gait.launch.py namespace:=robot1 use_sim_time:=false  # a second robot
     ros2 launch gait_nodes gait.launch.py simulator:=physics  # in MuJoCo (pip install mujoco)
+    ros2 launch gait_nodes gait.launch.py state_publisher:=false  # for ROS's robot_state_publisher
 
 The robot walks when it is asked to: ``ros2 topic pub /cmd_vel geometry_msgs/msg/Twist
 "{linear: {x: 0.04}}"`` or ``python -m gait_nodes.command --vel 0.04 0 0``.
 
 Each node loads ``share/gait_nodes/config/<node>.yaml`` when the package ships one, then the
 launch arguments. Without ROS, ``python -m gait_nodes run`` starts the same graph.
+
+Our robot_state_publisher puts the robot's URDF on /robot_description and its links on
+/tf_static and /tf, for RViz (``rviz2 -d share/gait_nodes/config/gait.rviz``) and Foxglove
+(``config/foxglove_layout.json``). With ``state_publisher:=false`` it is left out, to run ROS's
+own robot_state_publisher with the URDF instead (docs/ros_tools.md).
 
 ``namespace`` puts the whole graph, the recorder included, in a ROS namespace with launch_ros'
 own mechanism (``/robot1/gait/footsteps``, ``/robot1/footstep_planner``; the launch file may
@@ -49,6 +55,8 @@ GAIT_NODES = (
     'whole_body_ik',
     'kinematic_simulator',
 )
+#: /robot_description, /tf_static and the links' /tf (the state_publisher argument).
+STATE_PUBLISHER = 'robot_state_publisher'
 #: The simulator argument's values -> the simulator node it starts (one of them runs).
 SIMULATOR_NODES = dict(SIMULATORS)
 
@@ -107,6 +115,12 @@ def generate_launch_description():
                         'recorder go under it; empty: none.',
         ),
         DeclareLaunchArgument(
+            'state_publisher',
+            default_value='true',
+            description='Start our robot_state_publisher (/robot_description, /tf_static, '
+                        "the links' /tf); false: leave it out, to run ROS's own.",
+        ),
+        DeclareLaunchArgument(
             'record',
             default_value='',
             description='Output bag directory of the recorder; empty: do not record.',
@@ -142,6 +156,19 @@ def generate_launch_description():
             )
         )
 
+    nodes.append(
+        Node(
+            package=PACKAGE,
+            executable=STATE_PUBLISHER,
+            name=STATE_PUBLISHER,
+            namespace=namespace,
+            output='screen',
+            parameters=[*_params_file(STATE_PUBLISHER),
+                        {'use_sim_time': use_sim_time, 'robot': robot}],
+            remappings=remappings,
+            condition=IfCondition(LaunchConfiguration('state_publisher')),
+        )
+    )
     nodes.append(
         Node(
             package=PACKAGE,

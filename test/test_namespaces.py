@@ -252,7 +252,7 @@ def test_the_launch_file_puts_every_node_and_the_recorder_in_the_namespace(monke
     launch_file.generate_launch_description()
     nodes = [kwargs for kind, _, kwargs in captured if kind == 'Node']
     assert sorted(node['name'] for node in nodes) == sorted(
-        [*launch_file.GAIT_NODES, 'physics_simulator', 'recorder'])
+        [*launch_file.GAIT_NODES, 'physics_simulator', 'robot_state_publisher', 'recorder'])
     namespace = ('LaunchConfiguration', ('namespace',), {})
     for node in nodes:
         assert node['namespace'] == namespace, node['name']

@@ -34,6 +34,7 @@ PROGRAMS = (
     'swing_leg_policy',
     'kinematic_simulator',
     'physics_simulator',
+    'robot_state_publisher',
     'recorder',
     'command',
     'inspect',
@@ -162,6 +163,7 @@ def test_launch_file_compiles_and_declares_its_arguments():
         'use_sim_time': 'true',
         'record': '',
         'namespace': '',
+        'state_publisher': 'true',
     }
     assert 'generate_launch_description' in {
         node.name for node in tree.body if isinstance(node, ast.FunctionDef)
