@@ -49,7 +49,7 @@ import numpy as np
 
 from gait_nodes import graph
 from gait_nodes.bag.reader import BagReader
-from gait_nodes.contract import time_msg_to_ns
+from gait_nodes.contract import base_transforms, time_msg_to_ns
 from gait_nodes.geometry import signed_distance
 from gait_nodes.interfaces import deserialize_message, get_message
 from gait_nodes.robot.model import load_robot_model
@@ -84,7 +84,7 @@ def read(bag: Path) -> dict:
     for channel, _, _, payload in BagReader(bag).messages(topics=types):
         msg = deserialize_message(payload, get_message(types[channel.topic]))
         if channel.topic == '/tf':
-            for t in msg.transforms:
+            for t in base_transforms(msg):
                 p, r = t.transform.translation, t.transform.rotation
                 data['base'][time_msg_to_ns(t.header.stamp)] = (p.x, p.y, p.z,
                                                                *_rpy(r.x, r.y, r.z, r.w))

@@ -50,6 +50,16 @@ YAML, physics_simulator)
     ``header.frame_id`` = ``odom``: the centre of pressure of the contact forces over the tick
     ending at ``header.stamp``, on the plane of the lowest contact point (``z`` its height); not
     published without vertical ground force.
+``/tf`` (tf2_msgs/TFMessage, many publishers, as tf2 has it)
+    The simulator's messages hold one transform, ``odom -> base_link``: the floating base's
+    pose, stamped at its instant. robot_state_publisher's hold one transform per moving joint
+    of the URDF, parent link -> child link (the URDF's link names), stamped with the
+    /joint_states message they come from. A reader picks the transforms it wants by their frame
+    ids (:func:`base_transforms`), never by their place in a message.
+``/tf_static`` (tf2_msgs/TFMessage, latched), ``/robot_description`` (std_msgs/String, latched)
+    robot_state_publisher's, once at start: one message holding every fixed joint's transform
+    (and ``base_link -> <root link>`` when the URDF's root link has another name); the URDF's
+    text.
 
 Times are integer nanoseconds at the message boundary and float seconds inside the arrays.
 Converters from messages validate what they read and raise :class:`ContractError` with the reason;
@@ -118,6 +128,17 @@ def yaw_to_quaternion(yaw_rad: float) -> tuple[float, float, float, float]:
 def quaternion_to_yaw(x: float, y: float, z: float, w: float) -> float:
     """Yaw [rad] of a quaternion (the z-y-x Euler angle about z), in (-pi, pi]."""
     return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+
+
+def base_transforms(msg) -> list:
+    """The ``odom -> base_link`` transforms of a tf2_msgs/TFMessage: the floating base's pose.
+
+    /tf carries other transforms too (the links' of robot_state_publisher): readers pick the
+    base pose by its frame ids.
+    """
+    return [transform for transform in msg.transforms
+            if transform.header.frame_id.lstrip('/') == WORLD_FRAME
+            and transform.child_frame_id.lstrip('/') == BASE_FRAME]
 
 
 def _frozen(array) -> np.ndarray:

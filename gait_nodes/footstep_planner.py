@@ -61,9 +61,9 @@ import numpy as np
 from gait_nodes import callback_times
 from gait_nodes.cli import run_node
 from gait_nodes.contract import (
-    WORLD_FRAME,
     ContractError,
     ZmpReferenceMessages,
+    base_transforms,
     footsteps_to_msg,
     swing_trajectory_from_msg,
 )
@@ -309,16 +309,14 @@ class FootstepPlanner(GuardedNode):
         """The robot's base pose (joining or paused: the measured state)."""
         if self.sources.refused:
             return
-        for transform in msg.transforms:
-            if transform.header.frame_id.lstrip('/') == WORLD_FRAME and \
-                    transform.child_frame_id.lstrip('/') == 'base_link':
-                t, r = transform.transform.translation, transform.transform.rotation
-                pose = np.array([t.x, t.y, t.z, r.x, r.y, r.z, r.w], dtype=float)
-                if not np.isfinite(pose).all() or np.linalg.norm(pose[3:]) < 0.5:
-                    continue
-                pose[3:] /= np.linalg.norm(pose[3:])
-                if self.core.on_base(pose, self._now_ns()):
-                    self.tick()
+        for transform in base_transforms(msg):
+            t, r = transform.transform.translation, transform.transform.rotation
+            pose = np.array([t.x, t.y, t.z, r.x, r.y, r.z, r.w], dtype=float)
+            if not np.isfinite(pose).all() or np.linalg.norm(pose[3:]) < 0.5:
+                continue
+            pose[3:] /= np.linalg.norm(pose[3:])
+            if self.core.on_base(pose, self._now_ns()):
+                self.tick()
 
     def on_joint_states(self, msg) -> None:
         """The robot's joint positions (joining or paused: the measured state)."""

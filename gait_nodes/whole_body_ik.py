@@ -64,6 +64,7 @@ from gait_nodes.contract import (
     UNIT_QUATERNION_TOLERANCE,
     WORLD_FRAME,
     ContractError,
+    base_transforms,
     com_reference_from_msg,
     footsteps_from_msg,
     joint_trajectory_to_msg,
@@ -353,14 +354,12 @@ class WholeBodyIk(GuardedNode):
     def _on_tf(self, msg) -> None:
         if self._moving:
             return  # the base pose only seeds the posture held before motion
-        for transform in msg.transforms:
-            if transform.header.frame_id.lstrip('/') == 'odom' and \
-                    transform.child_frame_id.lstrip('/') == 'base_link':
-                t, r = transform.transform.translation, transform.transform.rotation
-                pose = np.array([t.x, t.y, t.z, r.x, r.y, r.z, r.w], dtype=float)
-                if np.all(np.isfinite(pose)) and np.linalg.norm(pose[3:]) > 0.5:
-                    pose[3:] /= np.linalg.norm(pose[3:])
-                    self._base_pose = pose
+        for transform in base_transforms(msg):
+            t, r = transform.transform.translation, transform.transform.rotation
+            pose = np.array([t.x, t.y, t.z, r.x, r.y, r.z, r.w], dtype=float)
+            if np.all(np.isfinite(pose)) and np.linalg.norm(pose[3:]) > 0.5:
+                pose[3:] /= np.linalg.norm(pose[3:])
+                self._base_pose = pose
 
     def _on_joint_states(self, msg) -> None:
         """Until motion is commanded, hold the measured posture (rejoin a running graph)."""

@@ -34,7 +34,7 @@ def decode_gait_topics(bag: Path) -> dict:
             continue
         msg = deserialize_message(payload, get_message(TYPES[channel.topic]))
         if channel.topic == '/tf':
-            for transform in msg.transforms:
+            for transform in contract.base_transforms(msg):
                 t, r = transform.transform.translation, transform.transform.rotation
                 data['tf'][contract.time_msg_to_ns(transform.header.stamp)] = np.array(
                     [t.x, t.y, t.z, r.x, r.y, r.z, r.w])

@@ -18,7 +18,12 @@ from test_sim_trajectory import bad_trajectories, trajectory_msg
 from test_zmp_monitor import body_by_body_zmp
 
 from gait_nodes import graph, runtime
-from gait_nodes.contract import FootstepPlan, footsteps_from_msg, footsteps_to_msg
+from gait_nodes.contract import (
+    FootstepPlan,
+    base_transforms,
+    footsteps_from_msg,
+    footsteps_to_msg,
+)
 from gait_nodes.diagnostics import ERROR, OK, WARN, level_value
 from gait_nodes.geometry import disc_support_margin, signed_distance
 from gait_nodes.interfaces import get_message
@@ -367,7 +372,7 @@ def configurations(robot, collector):
     """(stamps [ns], q) rebuilt from /joint_states and /tf (matched by stamp)."""
     bases = {}
     for msg in collector.messages['/tf']:
-        for transform in msg.transforms:
+        for transform in base_transforms(msg):
             t, r = transform.transform.translation, transform.transform.rotation
             bases[stamp_ns(transform)] = [t.x, t.y, t.z, r.x, r.y, r.z, r.w]
     stamps, qs = [], []
@@ -648,7 +653,7 @@ def test_every_monitor_sample_is_of_a_published_joint_state_and_base_pose(inproc
     hold = joint_command(robot.joint_names, robot.joint_positions(q_nominal))
     simulator, collector = run_simulator(0.1, [(k * NS // 200, hold) for k in range(20)])
     states = [stamp_ns(m) for m in collector.messages['/joint_states']]
-    bases = [stamp_ns(t) for m in collector.messages['/tf'] for t in m.transforms]
+    bases = [stamp_ns(t) for m in collector.messages['/tf'] for t in base_transforms(m)]
     assert bases == states
     for topic in ('/gait/zmp', '/gait/com', '/gait/support_polygon'):
         # Every instant but the newest, whose ZMP needs the next configuration.

@@ -126,14 +126,12 @@ class _Collector:
             self.series.undecodable[topic] += 1
 
     def _tf(self, msg) -> None:
-        for transform in msg.transforms:
-            if transform.header.frame_id.lstrip('/') == contract.WORLD_FRAME and \
-                    transform.child_frame_id.lstrip('/') == contract.BASE_FRAME:
-                t, r = transform.transform.translation, transform.transform.rotation
-                stamp = _stamp(transform.header)
-                self.series.base.append((stamp, t.x, t.y, t.z,
-                                         contract.quaternion_to_yaw(r.x, r.y, r.z, r.w)))
-                self.series.base_poses.append((stamp, t.x, t.y, t.z, r.x, r.y, r.z, r.w))
+        for transform in contract.base_transforms(msg):
+            t, r = transform.transform.translation, transform.transform.rotation
+            stamp = _stamp(transform.header)
+            self.series.base.append((stamp, t.x, t.y, t.z,
+                                     contract.quaternion_to_yaw(r.x, r.y, r.z, r.w)))
+            self.series.base_poses.append((stamp, t.x, t.y, t.z, r.x, r.y, r.z, r.w))
 
     def _gait_zmp(self, msg) -> None:
         stamp = _stamp(msg.header)
