@@ -132,12 +132,14 @@ def test_run_inproc_records_inspects_and_plots(tmp_path):
     (['--runtime', 'inproc', '--ros-args', '-p', 'robot:=[biped,'], {}, ['robot', 'line 1']),
     (['--runtime', 'rclpy'], {}, ['rclpy']),
     (['--no-such-option'], {}, ['--no-such-option']),
+    (['--runtime', 'inproc', '--nodes', 'robot_state_publisher', '--no-state-publisher'], {},
+     ['--no-state-publisher']),
 ], ids=['runtime-flag', 'runtime-env', 'negative-duration', 'word-duration', 'nan-duration',
         'unknown-node', 'fast-with-dds', 'record-exists', 'plot-without-record',
         'plot-and-no-plot', 'unknown-ros-flag',
         'param-without-value', 'missing-params-file',
         'bad-yaml-params-file', 'list-params-file', 'binary-params-file', 'bad-yaml-value',
-        'rclpy-without-ros', 'unknown-option'])
+        'rclpy-without-ros', 'unknown-option', 'state-publisher-and-not'])
 def test_run_refuses_bad_input_on_one_line(tmp_path, args, env, words):
     (tmp_path / 'bad.yaml').write_text('/**: {ros__parameters: {robot: [biped}}\n')
     (tmp_path / 'list.yaml').write_text('- robot\n- biped\n')

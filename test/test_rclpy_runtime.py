@@ -29,7 +29,7 @@ REPO = Path(__file__).resolve().parent.parent
 DOMAIN = random.SystemRandom().randrange(150, 230)
 LOOPBACK_DDS = (REPO / 'config' / 'cyclonedds_localhost.xml').as_uri()
 NODES = ('footstep_planner', 'com_preview_controller', 'swing_leg_policy', 'whole_body_ik',
-         'kinematic_simulator')
+         'kinematic_simulator', 'robot_state_publisher')
 START_TIMEOUT_S = 120.0
 
 
@@ -215,7 +215,8 @@ def test_a_short_graph_walk_under_rclpy_records_a_readable_bag(tmp_path):
     summary = json.loads(result.stdout[result.stdout.index('{'):])
     assert summary['runtime'] == 'rclpy'
     assert set(summary['exit_codes'].values()) == {0}, summary['exit_codes']
-    for topic in ('/gait/footsteps', '/gait/com_reference', '/joint_states', '/gait/zmp'):
+    for topic in ('/gait/footsteps', '/gait/com_reference', '/joint_states', '/gait/zmp',
+                  '/tf', '/tf_static', '/robot_description'):
         assert summary['topics'][topic]['messages'] > 0, topic
     report = json.loads(subprocess.run(
         [sys.executable, '-m', 'gait_nodes.inspect', str(bag), '--json'], env=ros_env(),
@@ -226,6 +227,34 @@ def test_a_short_graph_walk_under_rclpy_records_a_readable_bag(tmp_path):
     # strides up (0.05 to 0.16 m, the first swing about 8 s after the start).
     assert report['base']['displacement_m'] > 0.05, report['base']
     assert report['zmp_margin']['samples'] > 0
+
+
+def test_robot_state_publisher_latches_the_urdf_and_the_fixed_joints_for_ros(ros, started):
+    """What ``ros2 topic echo /robot_description`` and RViz get, subscribing after the start."""
+    import xml.etree.ElementTree as ET
+
+    from std_msgs.msg import String
+    from tf2_msgs.msg import TFMessage
+
+    node, executor = ros
+    started('robot_state_publisher')
+    latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    descriptions, statics = [], []
+    subscriptions = [
+        node.create_subscription(String, '/robot_description', descriptions.append, latched),
+        node.create_subscription(TFMessage, '/tf_static', statics.append, latched)]
+    try:
+        spin_until(executor, lambda: descriptions and statics, 20,
+                   '/robot_description and /tf_static from robot_state_publisher')
+    finally:
+        for subscription in subscriptions:
+            node.destroy_subscription(subscription)
+    urdf = REPO / 'config' / 'robots' / 'robosimian.urdf'
+    assert descriptions[0].data == urdf.read_text()
+    fixed = {joint.find('child').get('link')
+             for joint in ET.parse(urdf).getroot().findall('joint')
+             if joint.get('type') == 'fixed'}
+    assert {t.child_frame_id for t in statics[0].transforms} == fixed
 
 
 def test_rclpy_and_dds_nodes_share_one_graph(ros, started):

@@ -453,3 +453,84 @@ def test_the_links_follow_the_physics_simulator_too(tmp_path):
     messages, _ = record(tmp_path / 'bag', 'physics_simulator', 0.3)
     assert len(messages['/joint_states']) >= 25
     assert_links_follow_forward_kinematics(load_robot_model('robosimian'), messages, samples=3)
+
+
+# -- over DDS ----------------------------------------------------------------------------------
+
+def test_over_dds_a_late_subscriber_gets_the_urdf_and_the_static_transforms(tmp_path,
+                                                                            monkeypatch):
+    """The node process publishes both at start; a subscriber made afterwards still gets them."""
+    import random
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    from test_runtime_dds import dds_env
+
+    from gait_nodes.cli import READY_FILE_ENV
+
+    domain = random.SystemRandom().randrange(200, 230)
+    ready = tmp_path / 'ready'
+    process = subprocess.Popen(
+        [sys.executable, '-m', 'gait_nodes.robot_state_publisher', '--ros-args', '-p',
+         'robot:=go2'], env={**dds_env(domain), READY_FILE_ENV: str(ready)},
+        stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    monkeypatch.delenv('CYCLONEDDS_URI', raising=False)
+    monkeypatch.setenv('GAIT_NODES_DDS_LOCALHOST', '1')
+    try:
+        deadline = time.monotonic() + 60.0
+        while not ready.exists():
+            assert process.poll() is None, process.stderr.read()
+            assert time.monotonic() < deadline, 'robot_state_publisher not up after 60 s'
+            time.sleep(0.05)
+        runtime.init(args=[], runtime='dds', domain_id=domain, signal_handlers=False)
+        try:
+            late = runtime.Node('late_subscriber')
+            latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+            descriptions, statics = [], []
+            late.create_subscription(get_message('std_msgs/msg/String'), '/robot_description',
+                                     descriptions.append, latched)
+            late.create_subscription(get_message('tf2_msgs/msg/TFMessage'), '/tf_static',
+                                     statics.append, latched)
+            executor = runtime.SingleThreadedExecutor()
+            executor.add_node(late)
+            deadline = time.monotonic() + 20.0
+            while not (descriptions and statics) and time.monotonic() < deadline:
+                executor.spin_once(timeout_sec=0.05)
+        finally:
+            runtime.shutdown()
+    finally:
+        process.send_signal(signal.SIGINT)
+        assert process.wait(timeout=20) == 0
+    robot = load_robot_model('go2')
+    assert [d.data for d in descriptions] == [robot.description.urdf_path.read_text()]
+    [static] = statics
+    fixed = {j['child'] for j in urdf_joints(robot.description.urdf_path) if j['type'] == 'fixed'}
+    assert {child for _, child, *_ in message_rows(static)} == fixed | {'base'}
+
+
+# -- the launcher ------------------------------------------------------------------------------
+
+def test_run_starts_the_state_publisher_unless_told_not_to(capsys):
+    import json
+
+    from gait_nodes.__main__ import _selected_nodes, build_parser, main
+
+    assert main(['run', '--fast', '--duration', '0.5', '--json', '--nodes',
+                 'kinematic_simulator,robot_state_publisher']) == 0
+    topics = json.loads(capsys.readouterr().out)['topics']
+    assert topics['/robot_description']['messages'] == topics['/tf_static']['messages'] == 1
+    # The simulator's odom -> base_link and the links' transforms, each per /joint_states.
+    assert topics['/tf']['messages'] == 2 * topics['/joint_states']['messages']
+
+    assert main(['run', '--fast', '--duration', '0.5', '--json', '--nodes',
+                 'kinematic_simulator']) == 0
+    without = json.loads(capsys.readouterr().out)['topics']
+    assert '/robot_description' not in without
+    assert without['/tf']['messages'] == without['/joint_states']['messages']
+    for simulator in graph.SIMULATORS:
+        chosen = _selected_nodes(build_parser().parse_args(['run', '--simulator', simulator]))
+        assert chosen[-1] == graph.STATE_PUBLISHER
+        assert _selected_nodes(build_parser().parse_args(
+            ['run', '--simulator', simulator, '--no-state-publisher'])) == chosen[:-1]
