@@ -8,8 +8,11 @@ topics reach late subscribers (inproc here; DDS and rclpy in their tiers).
 
 from __future__ import annotations
 
+import json
 import math
+import re
 import xml.etree.ElementTree as ET
+from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
@@ -448,11 +451,18 @@ def test_every_link_in_the_bag_is_where_forward_kinematics_of_its_joint_states_p
     assert_links_follow_forward_kinematics(robot, messages, samples=6)
 
 
-def test_the_links_follow_the_physics_simulator_too(tmp_path):
+@pytest.fixture(scope='module')
+def physics_recorded(tmp_path_factory):
+    """{topic: [message]} of the physics simulator's first second (one diagnostics summary)."""
     pytest.importorskip('mujoco')
-    messages, _ = record(tmp_path / 'bag', 'physics_simulator', 0.3)
-    assert len(messages['/joint_states']) >= 25
-    assert_links_follow_forward_kinematics(load_robot_model('robosimian'), messages, samples=3)
+    bag = tmp_path_factory.mktemp('state_publisher_physics') / 'bag'
+    return record(bag, 'physics_simulator', 1.05)[0]
+
+
+def test_the_links_follow_the_physics_simulator_too(physics_recorded):
+    assert len(physics_recorded['/joint_states']) >= 100
+    assert_links_follow_forward_kinematics(load_robot_model('robosimian'), physics_recorded,
+                                           samples=3)
 
 
 # -- over DDS ----------------------------------------------------------------------------------
@@ -534,3 +544,68 @@ def test_run_starts_the_state_publisher_unless_told_not_to(capsys):
         assert chosen[-1] == graph.STATE_PUBLISHER
         assert _selected_nodes(build_parser().parse_args(
             ['run', '--simulator', simulator, '--no-state-publisher'])) == chosen[:-1]
+
+
+# -- the layouts -------------------------------------------------------------------------------
+
+CONFIG = Path(__file__).resolve().parent.parent / 'config'
+#: A diagnostics filter of a Foxglove message path: ``{name=="..."}`` or ``{key=="..."}``.
+FILTER = re.compile(r'\{(name|key)=="([^"]*)"\}')
+#: RViz display class -> the message type it draws.
+RVIZ_TYPES = {'rviz_default_plugins/RobotModel': 'std_msgs/msg/String',
+              'rviz_default_plugins/MarkerArray': 'visualization_msgs/msg/MarkerArray',
+              'rviz_default_plugins/Path': 'nav_msgs/msg/Path'}
+
+
+def foxglove_topics(layout: dict) -> set[str]:
+    """Every topic a Foxglove layout names: 3D topics and layers, message paths, panels'."""
+    topics = set()
+    for config in layout['configById'].values():
+        topics |= set(config.get('topics', {}))
+        topics |= {layer['topic'] for layer in config.get('layers', {}).values()
+                   if layer.get('topic')}
+        topics |= {re.match(r'/[\w/]+', path['value'])[0] for path in config.get('paths', [])}
+        if 'topicToRender' in config:
+            topics.add(config['topicToRender'])
+    return topics
+
+
+def status_keys(*bags: dict) -> set[tuple[str, str]]:
+    """(status name, key) of every /diagnostics key value in the bags."""
+    return {(status.name, value.key) for messages in bags for array in messages['/diagnostics']
+            for status in array.status for value in status.values}
+
+
+def test_the_foxglove_layout_names_only_what_the_graph_publishes(recorded, physics_recorded):
+    layout = json.loads((CONFIG / 'foxglove_layout.json').read_text())
+    topics = foxglove_topics(layout)
+    assert {'/robot_description', '/gait/markers', '/diagnostics', '/joint_states'} <= topics
+    assert topics <= set(graph.TOPICS), topics - set(graph.TOPICS)
+    scene = layout['configById']['3D!gait']
+    assert scene['followTf'] == BASE_FRAME
+    assert {layer.get('frameId') for layer in scene['layers'].values()} - {None} == {WORLD_FRAME}
+    # Each plotted diagnostics value is a key value that a simulator publishes, under its name.
+    published = status_keys(recorded[2], physics_recorded)
+    paths = [path['value'] for config in layout['configById'].values()
+             for path in config.get('paths', []) if path['value'].startswith('/diagnostics')]
+    assert paths
+    for path in paths:
+        filters = dict(FILTER.findall(path))
+        assert (filters['name'], filters['key']) in published, path
+
+
+def test_the_rviz_config_draws_the_graph_topics_in_odom():
+    config = yaml.safe_load((CONFIG / 'gait.rviz').read_text())['Visualization Manager']
+    assert config['Global Options']['Fixed Frame'] == WORLD_FRAME
+    assert config['Views']['Current']['Target Frame'] == BASE_FRAME
+    displays = {display['Class']: display for display in config['Displays']}
+    assert {'rviz_default_plugins/RobotModel', 'rviz_default_plugins/TF',
+            'rviz_default_plugins/MarkerArray'} <= set(displays)
+    for kind, type_name in RVIZ_TYPES.items():
+        display = displays[kind]
+        subscription = display.get('Description Topic') or display['Topic']
+        topic = subscription['Value']
+        assert graph.TOPICS.get(topic) == type_name, (kind, topic)
+        # A volatile subscription would never get a latched topic's one message.
+        latched = topic in graph.LATCHED_TOPICS
+        assert (subscription['Durability Policy'] == 'Transient Local') == latched, topic
