@@ -22,10 +22,11 @@ import yaml
 from gait_nodes import graph, runtime
 from gait_nodes.contract import BASE_FRAME, WORLD_FRAME, time_msg_to_ns
 from gait_nodes.diagnostics import WARN, level_value
+from gait_nodes.errors import ConfigError
 from gait_nodes.interfaces import get_message
-from gait_nodes.robot.description import available_robots
+from gait_nodes.robot.description import available_robots, load_robot_description
 from gait_nodes.robot.link_poses import LinkPoses, quaternions_of
-from gait_nodes.robot.model import load_robot_model
+from gait_nodes.robot.model import RobotModel, load_robot_model
 from gait_nodes.runtime import DurabilityPolicy, Parameter, QoSProfile
 
 NS = 1_000_000_000
@@ -192,6 +193,35 @@ def test_only_the_named_moving_joints_get_a_transform_and_unknown_names_are_igno
     assert set(moving.joints) == {robot.joint_names[2], robot.joint_names[5]}
     every = poses.moving(robot.joint_names, np.zeros(len(robot.joint_names)))
     assert len(every) == len(robot.joint_names)
+
+
+def biped_variant(tmp_path, change) -> RobotModel:
+    """The biped with its URDF text changed by ``change(text) -> text``, and its YAML's."""
+    description = load_robot_description('biped')
+    urdf = tmp_path / 'variant.urdf'
+    urdf.write_text(change(description.urdf_path.read_text()))
+    data = yaml.safe_load(description.path.read_text())
+    data['urdf'] = str(urdf)
+    if 'name="pelvis"' in urdf.read_text():
+        data['base_frame'] = 'pelvis'
+    path = tmp_path / 'variant.yaml'
+    path.write_text(yaml.safe_dump(data))
+    return RobotModel(load_robot_description(path))
+
+
+@pytest.mark.parametrize(('change', 'reason'), [
+    (lambda text: text.replace('"torso"', '"base_link"').replace('"base_link"', '"pelvis"', 1)
+     .replace('<parent link="base_link"/>', '<parent link="pelvis"/>'),
+     "link 'base_link' is not the root link \\('pelvis'\\)"),
+    (lambda text: text.replace('name="torso_joint" type="fixed"',
+                               'name="torso_joint" type="planar"'),
+     "joint 'torso_joint' has 3 degrees of freedom"),
+], ids=['base_link-not-the-root', 'planar-joint'])
+def test_a_urdf_whose_frames_cannot_be_published_is_refused_with_the_reason(tmp_path, change,
+                                                                           reason):
+    robot = biped_variant(tmp_path, change)
+    with pytest.raises(ConfigError, match=reason):
+        LinkPoses(robot)
 
 
 # -- the node ----------------------------------------------------------------------------------

@@ -12,10 +12,12 @@ base_link`` (REP-105). When the URDF's root link has another name (``base`` for 
 fixed identity transform ``base_link -> <root link>`` joins the two trees, since the base pose
 the simulators publish is the root link's.
 
-Pinocchio computes each moving joint's motion (``data.liMi``, any 1-DOF joint model it knows);
-the link frames are placed in the joints' frames as the URDF places them (the model's body
-frames), and the products and the quaternions are computed for all joints at once with numpy.
-No ROS import: the robot_state_publisher node turns these arrays into messages.
+Pinocchio reads the URDF: the link frames (the model's body frames), the joints' placements and
+their axes (read from Pinocchio's own joint motion and checked against it at start). For each
+/joint_states message the moving joints' transforms are then computed all at once with numpy: a
+rotation about the axis (revolute, continuous) or a slide along it (prismatic) after the
+joint's placement, as quaternions. No ROS import: the robot_state_publisher node turns these
+arrays into messages.
 """
 
 from __future__ import annotations
@@ -114,8 +116,9 @@ class LinkPoses:
 
     Raises:
         ConfigError: A URDF joint with more than one degree of freedom (floating, planar: no
-            /joint_states entry can carry it), or ``base_frame`` names a link of the URDF that
-            is not its root (the bridge would make a loop).
+            /joint_states entry can carry it) or neither revolute nor prismatic, or
+            ``base_frame`` names a link of the URDF that is not its root (the bridge would
+            make a loop).
     """
 
     def __init__(self, robot: RobotModel, base_frame: str = 'base_link'):
@@ -153,23 +156,10 @@ class LinkPoses:
                       for name, parent, child in fixed]
         self.static = self._transforms(bridge + placements)
 
-        names = [name for name, _, _ in moving]
-        self.moving_joints = tuple(names)
+        self.moving_joints = tuple(name for name, _, _ in moving)
         self._moving_parents = tuple(parent.name for _, parent, _ in moving)
         self._moving_children = tuple(child.name for _, _, child in moving)
-        self._pinocchio_joints = np.array([model.getJointId(n) for n in names], dtype=int)
-        # parent link -> joint frame (in the joint's parent joint) and joint -> child link.
-        self._parent_inverse = np.array([parent.placement.inverse().homogeneous
-                                         for _, parent, _ in moving]).reshape(-1, 4, 4)
-        self._child = np.array([child.placement.homogeneous
-                                for _, _, child in moving]).reshape(-1, 4, 4)
-        self._child_is_identity = bool(np.array_equal(
-            self._child, np.broadcast_to(np.eye(4), self._child.shape)))
-        # Each moving joint's place in the robot's joint vector.
-        self._in_vector = robot.indices(names) if names else np.zeros(0, dtype=int)
-        self._joint_vector = robot.posture.copy()
-        self._q = pin.neutral(model)
-        self._data = model.createData()
+        self._motion = _JointMotions(robot, moving)
         self._selection: tuple[tuple[str, ...], tuple] | None = None
 
     @staticmethod
@@ -185,17 +175,18 @@ class LinkPoses:
         """For a message's joint names (the last ones' answer kept: they rarely change).
 
         Returns:
-            (moving rows named, their columns in the message, their joint names, parent links,
-            child links).
+            (columns in the message of the moving joints named, their joint names, parent
+            links, child links, their motions).
         """
         if self._selection is None or self._selection[0] != names:
             column_of = {name: k for k, name in enumerate(names)}
             rows = [k for k, name in enumerate(self.moving_joints) if name in column_of]
-            columns = np.array([column_of[self.moving_joints[k]] for k in rows], dtype=int)
             self._selection = (names, (
-                np.array(rows, dtype=int), columns, tuple(self.moving_joints[k] for k in rows),
+                np.array([column_of[self.moving_joints[k]] for k in rows], dtype=int),
+                tuple(self.moving_joints[k] for k in rows),
                 tuple(self._moving_parents[k] for k in rows),
-                tuple(self._moving_children[k] for k in rows)))
+                tuple(self._moving_children[k] for k in rows),
+                self._motion.rows(np.array(rows, dtype=int))))
         return self._selection[1]
 
     def moving(self, names: Sequence[str], positions) -> LinkTransforms:
@@ -211,19 +202,122 @@ class LinkPoses:
         Returns:
             One row per moving joint named, in the URDF's (Pinocchio's) joint order.
         """
-        rows, columns, joint_names, parents, children = self._select(tuple(names))
-        values = np.asarray(positions, dtype=float)
-        joints = self._joint_vector
-        joints[self._in_vector[rows]] = values[columns]
-        self.robot.set_joint_positions(self._q, joints)
-        pin.forwardKinematics(self.robot.model, self._data, self._q)
-        motions = self._data.liMi
-        matrices = np.array([motions[j].homogeneous
-                             for j in self._pinocchio_joints[rows].tolist()]).reshape(-1, 4, 4)
-        matrices = self._parent_inverse[rows] @ matrices
-        if not self._child_is_identity:
-            matrices = matrices @ self._child[rows]
-        return LinkTransforms(
-            joints=joint_names, parents=parents, children=children,
-            translations_m=_read_only(matrices[:, :3, 3].copy()),
-            rotations_xyzw=_read_only(quaternions_of(matrices)))
+        columns, joint_names, parents, children, motion = self._select(tuple(names))
+        translations, rotations = motion.at(np.asarray(positions, dtype=float)[columns])
+        return LinkTransforms(joints=joint_names, parents=parents, children=children,
+                              translations_m=_read_only(translations),
+                              rotations_xyzw=_read_only(rotations))
+
+
+def _left_product_matrices(quaternions: np.ndarray) -> np.ndarray:
+    """(K, 4, 4) matrices L with ``L[k] @ q`` the Hamilton product ``quaternions[k] * q``.
+
+    Quaternions (x, y, z, w).
+    """
+    x, y, z, w = np.asarray(quaternions, dtype=float).reshape(-1, 4).T
+    return np.stack([np.stack([w, -z, y, x], axis=1), np.stack([z, w, -x, y], axis=1),
+                     np.stack([-y, x, w, z], axis=1), np.stack([-x, -y, -z, w], axis=1)],
+                    axis=1)
+
+
+@dataclass(frozen=True)
+class _Motions:
+    """Some moving joints' motions (rows of :class:`_JointMotions`)."""
+
+    #: (K, 4, 4) left products by the rotation parent link -> joint frame at position 0.
+    left: np.ndarray
+    #: (K, 3) translation parent link -> joint frame (the child link's) at position 0 [m].
+    origin_m: np.ndarray
+    #: (K, 3) unit rotation axis in the joint frame (zero for a prismatic joint).
+    axis: np.ndarray
+    #: (K,) half the rotation per unit of position: 0.5 (revolute), 0 (prismatic).
+    half_angle_per_unit: np.ndarray
+    #: (K, 3) translation per unit of position, in the parent link (zero for a revolute joint).
+    slide: np.ndarray
+
+    def at(self, positions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(K, 3) translations [m] and (K, 4) quaternions (x, y, z, w), w >= 0, at positions."""
+        half = positions * self.half_angle_per_unit
+        motion = np.empty((len(half), 4))
+        motion[:, :3] = self.axis * np.sin(half)[:, None]
+        motion[:, 3] = np.cos(half)
+        rotations = np.einsum('kij,kj->ki', self.left, motion)
+        rotations[rotations[:, 3] < 0] *= -1.0
+        return self.origin_m + self.slide * positions[:, None], rotations
+
+
+class _JointMotions:
+    """Each moving joint's transform parent link -> child link as a function of its position.
+
+    ``T(p) = A M(p)``: ``A`` the parent link -> joint frame (Pinocchio's placements), ``M(p)``
+    a rotation by ``p`` about the joint's axis (revolute, continuous) or a translation by ``p``
+    along it (prismatic). The axes are read from Pinocchio's own joint motion (``data.liMi`` at
+    two positions) and checked against it, so any 1-DOF joint model that moves this way is
+    taken, and another (helical...) refused.
+
+    Raises:
+        ConfigError: A joint whose motion is neither a rotation about nor a slide along an axis,
+            or a child link not at its joint's frame.
+    """
+
+    #: Positions at which Pinocchio's motion is read, then checked [rad or m].
+    PROBE, CHECK = 1.0, -0.7
+
+    def __init__(self, robot: RobotModel, moving):
+        model, where = robot.model, robot.description.urdf_path
+        joints = [model.getJointId(name) for name, _, _ in moving]
+        probed = self._pinocchio_motions(model, joints, self.PROBE)
+        axes, halves, slides_local = [], [], []
+        for (name, _, child), motion in zip(moving, probed, strict=True):
+            if not child.placement.isIdentity(1e-12):
+                raise ConfigError(f'{where}: link {child.name!r} is not at the frame of its '
+                                  f'joint {name!r}')
+            if np.allclose(motion.translation, 0.0, atol=1e-12):
+                axes.append(pin.log3(motion.rotation) / self.PROBE)
+                halves.append(0.5)
+                slides_local.append(np.zeros(3))
+            else:
+                axes.append(np.zeros(3))
+                halves.append(0.0)
+                slides_local.append(motion.translation / self.PROBE)
+        placements = [parent.placement.actInv(model.jointPlacements[j])
+                      for (_, parent, _), j in zip(moving, joints, strict=True)]
+        rotations = [placement.rotation for placement in placements]
+        self._all = _Motions(
+            left=_left_product_matrices(quaternions_of(np.array(
+                [placement.homogeneous for placement in placements]).reshape(-1, 4, 4))),
+            origin_m=np.array([placement.translation for placement in placements]).reshape(-1, 3),
+            axis=np.array(axes).reshape(-1, 3), half_angle_per_unit=np.array(halves),
+            slide=np.array([r @ s for r, s in zip(rotations, slides_local, strict=True)]
+                           ).reshape(-1, 3))
+        # The same motions, from Pinocchio and from the axes, at another position.
+        expected = self._pinocchio_motions(model, joints, self.CHECK)
+        translations, quaternions = self._all.at(np.full(len(joints), self.CHECK))
+        for k, (name, _, _) in enumerate(moving):
+            reference = placements[k] * expected[k]
+            rotation = pin.Quaternion(quaternions[k][3], *quaternions[k][:3]).toRotationMatrix()
+            if not (np.allclose(translations[k], reference.translation, atol=1e-9)
+                    and np.allclose(rotation, reference.rotation, atol=1e-9)):
+                raise ConfigError(f'{where}: joint {name!r} is neither revolute nor prismatic '
+                                  f'({model.joints[joints[k]].shortname()}): its transform is '
+                                  f'not published')
+
+    @staticmethod
+    def _pinocchio_motions(model, joints, position: float) -> list:
+        """Each joint's motion ``M(position)`` (joint frame at 0 -> at ``position``)."""
+        q = pin.neutral(model)
+        for j in joints:
+            joint = model.joints[j]
+            if joint.nq == 2:  # continuous: (cos, sin)
+                q[joint.idx_q:joint.idx_q + 2] = (np.cos(position), np.sin(position))
+            else:
+                q[joint.idx_q] = position
+        data = model.createData()
+        pin.forwardKinematics(model, data, q)
+        return [model.jointPlacements[j].actInv(data.liMi[j]) for j in joints]
+
+    def rows(self, rows: np.ndarray) -> _Motions:
+        """The motions of the moving joints ``rows`` (indices in the robot's moving joints)."""
+        every = self._all
+        return _Motions(every.left[rows], every.origin_m[rows], every.axis[rows],
+                        every.half_angle_per_unit[rows], every.slide[rows])
