@@ -12,9 +12,9 @@ graph or from a bag alone, with or without ROS:
   -> child link, once at start; when the URDF's root link is not ``base_link`` (the Go2's is
   ``base``), an identity ``base_link -> <root link>`` too;
 - /tf (tf2_msgs/TFMessage, reliable, keep-last 100, volatile, as tf2's TransformBroadcaster):
-  for each /joint_states message, one message with the transform of every moving joint it
-  names, parent link -> child link, stamped with the /joint_states message's own stamp (time is
-  in the data: never the moment it arrived).
+  for each /joint_states message (at most ``publish_frequency`` of them per second), one message
+  with the transform of every moving joint it names, parent link -> child link, stamped with
+  the /joint_states message's own stamp (time is in the data: never the moment it arrived).
 
 Frame names are the URDF's link names. The floating base is the simulator's: ``odom ->
 base_link`` (REP-105) comes on /tf from the kinematic or the physics simulator, in messages of
@@ -23,8 +23,9 @@ ROS in it.
 
 ``publish_frequency`` [Hz] bounds the /tf rate by the stamps, as ROS's parameter of that name
 does: a /joint_states message stamped less than ``1 / publish_frequency`` after the last one
-published is skipped (0, the default: every message, the simulator's rate; ROS's node defaults
-to 20 Hz). Joints of /joint_states that the URDF does not move are ignored, as ROS's node does.
+published is skipped before any work. The default is ROS's, 20 Hz (one /joint_states message in
+five of the simulators'); 0 publishes one /tf message for every /joint_states message. Joints of
+/joint_states that the URDF does not move are ignored, as ROS's node does.
 A /joint_states message that breaks its contract (positions not one per name, a repeated name,
 a NaN) is dropped and reported on /diagnostics (``robot_state_publisher: input
 /joint_states``).

@@ -58,7 +58,7 @@ def test_two_inproc_runs_record_identical_bytes(tmp_path):
     topics = {topic for topic, *_ in first}
     for topic in ('/gait/footsteps', '/gait/zmp_reference', '/gait/com_reference',
                   '/joint_commands', '/joint_states', '/tf', '/gait/zmp', '/gait/com',
-                  '/gait/support_polygon'):
+                  '/gait/support_polygon', '/tf_static', '/robot_description'):
         assert topic in topics, f'{topic} was not recorded'
     assert len(first) == len(second)
     for k, (a, b) in enumerate(zip(first, second, strict=True)):
