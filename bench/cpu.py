@@ -122,6 +122,8 @@ def nominal_rates(defaults: dict[str, dict], settings: dict | None = None) -> di
 
     The COM controller publishes every ``publish_period_s`` when it has that parameter, else
     every ``dt_s``. The markers come at ``markers_rate_hz``, at most one per simulator tick.
+    /tf carries the simulator's base pose every tick and, with robot_state_publisher, its links'
+    at ``publish_frequency`` (0: every tick), at most one per tick.
     """
     settings = settings or {}
 
@@ -151,6 +153,9 @@ def nominal_rates(defaults: dict[str, dict], settings: dict | None = None) -> di
         markers = value('kinematic_simulator', 'markers_rate_hz')
         if markers and value('kinematic_simulator', 'publish_markers') is not False:
             rates['/gait/markers'] = min(float(markers), float(simulator))
+        links = value('robot_state_publisher', 'publish_frequency')
+        if links is not None:
+            rates['/tf'] += min(float(links), float(simulator)) if links else float(simulator)
     return rates
 
 
@@ -568,7 +573,7 @@ def main() -> None:
     workdir.mkdir(parents=True, exist_ok=True)
     defaults = {}
     for node in ('footstep_planner', 'com_preview_controller', 'whole_body_ik',
-                 'kinematic_simulator'):
+                 'kinematic_simulator', 'robot_state_publisher'):
         defaults[node] = node_defaults(node)
     nominal = nominal_rates(defaults, get_scenario(scenario).settings)
     foot_radius = load_robot_description(get_scenario(scenario).robot).foot_radius_m

@@ -72,6 +72,12 @@ def test_nominal_rates_follow_the_node_parameters():
     com['publish_period_s'] = 0.05
     assert cpu.nominal_rates({'com_preview_controller': com})['/gait/com_reference'] == \
         pytest.approx(20.0)
+    # /tf: the simulator's base pose every tick, robot_state_publisher's links at its rate.
+    links = node_defaults('robot_state_publisher')
+    with_links = cpu.nominal_rates({**defaults, 'robot_state_publisher': links})
+    assert with_links['/tf'] == simulator['rate_hz'] + links['publish_frequency']
+    every = cpu.nominal_rates({**defaults, 'robot_state_publisher': {'publish_frequency': 0.0}})
+    assert every['/tf'] == 2 * simulator['rate_hz']
     # Settings sent to every node override the parameters a node has, and only those.
     overridden = cpu.nominal_rates(defaults, {'rate_hz': 100.0, 'publish_markers': False})
     assert overridden['/joint_states'] == 100.0
