@@ -29,10 +29,6 @@ from gait_nodes.runtime.qos import offered_qos_yaml
 from gait_nodes.runtime.selection import active_runtime
 
 PROG = 'python -m gait_nodes.view'
-#: Topics of the contract published by a robot state publisher, latched (transient local) as
-#: ROS's robot_state_publisher has them; offered to clients before anything publishes them.
-DESCRIPTION_TOPICS = {'/robot_description': 'std_msgs/msg/String',
-                      '/tf_static': 'tf2_msgs/msg/TFMessage'}
 #: How often the clients' subscriptions are followed [s]: the delay before a channel that a
 #: client subscribes to starts to flow.
 CLIENT_PERIOD_S = 0.1
@@ -52,7 +48,7 @@ def view_topics(foot_names=()) -> dict[str, str]:
         foot_names: Foot names of the robot whose per-foot topics
             (``/gait/contact_wrench/<foot>``) are served too.
     """
-    return {**DESCRIPTION_TOPICS, **graph.TOPICS, **graph.foot_topics(foot_names)}
+    return {**graph.TOPICS, **graph.foot_topics(foot_names)}
 
 
 def subscription_qos(offered: list[dict]):
