@@ -120,7 +120,7 @@ def test_robosimian_masses_are_the_published_ones(robosimian):
     assert 'Chrono' in description.description
     assert len(description.feet) == 4
     assert description.foot_radius_m == 0.055
-    assert description.body_height_m == 0.7
+    assert description.body_height_m == 0.77
     assert np.all(robosimian.velocity_limits_rad_s == 1.0)
     # The URDF says 1 rad/s too, and Pinocchio's model carries the YAML's limits.
     assert np.all(robosimian.model.velocityLimit[6:] == 1.0)
