@@ -38,6 +38,7 @@ gain (at its 0.77 m stance a 0.2 m stride swing needs 1.365 s at 0.1 s, 1.299 s 
 
 from __future__ import annotations
 
+import collections
 import math
 from collections.abc import Callable
 
@@ -610,11 +611,18 @@ def swing_timing(robot, method: str, step_height_m: float,
 
         path = default_table_path(robot, family, step_height_m, limit)
         if path.is_file():
+            stat = path.stat()
+            key = (id(robot), method, float(step_height_m), str(path), stat.st_mtime_ns,
+                   stat.st_size)
+            known = _known_model(robot, key)
+            if known is not None:
+                return known
             try:
                 table = load_table(path, robot, limit, family)
                 if math.isclose(table.step_height_m, step_height_m, abs_tol=1e-9):
-                    return TableSwingTiming(SwingPolicy(table, robot), robot), \
-                        f'swing times from the value table {path}'
+                    return _remember(robot, key, (
+                        TableSwingTiming(SwingPolicy(table, robot), robot),
+                        f'swing times from the value table {path}'))
             except GaitNodesError as exc:
                 if log is not None:
                     log(f'{path}: {exc}')
@@ -624,5 +632,37 @@ def swing_timing(robot, method: str, step_height_m: float,
             log(reason)
         return PolynomialSwingTiming(robot, family, limit, step_height_m, STAND_IN_FACTOR), \
             reason
-    return PolynomialSwingTiming(robot, family, limit, step_height_m), \
-        'swing times of the polynomial swing'
+    key = (id(robot), method, float(step_height_m))
+    return _known_model(robot, key) or _remember(robot, key, (
+        PolynomialSwingTiming(robot, family, limit, step_height_m),
+        'swing times of the polynomial swing'))
+
+
+#: Timing models made in this process, newest last: key -> (robot, (model, reason)).
+_MODELS: collections.OrderedDict = collections.OrderedDict()
+#: How many :data:`_MODELS` keeps.
+KNOWN_MODELS = 8
+
+
+def _known_model(robot, key: tuple) -> tuple[SwingTiming, str] | None:
+    """The model :func:`swing_timing` made for ``key`` before (its node times known), or None.
+
+    A model is a function of the robot (a shared, read-only RobotModel:
+    :func:`gait_nodes.robot.model.load_robot_model`), the swing and its height, and the table
+    file it read: every planner of the process with the same ones shares it, and so its
+    lattice nodes, each timed through the limb IK once per process, not once per planner (the
+    first plan of a run starts without that second of IK; a test run of many walks saves it
+    on each). Like any model it is used by one planning thread at a time.
+    """
+    known = _MODELS.get(key)
+    if known is None or known[0] is not robot:
+        return None
+    _MODELS.move_to_end(key)
+    return known[1]
+
+
+def _remember(robot, key: tuple, made: tuple[SwingTiming, str]) -> tuple[SwingTiming, str]:
+    _MODELS[key] = (robot, made)
+    while len(_MODELS) > KNOWN_MODELS:
+        _MODELS.popitem(last=False)
+    return made
