@@ -58,6 +58,8 @@ CHECK_CYCLES = 2.0
 RESCHEDULE_TOLERANCE_NS = 1_000_000
 #: Decisions remembered for repeated ids.
 REMEMBERED_IDS = 1000
+#: A stopping node waits this long for the job under way [s] (:meth:`OnlinePlanner.stop`).
+STOP_WAIT_S = 1.0
 
 ACCEPTED, REJECTED, APPLIED = 'accepted', 'rejected', 'applied'
 #: An accepted command's step boundary moved: a later change re-planned the steps before it.
@@ -323,11 +325,16 @@ class OnlinePlanner:
             self._thread.start()
 
     def stop(self) -> None:
-        """Stop the worker thread (its current job finishes first)."""
+        """Stop the worker thread: its current job finishes, or is left after STOP_WAIT_S.
+
+        A plan under way when the node stops is of no use to anyone, and the thread holds
+        nothing to save (a daemon, it ends with the process): a node stopping mid-plan (the
+        first plan of a slow start) exits at once, not after the launcher's kill.
+        """
         self._stop.set()
         self._wake.set()
         if self._thread is not None:
-            self._thread.join(timeout=10.0)
+            self._thread.join(timeout=STOP_WAIT_S)
             self._thread = None
 
     def run_pending(self) -> None:

@@ -568,6 +568,8 @@ class PlannerSupervisor:
         if event.error is not None:
             if token == 'resume' and self._pause is not None:
                 self._pause.fresh_ns = now_ns  # the walk stays paused; resumed again later
+            elif token == 'join':
+                self._listen(True)  # joined again from the robot's state then
             self.faults.failed(f'{token} plan', event.error)
             return
         if token == 'join':
@@ -672,6 +674,9 @@ class PlannerSupervisor:
         if self._base_pose is not None:
             if self._replacing is None:
                 self._plan_from_robot(now_ns, 'join')
+                # Measured: the robot's state is not read while the worker plans from it (at
+                # /tf's and /joint_states' rates it would take the CPU the first plan needs).
+                self._listen(False)
             return False  # joined once the worker's plan is live (_on_replaced)
         self._joined = True
         self._listen(False)
