@@ -154,8 +154,9 @@ setup(
         # ...and the live view, so they need the Foxglove SDK and a WebSocket client to talk to
         # it: the SDK ships a server only, and the sync client of websockets is the
         # client the test speaks the Foxglove protocol with. Used by the tests alone.
-        'test': ['pytest', 'hypothesis', 'ruff', 'example-robot-data', 'mujoco',
-                 'imageio[ffmpeg]', VIEW_REQUIREMENT, 'websockets>=13'],
+        # pytest-xdist runs the suite on every core (test/conftest.py groups the tests).
+        'test': ['pytest', 'pytest-xdist', 'hypothesis', 'ruff', 'example-robot-data',
+                 'mujoco', 'imageio[ffmpeg]', VIEW_REQUIREMENT, 'websockets>=13'],
         'robots': ['example-robot-data'],
         # The physics simulator (MuJoCo) and, for the walks' videos, an ffmpeg writer.
         'physics': ['mujoco', 'imageio[ffmpeg]'],

@@ -31,3 +31,35 @@ def tiny_crossover(tmp_path_factory):
     settings = {**WALKED_WITH, 'swing': 'polynomial', 'step_height_m': 0.1}
     return folder, walked_crossover((2.5,), duration_at_1_rad_s=40.0, bags_dir=folder,
                                     settings=settings)
+
+
+# -- running the suite on several workers (pytest-xdist, `-n auto --dist loadgroup`) ----------
+
+#: Modules whose tests start node processes that walk in real time over DDS (or rclpy): one
+#: worker runs them, one after the other, so that two graphs never share the cores; the other
+#: workers' tests (inproc walks, unit tests) are the competing load they meet on a robot's
+#: computer.
+BETWEEN_PROCESSES = {
+    'test_bags', 'test_command_cli', 'test_faults_dds', 'test_main_job_dds',
+    'test_namespaces_dds', 'test_node_parameters', 'test_online_commands_dds',
+    'test_rclpy_runtime', 'test_robot_state_publisher', 'test_runtime_dds', 'test_view',
+}
+#: Modules that share a session fixture (``tiny_crossover``): one worker computes it once.
+SHARING = {'test_thesis': 'walked_crossover', 'test_walked_crossover': 'walked_crossover'}
+
+
+def pytest_configure(config):
+    config.addinivalue_line('markers', 'xdist_group(name): run on one pytest-xdist worker')
+
+
+def pytest_collection_modifyitems(config, items):
+    """Group the tests for ``--dist loadgroup``.
+
+    A module's tests stay on one worker (its module-scoped fixtures are made once), and the
+    real-time graphs all run on one.
+    """
+    for item in items:
+        module = item.module.__name__.rpartition('.')[2] if item.module else item.nodeid
+        group = ('between_processes' if module in BETWEEN_PROCESSES
+                 else SHARING.get(module, module))
+        item.add_marker(pytest.mark.xdist_group(group))

@@ -20,7 +20,7 @@ DOCS = REPO / 'docs'
 #: The README's longest length [lines]: a page read in five minutes, the reference in docs/.
 MAX_README_LINES = 250
 MAIN_JOB_COMMAND = 'sh tools/venv.sh && .venv/bin/python -m gait_nodes run --duration 40 --record'
-TEST_COMMAND = 'sh tools/venv.sh && .venv/bin/python -m pytest -q test'
+TEST_COMMAND = 'sh tools/venv.sh && .venv/bin/python -m pytest -q -n auto --dist loadgroup test'
 
 FENCE = re.compile(r'^\s*(```|~~~)')
 HEADING = re.compile(r'^(#{1,6})\s+(.*?)\s*#*\s*$')

@@ -155,4 +155,4 @@ if wrong:
 ' "$CONSTRAINTS"
 fi
 
-say "done: $VENV/bin/python -m pytest -q test"
+say "done: $VENV/bin/python -m pytest -q -n auto --dist loadgroup test"
