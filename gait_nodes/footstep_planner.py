@@ -5,7 +5,9 @@ Subscribes ``/cmd_vel`` (geometry_msgs/Twist) and ``/gait/command`` (std_msgs/St
 plan changes), ``/gait/zmp_reference`` (the next ``zmp_horizon_s``, 2.5 s, every tick:
 ``rate_hz``, 10 Hz; the horizon covers the COM controller's ``preview_s + horizon_s`` and one
 publication period, so that a late reference is ridden through), ``/gait/command_status`` (one
-JSON answer per command) and ``/diagnostics``.
+JSON answer per command), ``/diagnostics`` and, with each plan, its footholds on
+``/gait/markers`` for RViz and Foxglove (namespace ``footsteps``, :mod:`gait_nodes.markers`;
+``publish_markers: false`` turns them off).
 
 The gait settings are ROS parameters (defaults in ``config/footstep_planner.yaml``); a
 ``ros2 param set`` and a /gait/command go through the same checks, and an accepted change takes

@@ -17,7 +17,9 @@ shortfall is reported on /diagnostics (the footstep planner with ``timing: joint
 the time the swing needs, :mod:`gait_nodes.swing.timing`). With ``swing: polynomial`` it
 publishes a sixth-order swing with a via point at ``step_height_m`` (Lucy, seed 004) instead.
 Either way the waypoints are ``sample_period_s`` apart (the whole-body IK interpolates them
-linearly, so at its own tick period the foot's velocity changes smoothly).
+linearly, so at its own tick period the foot's velocity changes smoothly). With each swing it
+sends, its path goes to /gait/markers for RViz and Foxglove (namespace ``swing_paths``,
+:mod:`gait_nodes.markers`; ``publish_markers: false`` turns them off).
 
 The swing follows the footstep planner's gait commands: an accepted one on
 /gait/command_status that changes ``swing`` or ``step_height_m`` is walked by the swings that
