@@ -18,7 +18,9 @@
    cancels), and the real-time factor of the longer run.
 4. Stream rates from each bag (recorder log times, between the two CPU instants), against the
    nominal rates read from the node parameter defaults (``config/*.yaml`` plus the scenario's
-   settings), with the deviation in %.
+   settings), with the deviation in %. /gait/markers counts the simulator's arrays only: the
+   footstep planner's and the swing policy's come with each plan and each swing, at no rate
+   a parameter sets.
 5. The walk, from the launcher's own inspection of the bag (:mod:`gait_nodes.bag.analysis`): ZMP
    samples outside the support polygon, the worst excursion beyond it against the robot's foot
    radius, ERROR and WARN statuses by name, distance walked, and whether the planner paused.
@@ -121,7 +123,9 @@ def nominal_rates(defaults: dict[str, dict], settings: dict | None = None) -> di
             defaults of the parameters a node has.
 
     The COM controller publishes every ``publish_period_s`` when it has that parameter, else
-    every ``dt_s``. The markers come at ``markers_rate_hz``, at most one per simulator tick.
+    every ``dt_s``. The simulator's markers come at ``markers_rate_hz``, at most one per
+    simulator tick (the planner's and the swing policy's on /gait/markers have no nominal rate:
+    :func:`read_bag` leaves them out).
     /tf carries the simulator's base pose every tick and, with robot_state_publisher, its links'
     at ``publish_frequency`` (0: every tick), at most one per tick.
     """
@@ -377,12 +381,17 @@ def read_bag(result: GraphRun, bag: Path) -> None:
     from gait_nodes.diagnostics import level_value
     from gait_nodes.errors import GaitNodesError
     from gait_nodes.interfaces import deserialize_message, get_message
+    from gait_nodes.markers import from_simulator
 
     times: dict[str, list[int]] = {}
     statuses = []
     array = get_message('diagnostic_msgs/msg/DiagnosticArray')
+    marker_array = get_message('visualization_msgs/msg/MarkerArray')
     try:
         for channel, log_ns, _, data in BagReader(bag).messages():
+            if channel.topic == '/gait/markers' and not from_simulator(
+                    deserialize_message(data, marker_array)):
+                continue  # a plan's or a swing's markers: not the periodic stream
             times.setdefault(channel.topic, []).append(log_ns)
             if channel.topic == '/diagnostics':
                 msg = deserialize_message(data, array)

@@ -12,8 +12,8 @@ as long as the bag recorded the simulator (or ``--duration`` s), and times the n
 (its tick and subscriptions, CPU time of the thread): the ``kinematic_simulator`` row of
 ``bench/sim.py``'s graph run without the other nodes' noise and cache pollution. With
 ``--check`` the node's /joint_states, /tf, /gait/zmp, /gait/com, /gait/support_polygon and
-/gait/markers are compared with the bag's, message by message and byte for byte: a speed change
-of the node must leave them as they were.
+/gait/markers (the simulator's: namespace ``gait``) are compared with the bag's, message by
+message and byte for byte: a speed change of the node must leave them as they were.
 
 A bag whose /joint_commands are sensor_msgs/JointState setpoints (recorded before they became
 trajectories) is replayed as whole_body_ik now publishes: every ``--period`` s a
@@ -44,6 +44,7 @@ import yaml  # noqa: E402
 from gait_nodes import runtime  # noqa: E402
 from gait_nodes.bag.reader import BagReader  # noqa: E402
 from gait_nodes.interfaces import get_message, serialize_message  # noqa: E402
+from gait_nodes.markers import from_simulator  # noqa: E402
 from gait_nodes.runtime import DurabilityPolicy, QoSProfile  # noqa: E402
 from gait_nodes.scenarios import get_scenario  # noqa: E402
 
@@ -106,6 +107,9 @@ def recorded(bag: Path) -> tuple[list, dict, dict]:
                 setpoints.append((log_time_ns, msg))
             else:
                 inputs.append((log_time_ns, channel.topic, msg))
+        elif channel.topic == '/gait/markers' and not from_simulator(
+                get_message(channel.type_name).deserialize(data)):
+            continue  # the planner's footholds or a swing's path
         elif channel.topic in outputs:
             outputs[channel.topic].append(bytes(data))
     if setpoints:

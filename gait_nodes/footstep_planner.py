@@ -5,7 +5,9 @@ Subscribes ``/cmd_vel`` (geometry_msgs/Twist) and ``/gait/command`` (std_msgs/St
 plan changes), ``/gait/zmp_reference`` (the next ``zmp_horizon_s``, 2.5 s, every tick:
 ``rate_hz``, 10 Hz; the horizon covers the COM controller's ``preview_s + horizon_s`` and one
 publication period, so that a late reference is ridden through), ``/gait/command_status`` (one
-JSON answer per command) and ``/diagnostics``.
+JSON answer per command), ``/diagnostics`` and, with each plan, its footholds on
+``/gait/markers`` for RViz and Foxglove (namespace ``footsteps``, :mod:`gait_nodes.markers`;
+``publish_markers: false`` turns them off).
 
 The gait settings are ROS parameters (defaults in ``config/footstep_planner.yaml``); a
 ``ros2 param set`` and a /gait/command go through the same checks, and an accepted change takes
@@ -71,6 +73,7 @@ from gait_nodes.diagnostics import OK, WARN, DiagnosticsReporter, level_value
 from gait_nodes.errors import GaitNodesError, GaitParameterError, ParameterError
 from gait_nodes.faults import FaultGuard, GuardedNode
 from gait_nodes.interfaces import get_message
+from gait_nodes.markers import footsteps_markers
 from gait_nodes.paths import node_defaults
 from gait_nodes.planning.footsteps import GaitPlanner, Twist2D
 from gait_nodes.planning.gait_params import (
@@ -111,6 +114,8 @@ GAIT_FIELDS = tuple(GaitParameters.__dataclass_fields__)
 NODE_SETTINGS = {'rate_hz': (0.01, True, 1000.0, 'Hz'), 'zmp_horizon_s': (1.6, True, 60.0, 's'),
                  'zmp_sample_period_s': (0.0, False, 0.1, 's'),
                  'cmd_vel_timeout_s': (0.0, True, 60.0, 's')}
+#: Node settings that are on or off: publish_markers, the footholds on /gait/markers.
+NODE_FLAGS = ('publish_markers',)
 #: Most samples in one /gait/zmp_reference.
 MAX_ZMP_SAMPLES = 20000
 #: Characters of a /gait/command (and of the reason it was refused) echoed in the answer.
@@ -144,6 +149,9 @@ def check_node_settings(values: dict[str, object]) -> None:
                 and (value >= low if low_included else value > low)):
             bound = f'[{low:g}' if low_included else f'({low:g}'
             raise ParameterError(f'{name} must be in {bound}, {high:g}] {unit}, got {value!r}')
+    for name in NODE_FLAGS:
+        if not isinstance(values[name], bool):
+            raise ParameterError(f'{name} must be true or false, got {values[name]!r}')
     samples = values['zmp_horizon_s'] / values['zmp_sample_period_s']
     if samples > MAX_ZMP_SAMPLES:
         raise ParameterError(f'zmp_horizon_s / zmp_sample_period_s = {samples:.0f} samples; at '
@@ -180,8 +188,10 @@ class FootstepPlanner(GuardedNode):
             default = defaults.get(name, default)
             values[name] = self.declare_parameter(
                 name, int(default) if name == 'stairs_count' else float(default)).value
+        for name in NODE_FLAGS:
+            values[name] = self.declare_parameter(name, bool(defaults[name])).value
         check_node_settings(values)
-        self.settings = {name: values[name] for name in NODE_SETTINGS}
+        self.settings = {name: values[name] for name in (*NODE_SETTINGS, *NODE_FLAGS)}
         params = GaitParameters(**{name: values[name] for name in GAIT_FIELDS})
         params.check_robot(self.robot)
         terrain = Staircase.from_parameters(values)
@@ -232,6 +242,8 @@ class FootstepPlanner(GuardedNode):
         # As deep as the command subscription: the answers to a burst of commands all go out.
         self.status_publisher = self.create_publisher(get_message('std_msgs/msg/String'),
                                                       'gait/command_status', COMMAND_DEPTH)
+        self.markers_publisher = self.create_publisher(
+            get_message('visualization_msgs/msg/MarkerArray'), 'gait/markers', 10)
         self.create_subscription(get_message('geometry_msgs/msg/Twist'), 'cmd_vel',
                                  self.on_cmd_vel, 10)
         self.create_subscription(get_message('std_msgs/msg/String'), 'gait/command',
@@ -390,6 +402,9 @@ class FootstepPlanner(GuardedNode):
                                            report.values)])
         if output.footsteps is not None:
             self.footsteps_publisher.publish(footsteps_to_msg(output.footsteps))
+            if self.settings['publish_markers']:
+                self.markers_publisher.publish(footsteps_markers(
+                    output.footsteps, self._now_ns(), self.robot.foot_radius_m))
         if output.zmp_reference is not None:
             self.zmp_publisher.publish(self._zmp_messages.to_msg(output.zmp_reference))
         for line in output.log:
@@ -497,7 +512,7 @@ class FootstepPlanner(GuardedNode):
                 if parameter.value != self.get_parameter('robot').value:
                     return SetParametersResult(successful=False,
                                                reason='robot is fixed when the node starts')
-            elif parameter.name in NODE_SETTINGS:
+            elif parameter.name in NODE_SETTINGS or parameter.name in NODE_FLAGS:
                 settings[parameter.name] = parameter.value
             elif parameter.name in GAIT_FIELDS:
                 gait_changes[parameter.name] = parameter.value

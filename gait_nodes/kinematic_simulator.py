@@ -21,8 +21,9 @@ The ZMP monitor (:mod:`gait_nodes.sim.zmp_monitor`) evaluates the full multi-bod
 behind, by central differences of the integrated configurations: the /gait/zmp, /gait/com,
 /gait/support_polygon and /gait/markers messages are stamped at the instant they describe (the
 previous tick). /gait/markers (ZMP and COM spheres, support polygon outline, for RViz or
-Foxglove) comes at a display's rate, ``markers_rate_hz``: the first sample of each of its
-periods. /diagnostics: a stability report at once whenever the level changes (OK, WARN
+Foxglove; namespace ``gait``, beside the planner's footholds and the swing paths,
+:mod:`gait_nodes.markers`) comes at a display's rate, ``markers_rate_hz``: the first sample of
+each of its periods. /diagnostics: a stability report at once whenever the level changes (OK, WARN
 below ``warn_margin_m``, ERROR with the ZMP outside the support polygon) and a stale-input report
 when /joint_commands stop for ``stale_after_s`` (the simulator goes on following what it holds,
 then holds its last point); every ``diagnostics_period_s`` a summary (stability margin, joint
@@ -68,6 +69,7 @@ from gait_nodes.diagnostics import ERROR, OK, WARN, DiagnosticsReporter
 from gait_nodes.errors import GaitNodesError, ParameterError
 from gait_nodes.faults import FaultGuard, GuardedNode
 from gait_nodes.interfaces import get_constructor, get_message
+from gait_nodes.markers import SIMULATOR_NAMESPACE
 from gait_nodes.paths import node_defaults as shipped_node_defaults
 from gait_nodes.robot.model import load_robot_model
 from gait_nodes.robot.whole_body_ik import nominal_configuration
@@ -663,8 +665,9 @@ class KinematicSimulator(GuardedNode):
         scale, color = parts[marker_id]
         empty = parts['empty']
         return self._new['Marker'](
-            header, 'gait', marker_id, kind, action, pose, scale, color, parts['lifetime'],
-            False, points, empty, '', parts['texture'], empty, '', '', parts['mesh_file'], False)
+            header, SIMULATOR_NAMESPACE, marker_id, kind, action, pose, scale, color,
+            parts['lifetime'], False, points, empty, '', parts['texture'], empty, '', '',
+            parts['mesh_file'], False)
 
     def _marker_array(self, header, zmp: list | None, com: list | None, outline_points: list):
         """ZMP and COM spheres (deleted when not finite), support polygon outline."""

@@ -17,7 +17,9 @@ shortfall is reported on /diagnostics (the footstep planner with ``timing: joint
 the time the swing needs, :mod:`gait_nodes.swing.timing`). With ``swing: polynomial`` it
 publishes a sixth-order swing with a via point at ``step_height_m`` (Lucy, seed 004) instead.
 Either way the waypoints are ``sample_period_s`` apart (the whole-body IK interpolates them
-linearly, so at its own tick period the foot's velocity changes smoothly).
+linearly, so at its own tick period the foot's velocity changes smoothly). With each swing it
+sends, its path goes to /gait/markers for RViz and Foxglove (namespace ``swing_paths``,
+:mod:`gait_nodes.markers`; ``publish_markers: false`` turns them off).
 
 The swing follows the footstep planner's gait commands: an accepted one on
 /gait/command_status that changes ``swing`` or ``step_height_m`` is walked by the swings that
@@ -48,6 +50,7 @@ from gait_nodes.errors import GaitNodesError, ParameterError, SwingPolicyError
 from gait_nodes.faults import FaultGuard, GuardedNode
 from gait_nodes.graph import node_topic_name
 from gait_nodes.interfaces import get_message
+from gait_nodes.markers import swing_path_markers
 from gait_nodes.paths import node_defaults
 from gait_nodes.robot.model import load_robot_model
 from gait_nodes.runtime import Parameter, SetParametersResult, qos_profile_latched
@@ -90,6 +93,9 @@ def check_values(values: dict) -> None:
             or not -1 <= values['family'] <= 7:
         raise ParameterError(f'family must be an integer in [-1, 7] (-1: the robot YAML\'s), '
                              f'got {values["family"]!r}')
+    if not isinstance(values['publish_markers'], bool):
+        raise ParameterError(f'publish_markers must be true or false, got '
+                             f'{values["publish_markers"]!r}')
     if not isinstance(values['table'], str):
         raise ParameterError(f'table must be a path string, got {values["table"]!r}')
     number('step_height_m', 0.0, 1.0, low_open=True)
@@ -148,6 +154,8 @@ class SwingLegPolicy(GuardedNode):
         self._publisher = self.create_publisher(
             get_message('trajectory_msgs/msg/MultiDOFJointTrajectory'),
             node_topic_name(SWING_TOPIC), 10)
+        self._markers = self.create_publisher(
+            get_message('visualization_msgs/msg/MarkerArray'), 'gait/markers', 10)
         self.create_subscription(get_message('trajectory_msgs/msg/MultiDOFJointTrajectory'),
                                  node_topic_name(FOOTSTEPS_TOPIC), self._on_footsteps,
                                  qos_profile_latched)
@@ -359,6 +367,10 @@ class SwingLegPolicy(GuardedNode):
             trajectory, _ = polynomial_swing(swing, lift_ns, height, samples)
         self._publisher.publish(contract.swing_trajectory_to_msg(trajectory))
         self.published_count += 1
+        if values['publish_markers']:
+            self._markers.publish(swing_path_markers(
+                trajectory, self.robot.foot_names.index(swing.foot),
+                self.get_clock().now().nanoseconds))
 
     def _value_table_swing(self, policy, plan, swing, lift_ns: int) -> contract.SwingTrajectory:
         climb = float(swing.end_in_world[2] - swing.start_in_world[2])

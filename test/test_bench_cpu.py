@@ -5,9 +5,15 @@ import os
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
+from gait_nodes.bag.writer import BagWriter
+from gait_nodes.contract import FootstepPlan
+from gait_nodes.interfaces import get_message, serialize_message
+from gait_nodes.markers import footsteps_markers
 from gait_nodes.paths import node_defaults
+from gait_nodes.runtime.qos import QoSProfile, offered_qos_yaml
 
 _SPEC = importlib.util.spec_from_file_location(
     'bench_cpu', Path(__file__).resolve().parent.parent / 'bench' / 'cpu.py')
@@ -82,6 +88,26 @@ def test_nominal_rates_follow_the_node_parameters():
     overridden = cpu.nominal_rates(defaults, {'rate_hz': 100.0, 'publish_markers': False})
     assert overridden['/joint_states'] == 100.0
     assert '/gait/markers' not in overridden
+
+
+def test_the_markers_rate_is_the_simulators_stream(tmp_path):
+    """/gait/markers' plan and swing markers come at no set rate: the bench leaves them out."""
+    marker_array = get_message('visualization_msgs/msg/MarkerArray')
+    simulator = marker_array(markers=[get_message('visualization_msgs/msg/Marker')(ns='gait')])
+    plan = FootstepPlan(0, ('foot',), np.array([0.0]), np.zeros((1, 1, 3)), np.zeros((1, 1)))
+    period_ns = 50_000_000  # 20 Hz
+    with BagWriter(tmp_path / 'bag') as writer:
+        writer.add_topic('/gait/markers', 'visualization_msgs/msg/MarkerArray',
+                         [offered_qos_yaml(QoSProfile())])
+        for k in range(41):
+            writer.write('/gait/markers', serialize_message(simulator), k * period_ns)
+            if k % 7 == 3:  # a new plan, between two of the simulator's
+                writer.write('/gait/markers', serialize_message(
+                    footsteps_markers(plan, k * period_ns + 1, 0.05)), k * period_ns + 1)
+    result = cpu.GraphRun('dds', window_ns=(0, 40 * period_ns))
+    cpu.read_bag(result, tmp_path / 'bag')
+    assert result.problem is None
+    assert result.rates_hz['/gait/markers'] == pytest.approx(20.0)
 
 
 def test_pause_reports_and_json_summary():

@@ -42,6 +42,7 @@ from pathlib import Path
 import numpy as np
 
 from gait_nodes.errors import GaitNodesError
+from gait_nodes.markers import FOOT_COLOURS
 
 #: Video formats by file suffix -> what encodes them.
 FORMATS = {'.mp4': 'imageio-ffmpeg', '.gif': 'pillow', '.png': 'pillow'}
@@ -53,9 +54,8 @@ COP_RGBA = (0.85, 0.1, 0.85, 1.0)
 COM_RGBA = (0.1, 0.7, 0.1, 1.0)
 POLYGON_RGBA = (0.15, 0.35, 1.0, 1.0)
 SKELETON_RGBA = (0.35, 0.37, 0.42, 1.0)
-#: One colour a foot (cycled), landed footholds solid, planned ones faint.
-FOOT_COLOURS = ((0.1, 0.55, 0.95), (0.2, 0.75, 0.45), (0.6, 0.35, 0.85), (0.05, 0.75, 0.8),
-                (0.9, 0.35, 0.45), (0.6, 0.6, 0.1))
+#: Landed footholds solid, planned ones faint (one colour a foot: FOOT_COLOURS, as on
+#: /gait/markers).
 LANDED_ALPHA, PLANNED_ALPHA = 0.9, 0.3
 #: Opacity of the feet's contact shapes (what is under a sole shows through).
 FOOT_ALPHA = 0.45
