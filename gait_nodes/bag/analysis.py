@@ -38,12 +38,14 @@ independent reader of the bag can check it:
 from __future__ import annotations
 
 import bisect
+import itertools
 import json
 import math
 import struct
 from collections import Counter, defaultdict
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from operator import attrgetter
 from pathlib import Path
 
 import numpy as np
@@ -59,6 +61,9 @@ from gait_nodes.interfaces import deserialize_message, get_message
 #: Samples of each /gait/zmp_reference window kept in the series: its first 0.2 s (the next
 #: window replaces them from its own first sample on) [ns].
 ZMP_REFERENCE_KEPT_NS = 200_000_000
+
+#: (x, y) of a point message.
+_XY = attrgetter('x', 'y')
 
 #: Topics whose messages inspect decodes (when their type is the contract's).
 GAIT_TOPICS = ('/tf', '/gait/zmp', '/gait/com', '/gait/support_polygon', '/gait/footsteps',
@@ -111,6 +116,9 @@ class _Collector:
     def __init__(self):
         self.series = GaitSeries()
         self._classes = {}
+        #: The vertices (their bytes) of the last support polygon read and its hull (None:
+        #: not a polygon).
+        self._last_polygon: tuple[bytes, np.ndarray | None] | None = None
 
     def message(self, topic: str, type_name: str, data: bytes) -> None:
         if TOPICS.get(topic) != type_name:
@@ -147,9 +155,18 @@ class _Collector:
         self.series.cop.append((_stamp(msg.header), msg.point.x, msg.point.y, msg.point.z))
 
     def _gait_support_polygon(self, msg) -> None:
-        vertices = np.array([(p.x, p.y) for p in msg.polygon.points], dtype=float)
-        if len(vertices) and np.all(np.isfinite(vertices)):
-            self.series.polygons.append((_stamp(msg.header), convex_hull(vertices)))
+        # The polygon changes with the contacts only (a few times a cycle, published at
+        # 100 Hz): a message with the very same vertices as the last one, bit for bit, shares
+        # its hull, computed once (or its refusal, for a NaN or infinite vertex).
+        xy = np.fromiter(itertools.chain.from_iterable(map(_XY, msg.polygon.points)), float)
+        key = xy.tobytes()
+        if self._last_polygon is None or self._last_polygon[0] != key:
+            vertices = xy.reshape(-1, 2)
+            usable = len(vertices) and np.all(np.isfinite(vertices))
+            self._last_polygon = (key, convex_hull(vertices) if usable else None)
+        hull = self._last_polygon[1]
+        if hull is not None:
+            self.series.polygons.append((_stamp(msg.header), hull))
 
     def _gait_zmp_reference(self, msg) -> None:
         reference = contract.zmp_reference_from_msg(msg)
@@ -354,11 +371,18 @@ def zmp_margins(series: GaitSeries) -> tuple[np.ndarray, np.ndarray]:
     stamps = np.array([z[0] for z in zmp], dtype=np.int64)
     points = np.array([(z[1], z[2]) for z in zmp])
     which = np.searchsorted(polygon_stamps, stamps, side='right') - 1
+    keep = which >= 0
+    # The samples of equal polygons (published again and again until the contacts change) in
+    # one signed_distance call, under the first copy's index: a point's margin does not
+    # depend on the other points.
+    first_copy: dict[bytes, int] = {}
+    copy_of = np.array([first_copy.setdefault(np.asarray(hull, dtype=float).tobytes(), index)
+                        for index, (_, hull) in enumerate(polygons)], dtype=np.intp)
+    which = np.where(keep, copy_of[which], -1)
     margins = np.full(len(zmp), np.nan)
-    for index in np.unique(which[which >= 0]):
+    for index in np.unique(which[keep]):
         chosen = which == index
         margins[chosen] = signed_distance(points[chosen], polygons[index][1])
-    keep = which >= 0
     return stamps[keep], margins[keep]
 
 

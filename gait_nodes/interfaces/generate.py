@@ -536,12 +536,40 @@ class _DeserializerBuilder:
             else:
                 state.reset(min(size, 4))
             return
+        if field.container == 'sequence' and field.base_type == 'string':
+            self._string_sequence(indent, single, count, target)
+            state.reset(1)
+            return
         element = self.w.unique('e')
         self.emit(indent, f'{target} = []')
         self.emit(indent, f'for _ in range({count}):')
         self.single(indent + 1, single, element, _Alignment(1))
         self.emit(indent + 1, f'{target}.append({element})')
         state.reset(1)
+
+    def _string_sequence(self, indent: int, single: FieldDef, count: str, target: str) -> None:
+        """A sequence of strings, decoded once for the bytes met last with its count here.
+
+        After its count the strings start 4-aligned, so their bytes alone decide them and where
+        they end: a name list received again and again (JointState.name, 28 names decoded in
+        17 of the 22 us of a RoboSimian /joint_states) is compared, not decoded. Bytes that
+        run past the end of the data are not remembered.
+        """
+        memo, known, start = self.w.unique('MEMO'), self.w.unique('k'), self.w.unique('t')
+        element = self.w.unique('e')
+        self.w.constants[memo] = {}
+        self.emit(indent, f'{known} = {memo}.get({count})')
+        self.emit(indent, f'if {known} is not None and bytes(d[p:p + {known}[1]]) == {known}[0]:')
+        self.emit(indent + 1, f'{target} = list({known}[2])')
+        self.emit(indent + 1, f'p += {known}[1]')
+        self.emit(indent, 'else:')
+        self.emit(indent + 1, f'{start} = p')
+        self.emit(indent + 1, f'{target} = []')
+        self.emit(indent + 1, f'for _ in range({count}):')
+        self.single(indent + 2, single, element, _Alignment(1))
+        self.emit(indent + 2, f'{target}.append({element})')
+        self.emit(indent + 1, f'if p <= len(d): remember_strings({memo}, {count}, '
+                              f'bytes(d[{start}:p]), {target})')
 
 
 class RecordRun:
@@ -713,6 +741,13 @@ def _remember(memo: dict, sequence, data: bytearray, start: int) -> None:
     memo[id(sequence)] = (sequence, bytes(data[start:]))
 
 
+def _remember_strings(memo: dict, count: int, data: bytes, strings: list[str]) -> None:
+    """Keep a sequence of ``count`` strings decoded from ``data`` (see ``_string_sequence``)."""
+    if len(memo) >= _MEMO_KEPT:
+        memo.clear()
+    memo[count] = (data, len(data), tuple(strings))
+
+
 def _compile(writer: _CodeWriter, name: str, args: str, result: str) -> Callable:
     source = '\n'.join([f'def {name}({args}):', *writer.lines, f'    return {result}'])
     namespace = dict(writer.constants)
@@ -720,7 +755,7 @@ def _compile(writer: _CodeWriter, name: str, args: str, result: str) -> Callable
         PAD=[bytes(i) for i in range(8)], U32=struct.Struct('<I'),
         pack=struct.pack, unpack_from=struct.unpack_from,
         STRINGS=_STRING_SEQUENCES, string_sequence=_string_sequence,
-        MEMO_MIN=_MEMO_MIN, remember=_remember,
+        MEMO_MIN=_MEMO_MIN, remember=_remember, remember_strings=_remember_strings,
     )
     exec(compile(source, f'<cdr {name}>', 'exec'), namespace)  # noqa: S102 - generated above
     function = namespace[name]
