@@ -365,8 +365,14 @@ class OnlinePlanner:
                 self._job_done(job.kind, time.monotonic() - started)
             self._extend()
             self._publish()
+            # Each job's events with its plan: a join plan is live while a velocity waits.
+            self._hand_over()
         if self._extend():
             self._publish()
+        self._hand_over()
+
+    def _hand_over(self) -> None:
+        """Give the node the events of the plan just published, in order."""
         with self._lock:
             self._events.extend(self._outbox)
             self._to_apply.extend(event for event in self._outbox
