@@ -50,6 +50,8 @@ SHARING = {'test_thesis': 'walked_crossover', 'test_walked_crossover': 'walked_c
 
 def pytest_configure(config):
     config.addinivalue_line('markers', 'xdist_group(name): run on one pytest-xdist worker')
+    config.addinivalue_line('markers', 'between_processes: starts node processes that walk in '
+                            'real time (BETWEEN_PROCESSES)')
 
 
 def pytest_collection_modifyitems(config, items):
@@ -60,6 +62,9 @@ def pytest_collection_modifyitems(config, items):
     """
     for item in items:
         module = item.module.__name__.rpartition('.')[2] if item.module else item.nodeid
-        group = ('between_processes' if module in BETWEEN_PROCESSES
-                 else SHARING.get(module, module))
+        if module in BETWEEN_PROCESSES:
+            item.add_marker(pytest.mark.between_processes)
+            group = 'between_processes'
+        else:
+            group = SHARING.get(module, module)
         item.add_marker(pytest.mark.xdist_group(group))
