@@ -35,6 +35,9 @@ from gait_nodes.swing.table import ValueTable
 
 #: Stop when no value changes by more than this in a sweep [s] (thesis Appendix A).
 TOLERANCE_S = 1e-4
+#: Points ``s + a`` whose IK :func:`one_step_costs` solves in one batch (8 MB of states), each
+#: distinct one once.
+IK_BATCH_POINTS = 250_000
 #: The thesis' swing planes: 0.7 and 0.6 m below the centre of body [m] (000, IV.B.1).
 THESIS_Z_PLANES_M = (-0.7, -0.6)
 #: The thesis' goal of the front-right foot: y and z of the swing's start (000, IV.B.3) [m].
@@ -126,6 +129,13 @@ def one_step_costs(timing: LimbTiming, grid: SwingGrid, displacements: np.ndarra
                    progress: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """One-step cost ``C[a, s]`` [s] of every action from every node, and node feasibility.
 
+    The IK of the clamped ``s + a`` is solved :data:`IK_BATCH_POINTS` points at a time, each
+    distinct point of a batch once: many coincide (moves clamped onto the same point at the
+    mesh's edges, several actions reaching the same place), and the IK of a point does not
+    depend on the others solved with it (but in the last bits: its roots are polished for a
+    whole chunk at once), so the costs are those of solving every point. On the default grid
+    and actions (2,145 states x 218 actions) 42 % of the points are distinct.
+
     Returns:
         ``(costs, feasible)``: (A, S) times with the fastest joint at the limit
         (:data:`INFEASIBLE_S` when either end is infeasible) and (S,) booleans.
@@ -135,10 +145,19 @@ def one_step_costs(timing: LimbTiming, grid: SwingGrid, displacements: np.ndarra
     states = grid.points()
     q, feasible = timing.joints(states)
     costs = np.empty((len(displacements), len(states)))
-    for a, move in enumerate(tqdm(displacements, desc='one-step costs', unit='action',
-                                  disable=not progress, leave=False)):
-        q_next, ok = timing.joints(grid.clamp(states + move))
-        costs[a] = np.where(feasible & ok, timing.move_time(q, q_next), INFEASIBLE_S)
+    per_batch = max(1, IK_BATCH_POINTS // len(states))
+    with tqdm(total=len(displacements), desc='one-step costs', unit='action',
+              disable=not progress, leave=False) as bar:
+        for first in range(0, len(displacements), per_batch):
+            moves = displacements[first:first + per_batch]
+            following = grid.clamp(states[None, :, :] + moves[:, None, :]).reshape(-1, 4)
+            distinct, inverse = np.unique(following, axis=0, return_inverse=True)
+            q_distinct, ok_distinct = timing.joints(distinct)
+            inverse = inverse.reshape(len(moves), len(states))
+            costs[first:first + len(moves)] = np.where(
+                feasible & ok_distinct[inverse],
+                timing.move_time(q, q_distinct[inverse]), INFEASIBLE_S)
+            bar.update(len(moves))
     return costs, feasible
 
 
