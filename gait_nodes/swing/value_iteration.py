@@ -298,8 +298,8 @@ def build_table(robot, family: int, step_height_m: float, joint_velocity_limit_r
                 grid_spec: GridSpec | None = None, actions: SwingActions | None = None,
                 goal: np.ndarray | None = None, tolerance_s: float = TOLERANCE_S,
                 progress: bool = False, ground_z_m: float | None = None,
-                costs: tuple[np.ndarray, np.ndarray] | None = None
-                ) -> tuple[ValueTable, BuildReport]:
+                costs: tuple[np.ndarray, np.ndarray] | None = None,
+                lift_s: np.ndarray | None = None) -> tuple[ValueTable, BuildReport]:
     """Build a swing-leg value table for a robot, IK family, step height and limit.
 
     Args:
@@ -318,6 +318,8 @@ def build_table(robot, family: int, step_height_m: float, joint_velocity_limit_r
             foot by the step height below the swing plane (``goal z - step height``).
         costs: Precomputed one-step costs for this family, limit, grid and actions
             (:func:`one_step_costs`); they do not depend on the goal.
+        lift_s: Precomputed lift times for this family, limit, grid and ground
+            (:func:`lift_times`); they do not depend on the goal either.
 
     Raises:
         SwingTableError: Bad settings, an unreachable goal, or no convergence.
@@ -337,7 +339,7 @@ def build_table(robot, family: int, step_height_m: float, joint_velocity_limit_r
         step_height_m=float(step_height_m), ground_z_m=timing.ground_z_m, grid=grid,
         actions=actions, goal=goal, values_s=values, lift_s=np.zeros(grid.shape),
         lower_s=0.0, iterations=report.iterations, max_change_s=report.max_change_s)
-    return with_step_height(table, robot, step_height_m, timing.ground_z_m), report
+    return with_step_height(table, robot, step_height_m, timing.ground_z_m, lift_s), report
 
 
 def table_grid(robot, step_height_m: float, grid_spec: GridSpec | None = None,
@@ -364,8 +366,19 @@ def grid_goal(robot, step_height_m: float, grid: SwingGrid, goal: np.ndarray | N
     return np.array([a[i] for a, i in zip(grid.axes, index, strict=True)])
 
 
+def lift_times(timing: LimbTiming, grid: SwingGrid) -> np.ndarray:
+    """Time [s] to lift the foot from the ground straight up to each node (grid-shaped).
+
+    From ``timing``'s ground, in its family and at its limit (:data:`INFEASIBLE_S` where the
+    way up is infeasible or the node is below the ground). It does not depend on the goal:
+    tables of several goals on one grid share it (:func:`gait_nodes.swing.sweep.sweep_tables`).
+    """
+    return timing.vertical_times(grid.points()).reshape(grid.shape)
+
+
 def with_step_height(table: ValueTable, robot, step_height_m: float,
-                     ground_z_m: float | None = None) -> ValueTable:
+                     ground_z_m: float | None = None,
+                     lift_s: np.ndarray | None = None) -> ValueTable:
     """The table with the lift and lowering of another step height (same cost-to-go).
 
     The cost-to-go does not depend on the step height; the lift (from the ground straight up
@@ -378,12 +391,21 @@ def with_step_height(table: ValueTable, robot, step_height_m: float,
         robot: Its robot.
         step_height_m: The step height [m].
         ground_z_m: The ground in the base frame [m]; None: ``-body_height_m``.
+        lift_s: :func:`lift_times` of the table's family, limit and grid from this ground,
+            when already computed (e.g. for another goal on the same grid); None: computed.
 
     Raises:
-        SwingTableError: The foot cannot be lowered from the goal to the ground.
+        SwingTableError: The foot cannot be lowered from the goal to the ground, or
+            ``lift_s`` is not grid-shaped.
     """
     timing = LimbTiming(robot, table.family, table.joint_velocity_limit_rad_s, ground_z_m)
-    lift = timing.vertical_times(table.grid.points()).reshape(table.grid.shape)
+    if lift_s is None:
+        lift = lift_times(timing, table.grid)
+    else:
+        lift = np.asarray(lift_s, dtype=float)
+        if lift.shape != table.grid.shape:
+            raise SwingTableError(f'lift times of shape {lift.shape} do not match the grid '
+                                  f'{table.grid.shape}')
     lower = float(timing.vertical_times(table.goal[None])[0])
     if lower >= INFEASIBLE_S:
         raise SwingTableError(f'the foot cannot be lowered from the goal '
