@@ -15,7 +15,8 @@ Implementation: the IK of every node and of every clamped ``s + a`` is computed 
 one-step costs ``C[a, s]``. For one action ``a`` the point ``s + a`` lies at the same offset from
 every node along each axis (up to the clamping), so interpolating V at all ``s + a`` is four
 1-D linear interpolations of the whole array, one per axis: each sweep is pure array
-arithmetic, O(A * S), with no per-state gather of 16 corners.
+arithmetic, O(A * S), with no per-state gather of 16 corners. Actions that move alike along x
+(then x and y, then x, y and z) share those interpolations (:func:`interpolation_tree`).
 
 Unlike the thesis, values start at :data:`INFEASIBLE_S` (not 0) and decrease: states that cannot
 reach the goal then keep that value instead of growing without bound, and the sweeps converge.
@@ -162,40 +163,83 @@ def one_step_costs(timing: LimbTiming, grid: SwingGrid, displacements: np.ndarra
 
 
 def _action_weights(grid: SwingGrid, move: np.ndarray) -> list:
-    """Per axis: None when ``s + a`` lands on the nodes themselves, else ``(lo, hi, f)``."""
+    """Per axis: None when ``s + a`` lands on the nodes themselves, else ``(lo, hi, f)``.
+
+    On the nodes themselves: every node's whole weight on that node (also where a move
+    clamped at the mesh's edge puts the last node's weight on its upper neighbour: ``f = 1``
+    there, 0 elsewhere). Interpolating would then give V itself exactly (V is finite and
+    >= 0), so the axis is skipped.
+    """
     result = []
     for axis, delta in zip(grid.axes, move, strict=True):
         lo, hi, f = axis_weights(axis, axis + delta)
         identity = np.arange(len(axis))
-        if np.all(f == 0) and np.array_equal(lo, identity):
-            result.append(None)
-        elif np.all(f == 1) and np.array_equal(hi, identity):
+        if np.all(((f == 0) & (lo == identity)) | ((f == 1) & (hi == identity))):
             result.append(None)
         else:
             result.append((lo, hi, f))
     return result
 
 
-def _interpolate_shifted(values: np.ndarray, weights: list) -> np.ndarray:
-    """V at ``s + a`` for every node: one 1-D linear interpolation per axis."""
-    out = values
-    for d, w in enumerate(weights):
-        if w is None:
-            continue
-        lo, hi, f = w
-        shape = [1, 1, 1, 1]
-        shape[d] = -1
-        f = f.reshape(shape)
-        out = np.take(out, lo, axis=d) * (1.0 - f) + np.take(out, hi, axis=d) * f
-    return out
+def interpolation_tree(weights: list) -> dict:
+    """The actions' interpolations (:func:`_action_weights`) as a tree over the axes.
+
+    Level ``d`` has one node per distinct way of moving along axes 0..d (x, then y, z and
+    yaw): the actions that move alike along x share the interpolation along x, those that also
+    move alike along y the one along y, and so on. On the thesis' grid and actions (31 x 11 x 2
+    x 7 nodes, 578 actions) a sweep then interpolates 690 arrays instead of 2,312 (254 instead
+    of 872 on the default grid and actions), with the same arithmetic: the same values.
+
+    Returns:
+        ``{key: [axis_weights, children, actions]}``: ``axis_weights`` None (V itself) or
+        ``(axis, lo, hi, 1 - f, f)`` with ``f`` shaped to broadcast along ``axis``;
+        ``children`` the next axis' nodes; ``actions`` the indices of the actions whose moves
+        end at this node (on the last axis).
+    """
+    tree = {}
+    for action, per_axis in enumerate(weights):
+        level = tree
+        for d, w in enumerate(per_axis):
+            if w is None:
+                key = prepared = None
+            else:
+                lo, hi, f = w
+                key = (lo.tobytes(), hi.tobytes(), f.tobytes())
+                shape = [1] * len(per_axis)
+                shape[d] = -1
+                f = f.reshape(shape)
+                prepared = (d, lo, hi, 1.0 - f, f)
+            node = level.setdefault(key, [prepared, {}, []])
+            if d == len(per_axis) - 1:
+                node[2].append(action)
+            level = node[1]
+    return tree
 
 
-def bellman_backup(values: np.ndarray, costs: np.ndarray, weights: list) -> np.ndarray:
-    """``min_a {C[a] + V(s + a)}`` at every node (grid-shaped)."""
+def _interpolate_axis(values: np.ndarray, prepared) -> np.ndarray:
+    """V at ``s + a`` along one axis (``prepared``: an :func:`interpolation_tree` node's)."""
+    if prepared is None:
+        return values
+    d, lo, hi, lower_weight, f = prepared
+    return np.take(values, lo, axis=d) * lower_weight + np.take(values, hi, axis=d) * f
+
+
+def bellman_backup(values: np.ndarray, costs: np.ndarray, tree: dict) -> np.ndarray:
+    """``min_a {C[a] + V(s + a)}`` at every node (grid-shaped).
+
+    ``V(s + a)``: four 1-D linear interpolations of V, along x, y, z and yaw, shared by the
+    actions of each node of ``tree`` (:func:`interpolation_tree`).
+    """
     best = np.full(values.shape, np.inf)
-    for a, w in enumerate(weights):
-        candidate = costs[a].reshape(values.shape) + _interpolate_shifted(values, w)
-        np.minimum(best, candidate, out=best)
+
+    def descend(shifted: np.ndarray, level: dict) -> None:
+        for prepared, children, actions in level.values():
+            out = _interpolate_axis(shifted, prepared)
+            for action in actions:
+                np.minimum(best, costs[action].reshape(values.shape) + out, out=best)
+            descend(out, children)
+
+    descend(values, tree)
     return best
 
 
@@ -263,7 +307,7 @@ def value_iteration(timing: LimbTiming, grid: SwingGrid, actions: SwingActions,
     if not feasible[goal_index]:
         raise SwingTableError(f'the goal {grid.points().reshape(*grid.shape, 4)[goal_index]} '
                               f'is not reachable in IK family {timing.family}')
-    weights = [_action_weights(grid, move) for move in displacements]
+    tree = interpolation_tree([_action_weights(grid, move) for move in displacements])
     cost_seconds = time.perf_counter() - started
 
     started = time.perf_counter()
@@ -278,7 +322,7 @@ def value_iteration(timing: LimbTiming, grid: SwingGrid, actions: SwingActions,
             if iterations >= max_iterations:
                 raise SwingTableError(f'value iteration did not converge in {max_iterations} '
                                       f'sweeps (last change {change:.3g} s > {tolerance_s} s)')
-            updated = bellman_backup(values, costs, weights)
+            updated = bellman_backup(values, costs, tree)
             updated[~feasible] = INFEASIBLE_S
             np.minimum(updated, INFEASIBLE_S, out=updated)
             updated[goal_index] = 0.0
