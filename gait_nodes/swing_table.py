@@ -14,10 +14,12 @@ speed of thesis eq. (2) (thesis Fig. 14, 17-19), prints the optimal step and spe
 centred on the middle of the grid's x range and over every goal, and with ``--perturb``
 repeats the optimality test of thesis IV.B.7. Its defaults are the thesis' setting of
 ``python -m gait_nodes.thesis`` (:meth:`GridSpec.thesis`, :func:`thesis_actions`, goals at y
--0.5 m, z -0.6 m, every x node ahead of the middle whose mirror is a node): on the same grid
-both print the same optima. Steps end where the grid's x range does (0.6 m on x 0.2-0.8 m); an
-optimum on the longest or shortest step is printed as "at the end of the range, not an interior
-optimum". The one-step costs are cached as the thesis command's.
+-0.5 m, z -0.6 m, every x node ahead of the middle whose mirror is a node), on the thesis'
+stance as that command's (:func:`gait_nodes.thesis.thesis_robot`): on the same grid both print
+the same optima. Steps end where the grid's x range does (0.6 m on x 0.2-0.8 m); an optimum on
+the longest or shortest step is printed as "at the end of the range, not an interior optimum".
+The one-step costs are cached as the thesis command's, and shared with it: the same robot,
+grid and actions are computed once.
 
 ``python -m gait_nodes.swing_table crossover [--joint-vel-limits 0.5 1 1.5 2 2.5 3 4] [--quick]
 [--keep-bags DIR]`` walks each of the robot's gaits (RoboSimian: the ZMP crawl, the static
@@ -145,9 +147,11 @@ def _sweep(options) -> int:
         sweep_tables,
     )
     from gait_nodes.swing.value_iteration import GridSpec, thesis_actions, thesis_goal
-    from gait_nodes.thesis import THESIS
+    from gait_nodes.thesis import THESIS, thesis_robot
 
-    robot = load_robot_model(options.robot)
+    # The thesis' sweep on the thesis' stance, as python -m gait_nodes.thesis sweeps it: one
+    # answer for one robot, and its cached one-step costs.
+    robot = thesis_robot(load_robot_model(options.robot))
     limit = options.joint_vel_limit or robot.description.joint_velocity_limit_rad_s
     spec, actions = _grid_and_actions(options, GridSpec.thesis(), thesis_actions())
     low, high, count = spec.x_range_m

@@ -1,5 +1,7 @@
 """Swing value iteration (thesis 000, III.C): Bellman equation, goal, 1/W scaling, lift time."""
 
+import functools
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -142,7 +144,16 @@ def test_build_refuses_bad_settings():
 
 
 def small_thesis_table(step_height_m=0.1):
-    """The thesis' setting (planes, goal, lift) on a coarse mesh: 7 x 6 x 2 x 3 nodes."""
+    """The thesis' setting (planes, goal, lift) on a coarse mesh: 7 x 6 x 2 x 3 nodes.
+
+    Built once per process and step height (two tests read the 0.1 m one; a ValueTable's
+    arrays are read-only).
+    """
+    return _small_thesis_table(float(step_height_m))
+
+
+@functools.lru_cache(maxsize=2)
+def _small_thesis_table(step_height_m):
     from gait_nodes.swing.value_iteration import GridSpec, thesis_goal
 
     spec = GridSpec.thesis(x_count=7, y_count=6, yaw_count=3)

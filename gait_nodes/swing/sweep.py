@@ -244,7 +244,8 @@ def sweep_tables(robot, families, step_heights_m, grid_spec, actions, goals,
     them, and the foot is lifted from and lowered to the ground ``step height`` below the goal
     (the value iteration, which does not depend on the step height, runs once per goal). The
     one-step costs are shared by every goal on the same grid and cached
-    (:func:`~gait_nodes.swing.cache.cached_one_step_costs`).
+    (:func:`~gait_nodes.swing.cache.cached_one_step_costs`); so are the lift times of each
+    step height (:func:`~gait_nodes.swing.value_iteration.lift_times`).
 
     Args:
         robot: The RobotModel.
@@ -260,10 +261,25 @@ def sweep_tables(robot, families, step_heights_m, grid_spec, actions, goals,
     import time
 
     from gait_nodes.swing.cache import cached_one_step_costs
-    from gait_nodes.swing.value_iteration import build_table, table_grid, with_step_height
+    from gait_nodes.swing.kinematics import LimbTiming
+    from gait_nodes.swing.value_iteration import (
+        build_table,
+        lift_times,
+        table_grid,
+        with_step_height,
+    )
 
     result = SweepTables()
     displacements = actions.displacements()
+    lifts = {}
+
+    def lift(family, grid, key, ground_z_m):
+        """The grid's lift times (``key``: its axes) from a ground, computed once."""
+        if (family, key, ground_z_m) not in lifts:
+            lifts[family, key, ground_z_m] = lift_times(
+                LimbTiming(robot, family, joint_velocity_limit_rad_s, ground_z_m), grid)
+        return lifts[family, key, ground_z_m]
+
     for family in families:
         started = time.perf_counter()
         costs = {}
@@ -279,13 +295,15 @@ def sweep_tables(robot, families, step_heights_m, grid_spec, actions, goals,
                         robot, family, joint_velocity_limit_rad_s, grid, displacements, log)
                 table, _ = build_table(robot, family, first, joint_velocity_limit_rad_s,
                                        grid_spec, actions, goal, ground_z_m=grounds[first],
-                                       costs=costs[key])
+                                       costs=costs[key],
+                                       lift_s=lift(family, grid, key, grounds[first]))
             except GaitNodesError as exc:
                 result.skipped.append((family, goal_x, str(exc)))
                 continue
             for height in step_heights_m:
                 try:
-                    tab = with_step_height(table, robot, height, grounds[height])
+                    tab = with_step_height(table, robot, height, grounds[height],
+                                           lift(family, table.grid, key, grounds[height]))
                 except GaitNodesError as exc:
                     result.skipped.append((family, goal_x, str(exc)))
                     continue
