@@ -409,7 +409,10 @@ class PlannerSupervisor:
         # walks; its report (VelocityApplied) comes when it is planned.
         if twist != self._requested_twist or self._stale_stop:
             self._requested_twist, self._stale_stop = twist, False
-            self.worker.submit_velocity(twist)
+            # Before the join the twist waits for it (the join plan walks the newest one):
+            # planned on the plan the join replaces, it would hold the join back.
+            if self._joined or self._replacing is not None:
+                self.worker.submit_velocity(twist)
 
     def on_base(self, pose_in_world: np.ndarray, now_ns: int) -> bool:
         """The base pose (x, y, z, qx, qy, qz, qw; unit quaternion) in odom at ``now_ns``.
@@ -680,6 +683,8 @@ class PlannerSupervisor:
             return False  # joined once the worker's plan is live (_on_replaced)
         self._joined = True
         self._listen(False)
+        if not self._requested_twist.is_zero():
+            self.worker.submit_velocity(self._requested_twist)  # heard while joining
         return True
 
     def _clock_jumped(self, now_ns: int) -> bool:
