@@ -363,10 +363,14 @@ class OnlinePlanner:
             finally:
                 self._busy_since = None
                 self._job_done(job.kind, time.monotonic() - started)
-            self._extend()
+            # The job's plan and events to the node at once, then the plan ahead: a change
+            # joins a lead ahead of the motion, which planning further first would spend (on
+            # a loaded machine, a swing lifted off before its plan was out), and a join plan
+            # is live while a velocity waits.
             self._publish()
-            # Each job's events with its plan: a join plan is live while a velocity waits.
             self._hand_over()
+            if self._extend():
+                self._publish()
         if self._extend():
             self._publish()
         self._hand_over()
