@@ -58,6 +58,9 @@ CHECK_CYCLES = 2.0
 RESCHEDULE_TOLERANCE_NS = 1_000_000
 #: Decisions remembered for repeated ids.
 REMEMBERED_IDS = 1000
+#: A change's lead counts this many times the last candidate's planning time (its own may
+#: be longer: a plan from standstill, a loaded machine).
+WORK_HEADROOM = 1.5
 #: A stopping node waits this long for the job under way [s] (:meth:`OnlinePlanner.stop`).
 STOP_WAIT_S = 1.0
 
@@ -420,7 +423,7 @@ class OnlinePlanner:
         step leaves them) is tried from the next ones, up to :data:`JOIN_BOUNDARIES`.
         """
         least_s = self._least_lead_s()
-        lead_s = least_s + LEAD_MARGIN_S + self._work_s
+        lead_s = least_s + LEAD_MARGIN_S + WORK_HEADROOM * self._work_s
         for _ in range(MAX_ATTEMPTS):
             started = time.monotonic()
             at_s = self._now_s() + lead_s
@@ -446,7 +449,10 @@ class OnlinePlanner:
                 return
             if result is UNCHANGED:
                 return
-            if at_s - self._now_s() >= least_s or not self._threaded:
+            # Handed over with the margin left for the nodes that follow the plan (the
+            # swing-leg policy sends a swing's path before it lifts off): planning may have
+            # spent the rest of the lead, not that.
+            if at_s - self._now_s() >= least_s + LEAD_MARGIN_S or not self._threaded:
                 takes_effect_ns = self._origin_ns + int(round(
                     fork.next_boundary_s(at_s) * NS_PER_S))
                 self._live = fork
