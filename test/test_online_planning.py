@@ -7,6 +7,7 @@ applied once; in a thread, the control path's plan keeps covering its horizon wh
 change is planned, and a change is never handed over closer to the clock than its lead.
 """
 
+import dataclasses
 import threading
 import time
 
@@ -197,6 +198,36 @@ def test_in_a_thread_the_plan_covers_the_horizon_while_a_slow_change_is_planned(
         # Planned again from a later start: the join still a lead ahead of the handover.
         assert decision.takes_effect_ns - handed_over_ns >= (LEAD_S - 0.1) * NS
         assert min(covered) > 2.5  # the control path's horizon stayed covered
+    finally:
+        worker.stop()
+
+
+def test_in_a_thread_a_node_slow_to_publish_plans_makes_changes_join_that_much_later():
+    # The node took 2 s to publish the worker's newest plan (a loaded machine): a command
+    # joins at least that much further ahead than the lead and margin, so that its plan is
+    # out before the motion it changes.
+    start = time.monotonic_ns()
+
+    def clock():
+        return time.monotonic_ns() - start
+
+    worker = walking(clock, threaded=True)
+    late_s = 2.0
+    snapshot = worker.snapshot
+    worker.delivered(dataclasses.replace(snapshot, ready_s=time.monotonic() - late_s))
+    worker.start()
+    try:
+        submitted_ns = clock()
+        worker.submit_command('after_a_slow_publish', '{}', step_length(0.15))
+        deadline = time.monotonic() + 20.0
+        decisions = []
+        while not decisions and time.monotonic() < deadline:
+            decisions = answers(worker)
+            time.sleep(0.01)
+        (decision,) = decisions
+        assert decision.state == ACCEPTED
+        assert decision.takes_effect_ns - submitted_ns >= (
+            LEAD_S + online.LEAD_MARGIN_S + late_s) * NS
     finally:
         worker.stop()
 

@@ -61,6 +61,8 @@ REMEMBERED_IDS = 1000
 #: A change's lead counts this many times the last candidate's planning time (its own may
 #: be longer: a plan from standstill, a loaded machine).
 WORK_HEADROOM = 1.5
+#: :meth:`OnlinePlanner.delivered`'s delay of the plans out lately decays by this a plan.
+DELIVERY_DECAY = 0.9
 #: A stopping node waits this long for the job under way [s] (:meth:`OnlinePlanner.stop`).
 STOP_WAIT_S = 1.0
 
@@ -157,6 +159,8 @@ class Snapshot:
         generation: Counts the plans made from scratch (``submit_replace``).
         planned_until_s: The plan's steps reach this time [s].
         report: What the worker measured of the plan for the node's reports (the rhythm).
+        ready_s: ``time.monotonic()`` when the plan was ready: a change's, when it was found
+            to join in time (:meth:`OnlinePlanner.delivered` measures from there).
     """
 
     planner: GaitPlanner
@@ -164,6 +168,7 @@ class Snapshot:
     generation: int
     planned_until_s: float
     report: dict
+    ready_s: float = 0.0
 
 
 @dataclasses.dataclass
@@ -224,6 +229,8 @@ class OnlinePlanner:
         self._pending: set[str] = set()  # ids submitted, not decided yet
         self._to_apply: list[Answer] = []  # accepted, not taken effect yet
         self._work_s = 0.0  # the last candidate's planning time [s]
+        self._delivery_s = 0.0  # how long the node took to publish a plan, lately [s]
+        self._ready_s: float | None = None  # when the job's change was found in time
         self._wake = threading.Event()
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
@@ -239,6 +246,18 @@ class OnlinePlanner:
     def snapshot(self) -> Snapshot:
         """The newest finished plan."""
         return self._snapshot
+
+    def delivered(self, snapshot: Snapshot) -> None:
+        """The node published ``snapshot`` now: learn how long plans take to go out.
+
+        From a change found to join in time to its plan published, the worker makes the
+        snapshot and the node waits for its tick and the CPU; on a loaded machine that is
+        more than :data:`LEAD_MARGIN_S`. The longest such delay lately (it decays by
+        :data:`DELIVERY_DECAY` a plan) is added to every change's margin.
+        """
+        if self._threaded:
+            delay = max(time.monotonic() - snapshot.ready_s, 0.0)
+            self._delivery_s = max(delay, DELIVERY_DECAY * self._delivery_s)
 
     @property
     def busy_s(self) -> float:
@@ -423,7 +442,8 @@ class OnlinePlanner:
         step leaves them) is tried from the next ones, up to :data:`JOIN_BOUNDARIES`.
         """
         least_s = self._least_lead_s()
-        lead_s = least_s + LEAD_MARGIN_S + WORK_HEADROOM * self._work_s
+        margin_s = LEAD_MARGIN_S + self._delivery_s
+        lead_s = least_s + margin_s + WORK_HEADROOM * self._work_s
         for _ in range(MAX_ATTEMPTS):
             started = time.monotonic()
             at_s = self._now_s() + lead_s
@@ -449,16 +469,17 @@ class OnlinePlanner:
                 return
             if result is UNCHANGED:
                 return
-            # Handed over with the margin left for the nodes that follow the plan (the
-            # swing-leg policy sends a swing's path before it lifts off): planning may have
-            # spent the rest of the lead, not that.
-            if at_s - self._now_s() >= least_s + LEAD_MARGIN_S or not self._threaded:
+            # Handed over with the margin left for the plan to go out and reach the nodes that
+            # follow it (the swing-leg policy sends a swing's path before it lifts off):
+            # planning may have spent the rest of the lead, not that.
+            if at_s - self._now_s() >= least_s + margin_s or not self._threaded:
+                self._ready_s = time.monotonic()
                 takes_effect_ns = self._origin_ns + int(round(
                     fork.next_boundary_s(at_s) * NS_PER_S))
                 self._live = fork
                 self._handed_over(job, result, takes_effect_ns)
                 return
-            lead_s = least_s + LEAD_MARGIN_S + 2.0 * self._work_s
+            lead_s = least_s + margin_s + 2.0 * self._work_s
         self._refuse(job, f'busy: the planner could not plan it ahead of the motion '
                           f'({MAX_ATTEMPTS} tries, the last {self._work_s:.2f} s); send it again')
 
@@ -595,5 +616,7 @@ class OnlinePlanner:
     def _publish(self) -> None:
         live = self._live
         planned = live.steps[-1].end_s if live.steps else -math.inf
+        ready_s = self._ready_s if self._ready_s is not None else time.monotonic()
+        self._ready_s = None
         self._snapshot = Snapshot(live.fork(), self._origin_ns, self._generation, planned,
-                                  self._describe(live))
+                                  self._describe(live), ready_s)

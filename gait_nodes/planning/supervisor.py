@@ -346,6 +346,7 @@ class PlannerSupervisor:
         self._base_pose: tuple[float, float, float] | None = None
         self._measured: MeasuredState | None = None
         self._join_start_ns: int | None = None
+        self._delivered = None  # the worker's newest snapshot this node has published
         self._dependencies: dict[str, bool] = {}
         self._dependencies_fresh: set[str] = set()  # reported their inputs fresh at least once
         # Reported stale since the last tick: a stale spell shorter than the planner's period
@@ -487,6 +488,9 @@ class PlannerSupervisor:
         self.worker.run_pending()
         self._drain(now_ns)
         snapshot = self.worker.snapshot
+        if snapshot is not self._delivered:
+            self._delivered = snapshot
+            self.worker.delivered(snapshot)  # published now, at the end of this tick
         planner, horizon = snapshot.planner, self.settings.zmp_horizon_s
         plan = self._within(planner.footstep_plan(now_s, snapshot.origin_ns), now_ns,
                             now_ns + int(horizon * NS_PER_S))
