@@ -39,6 +39,8 @@ REPUBLISH_S = 0.5
 #: States of a decision on a command (the first answer); 'applied' comes after 'accepted'.
 DECISIONS = ('accepted', 'rejected', 'superseded')
 PLANNER_STATUS_PREFIX = 'footstep_planner: '
+#: The planner's status that answers a velocity (requested and applied twist).
+VELOCITY_STATUS = PLANNER_STATUS_PREFIX + 'velocity'
 
 
 def parse_assignments(items: list[str]) -> dict[str, object]:
@@ -142,7 +144,9 @@ class GaitCommandClient(Node):
         if self.velocity is None or self.velocity_report is not None:
             return
         for status in msg.status:
-            if not status.name.startswith(PLANNER_STATUS_PREFIX):
+            # The planner's answer to a velocity, not its once-a-second state (which says the
+            # twist asked for at once, and the one walked until the new one is planned).
+            if status.name != VELOCITY_STATUS:
                 continue
             values = {item.key: item.value for item in status.values}
             if 'requested_twist' not in values:
