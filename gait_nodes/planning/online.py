@@ -63,6 +63,8 @@ REMEMBERED_IDS = 1000
 WORK_HEADROOM = 1.5
 #: :meth:`OnlinePlanner.delivered`'s delay of the plans out lately decays by this a plan.
 DELIVERY_DECAY = 0.9
+#: A standing robot's plan is kept this far ahead [s] (:meth:`OnlinePlanner._extend`).
+STANDING_COVER_S = 30.0
 #: A stopping node waits this long for the job under way [s] (:meth:`OnlinePlanner.stop`).
 STOP_WAIT_S = 1.0
 
@@ -601,10 +603,18 @@ class OnlinePlanner:
         self._outbox.append(event)
 
     def _extend(self) -> bool:
-        """Plan the live plan ``cover_s`` ahead and forget what is past; True if it changed."""
+        """Plan the live plan ``cover_s`` ahead and forget what is past; True if it changed.
+
+        A robot standing is planned :data:`STANDING_COVER_S` ahead (standing steps cost next
+        to nothing): the first walk from standstill is the slowest change to plan (its rhythm,
+        every probe), and the plan it joins must cover the horizon until it is out.
+        """
         now_s = self._now_s()
+        standing = self._live.twist.is_zero() and not any(
+            step.slots and step.end_s > now_s for step in self._live.steps)
         try:
-            added = self._live.advance(now_s + self.cover_s)
+            added = self._live.advance(
+                now_s + (max(self.cover_s, STANDING_COVER_S) if standing else self.cover_s))
         except Exception as exc:  # noqa: BLE001 (the worker never dies of a plan)
             self._live.stand(now_s, self._failure_hold_s(self._live))
             self._emit(Failure(exc, 'planning ahead'))
