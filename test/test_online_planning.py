@@ -65,6 +65,16 @@ def answers(worker):
     return [event for event in worker.events() if isinstance(event, Answer)]
 
 
+def decisions_within(worker, timeout_s: float) -> list:
+    """The first answers of a threaded worker, waited for up to ``timeout_s``."""
+    deadline = time.monotonic() + timeout_s
+    decisions = []
+    while not decisions and time.monotonic() < deadline:
+        decisions = answers(worker)
+        time.sleep(0.01)
+    return decisions
+
+
 def test_a_change_joins_at_a_step_boundary_after_its_lead_and_keeps_what_came_before():
     clock = FakeClock()
     worker = walking(clock)
@@ -219,12 +229,7 @@ def test_in_a_thread_a_node_slow_to_publish_plans_makes_changes_join_that_much_l
     try:
         submitted_ns = clock()
         worker.submit_command('after_a_slow_publish', '{}', step_length(0.15))
-        deadline = time.monotonic() + 20.0
-        decisions = []
-        while not decisions and time.monotonic() < deadline:
-            decisions = answers(worker)
-            time.sleep(0.01)
-        (decision,) = decisions
+        (decision,) = decisions_within(worker, 20.0)
         assert decision.state == ACCEPTED
         assert decision.takes_effect_ns - submitted_ns >= (
             LEAD_S + online.LEAD_MARGIN_S + late_s) * NS
@@ -244,12 +249,7 @@ def test_in_a_thread_a_change_always_too_slow_is_rejected_as_busy():
             step_length(0.15)(fork, at_s)
 
         worker.submit_command('slow', '{}', slower_each_time)
-        deadline = time.monotonic() + 20.0
-        decisions = []
-        while not decisions and time.monotonic() < deadline:
-            decisions = answers(worker)
-            time.sleep(0.01)
-        (decision,) = decisions
+        (decision,) = decisions_within(worker, 20.0)
         assert decision.state == REJECTED and decision.reason.startswith('busy')
         assert worker.snapshot.planner.params.step_length_m != 0.15
     finally:
