@@ -603,7 +603,9 @@ class OnlinePlanner:
         self._outbox.append(event)
 
     def _extend(self) -> bool:
-        """Plan the live plan ``cover_s`` ahead and forget what is past; True if it changed.
+        """Plan the live plan ahead and forget what is past; True if it changed.
+
+        ``cover_s`` ahead, and :data:`WORK_HEADROOM` times the last change's planning time more.
 
         A robot standing is planned :data:`STANDING_COVER_S` ahead (standing steps cost next
         to nothing): the first walk from standstill is the slowest change to plan (its rhythm,
@@ -612,9 +614,13 @@ class OnlinePlanner:
         now_s = self._now_s()
         standing = self._live.twist.is_zero() and not any(
             step.slots and step.end_s > now_s for step in self._live.steps)
+        # Beside the clock, also as far as the next change may take to plan (the plan must
+        # cover the horizon until that change is out; on a loaded machine a change took more
+        # than cover_s); deterministic callers plan in no time.
+        ahead_s = self.cover_s + WORK_HEADROOM * self._work_s
         try:
             added = self._live.advance(
-                now_s + (max(self.cover_s, STANDING_COVER_S) if standing else self.cover_s))
+                now_s + (max(ahead_s, STANDING_COVER_S) if standing else ahead_s))
         except Exception as exc:  # noqa: BLE001 (the worker never dies of a plan)
             self._live.stand(now_s, self._failure_hold_s(self._live))
             self._emit(Failure(exc, 'planning ahead'))
