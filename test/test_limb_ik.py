@@ -394,3 +394,38 @@ def test_the_meeting_polynomial_is_of_degree_16_within_the_bound(limb_ik):
     tail = spectrum[:, 17:].max(axis=1) / spectrum.max(axis=1)
     assert tail.max() < 1e-12
     assert MEETING_DEGREE >= 16
+
+
+def test_a_target_gets_the_same_angles_alone_in_a_batch_and_remembered(robot):
+    # Planning solves the same targets again in calls of any size; the memo must return what
+    # solving again would, bit for bit (a fresh solver each time: nothing remembered).
+    rng = np.random.default_rng(3)
+    targets = np.column_stack([rng.uniform(0.3, 0.8, 40), rng.uniform(-0.6, -0.4, 40),
+                               rng.uniform(-0.8, -0.6, 40)])
+    yaws = rng.uniform(-0.3, 0.3, 40)
+    for family in (2, 5):
+        together, ok_together = RoboSimianLimbIk(robot).solve(targets, yaws, family)
+        assert ok_together.sum() >= 30
+        alone = RoboSimianLimbIk(robot)
+        for k in range(0, 40, 3):
+            q, ok = alone.solve(targets[k:k + 3], yaws[k:k + 3], family)
+            np.testing.assert_array_equal(q, together[k:k + 3])
+            np.testing.assert_array_equal(ok, ok_together[k:k + 3])
+        again, ok_again = alone.solve(targets[::-1], yaws[::-1], family)   # all remembered
+        np.testing.assert_array_equal(again, together[::-1])
+        np.testing.assert_array_equal(ok_again, ok_together[::-1])
+
+
+def test_several_limbs_solved_at_once_as_each_alone(limb_ik):
+    rng = np.random.default_rng(4)
+    targets = np.column_stack([rng.uniform(0.35, 0.7, 12), rng.uniform(-0.6, -0.4, 12),
+                               rng.uniform(-0.8, -0.65, 12)])
+    yaws = rng.uniform(-0.2, 0.2, 12)
+    stacked = np.stack([mirrored(foot, targets, yaws)[0] for foot in FEET], axis=1)
+    stacked_yaws = np.stack([mirrored(foot, targets, yaws)[1] for foot in FEET], axis=1)
+    q, feasible = limb_ik.solve_feet(stacked, stacked_yaws, 2, list(FEET))
+    assert q.shape == (12, 4, 7) and feasible.shape == (12, 4) and feasible.any()
+    for k, foot in enumerate(FEET):
+        alone, ok = limb_ik.solve(stacked[:, k], stacked_yaws[:, k], 2, foot)
+        np.testing.assert_array_equal(q[:, k], alone)
+        np.testing.assert_array_equal(feasible[:, k], ok)

@@ -156,6 +156,10 @@ SHEETS = ((1.0, 1.0), (1.0, -1.0), (-1.0, 1.0), (-1.0, -1.0))
 SINGULAR_SINE = 1e-3
 #: Targets solved at once (the sampled circle of a chunk stays in the CPU's cache).
 CHUNK = 2048
+#: Principal solutions kept per family (about 15 MB at most): planning asks for the same
+#: targets again and again (a re-timed step probes the footholds it keeps, each walk's swing
+#: timing the same lattice), bit for bit; a full memo starts over.
+MEMO_SIZE = 50_000
 _EPS = 1e-9
 _SINGULAR = 1e-6
 _UP = np.array([0.0, 0.0, 1.0])
@@ -476,8 +480,11 @@ class _Meeting:
         wrist_axes = np.stack([wrist_axes[:, 0], wrist_axes[:, 1], z6], axis=1)
         radius = circle.radius[:, None]
         # P3 - P1 = u0 + u1 cos + u2 sin in (h1, h2, n); P5 - P3 likewise in (x6, y6, z6).
-        u = np.stack([(circle.centre - geometry.shoulder_in_base) @ base_axes.T,
-                      radius * (circle.e1 @ base_axes.T), radius * (circle.e2 @ base_axes.T)])
+        # (einsum, not a matrix product: its rounding must not depend on how many targets.)
+        u = np.stack([np.einsum('nj,kj->nk', circle.centre - geometry.shoulder_in_base,
+                                base_axes),
+                      radius * np.einsum('nj,kj->nk', circle.e1, base_axes),
+                      radius * np.einsum('nj,kj->nk', circle.e2, base_axes)])
         v = np.stack([np.einsum('nj,nij->ni', circle.p5 - circle.centre, wrist_axes),
                       -radius * np.einsum('nj,nij->ni', circle.e1, wrist_axes),
                       -radius * np.einsum('nj,nij->ni', circle.e2, wrist_axes)])
@@ -621,6 +628,8 @@ class RoboSimianLimbIk:
                               f'straight down (it has link 7\'s x along {down.tolist()})')
         #: (F,) +1 or -1: limb ``k`` at ``sign * q`` is the front-right limb's mirror image at q.
         self.angle_signs = np.ones(len(feet))
+        #: (family, target and yaw bytes) -> (principal solution or None).
+        self._solved: dict[int, dict[bytes, np.ndarray | None]] = {}
         self._check_structure(where)
         nominal = (self.mirrors[reference]
                    * robot.description.feet[reference].nominal_position_in_base)
@@ -722,8 +731,46 @@ class RoboSimianLimbIk:
         """
         family_bits(family)
         targets, yaws = self.mirror_targets(targets_in_base, yaws_rad, foot)
-        q, feasible = self._solve_reference(targets, yaws, family, wrap=True)
+        q, feasible = self._solve_principal(targets, yaws, family)
         return q * self.angle_signs[self.foot_index[foot]], feasible
+
+    def solve_feet(self, targets_in_base, yaws_rad, family: int, feet: list[str]
+                   ) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`solve` of several limbs at once: (N, F, 3) targets and (N, F) yaws.
+
+        Returns (N, F, 7) joint angles and (N, F) feasibility, ``[:, k]`` those of ``feet[k]``.
+        """
+        family_bits(family)
+        targets = np.asarray(targets_in_base, dtype=float)
+        yaws = np.asarray(yaws_rad, dtype=float)
+        count = targets.shape[0]
+        mirrored = [self.mirror_targets(targets[:, k], yaws[:, k], foot)
+                    for k, foot in enumerate(feet)]
+        q, feasible = self._solve_principal(np.concatenate([m[0] for m in mirrored]),
+                                            np.concatenate([m[1] for m in mirrored]), family)
+        signs = np.repeat([self.angle_signs[self.foot_index[foot]] for foot in feet], count)
+        q = (q * signs[:, None]).reshape(len(feet), count, 7)
+        return np.swapaxes(q, 0, 1), feasible.reshape(len(feet), count).T
+
+    def _solve_principal(self, targets: np.ndarray, yaws: np.ndarray, family: int
+                         ) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`_solve_reference` (wrapped) of front-right targets, each solved once."""
+        memo = self._solved.setdefault(family, {})
+        keys = [row.tobytes() for row in np.column_stack([targets, yaws])]
+        missing = [k for k, key in enumerate(keys) if key not in memo]
+        if missing:
+            q_new, feasible_new = self._solve_reference(targets[missing], yaws[missing], family,
+                                                        wrap=True)
+            if len(memo) + len(missing) > MEMO_SIZE:
+                memo.clear()
+            for k, q_row, ok in zip(missing, q_new, feasible_new, strict=True):
+                memo[keys[k]] = q_row if ok else None
+        found = [memo.get(key, False) for key in keys]
+        if any(value is False for value in found):   # (cleared while solving: a large call)
+            return self._solve_reference(targets, yaws, family, wrap=True)
+        feasible = np.array([value is not None for value in found], dtype=bool)
+        q = np.array([self.centers[family] if value is None else value for value in found])
+        return q.reshape(len(keys), 7), feasible
 
     def solutions(self, targets_in_base, yaws_rad, foot: str = 'front_right'
                   ) -> LimbIkSolutions:
@@ -977,24 +1024,29 @@ class RoboSimianLimbIk:
             return _sheet_value(terms(np.cos(phi)[:, None], np.sin(phi)[:, None]), sheet_base,
                                 sheet_wrist)[:, 0]
 
-        # Illinois false position: the bracket closes to the root within a few ulps.
+        # Illinois false position: the bracket closes to the root within a few ulps. A
+        # crossing stops where it closes, so that its root does not depend on the others
+        # solved with it (the same target gives the same angles in any call).
         lo, hi, g_lo, g_hi = crossings.lo, crossings.hi, crossings.g_lo, crossings.g_hi
         kept_lo = np.zeros(len(rows), dtype=bool)
         kept_hi = np.zeros(len(rows), dtype=bool)
-        mid = lo
+        mid = lo.copy()
+        open_ = np.ones(len(rows), dtype=bool)
         for _ in range(60):
             width = g_hi - g_lo
-            mid = np.where(width != 0.0, (lo * g_hi - hi * g_lo) / np.where(width != 0.0, width,
-                                                                             1.0), lo)
-            mid = np.clip(mid, np.minimum(lo, hi), np.maximum(lo, hi))
+            step = np.where(width != 0.0, (lo * g_hi - hi * g_lo) / np.where(width != 0.0, width,
+                                                                              1.0), lo)
+            mid = np.where(open_, np.clip(step, np.minimum(lo, hi), np.maximum(lo, hi)), mid)
             g_mid = g_of(mid)
             same = np.sign(g_mid) == np.sign(g_lo)
-            lo, g_lo = np.where(same, mid, lo), np.where(same, g_mid, g_lo)
-            hi, g_hi = np.where(same, hi, mid), np.where(same, g_hi, g_mid)
-            g_hi = np.where(same & kept_hi, 0.5 * g_hi, g_hi)
-            g_lo = np.where(~same & kept_lo, 0.5 * g_lo, g_lo)
-            kept_hi, kept_lo = same, ~same
-            if np.all((g_mid == 0.0) | (np.abs(hi - lo) <= 4.0 * np.spacing(np.abs(mid)))):
+            moved_lo, moved_hi = open_ & same, open_ & ~same
+            lo, g_lo = np.where(moved_lo, mid, lo), np.where(moved_lo, g_mid, g_lo)
+            hi, g_hi = np.where(moved_hi, mid, hi), np.where(moved_hi, g_mid, g_hi)
+            g_hi = np.where(moved_lo & kept_hi, 0.5 * g_hi, g_hi)
+            g_lo = np.where(moved_hi & kept_lo, 0.5 * g_lo, g_lo)
+            kept_hi, kept_lo = np.where(open_, same, kept_hi), np.where(open_, ~same, kept_lo)
+            open_ &= (g_mid != 0.0) & (np.abs(hi - lo) > 4.0 * np.spacing(np.abs(mid)))
+            if not open_.any():
                 break
 
         phi = mid[:, None]

@@ -126,17 +126,21 @@ class StillBody:
         yaws = np.asarray(foot_yaws_rad, dtype=float)
         rotation = yaw_rotation(body_yaw_rad)
         joints = np.repeat(self._q_posture[None], len(base), axis=0)
-        for f in (range(len(self._limbs)) if limbs is None else limbs):
+        solved = list(range(len(self._limbs)) if limbs is None else limbs)
+        if not solved:
+            return joints
+        in_base = (feet[:, solved] - base[:, None]) @ rotation
+        angles, feasible = self.ik.solve_feet(in_base, yaws[:, solved] - body_yaw_rad,
+                                              self.family,
+                                              [self._limbs[f][0] for f in solved])
+        for k, f in enumerate(solved):
             name, index = self._limbs[f]
-            in_base = (feet[:, f] - base) @ rotation
-            angles, feasible = self.ik.solve(in_base, yaws[:, f] - body_yaw_rad, self.family,
-                                             name)
-            if not feasible.all():
-                where = np.round(feet[int(np.argmin(feasible)), f], 3).tolist()
+            if not feasible[:, k].all():
+                where = np.round(feet[int(np.argmin(feasible[:, k])), f], 3).tolist()
                 raise SwingPolicyError(f'the {name} foot at {where} leaves the reach of its limb '
                                        f'(IK family {self.family}) with the body still at '
                                        f'{np.round(base[0], 3).tolist()}')
-            joints[:, index] = angles
+            joints[:, index] = angles[:, k]
         return joints
 
     def com(self, base_in_world: np.ndarray, body_yaw_rad: float, feet_in_world: np.ndarray,
