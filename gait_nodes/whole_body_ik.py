@@ -43,6 +43,9 @@ message is no jump: the previous one still covers ``horizon_s`` ahead.
 * A foot in swing per the plan with no swing trajectory covering a knot's instant follows the
   fallback swing (quintic smoothstep from lift-off to landing place, lifted by
   ``fallback_step_height_m``; :func:`gait_nodes.robot.whole_body_ik.fallback_swing_pose`).
+  A trajectory that comes after its swing lifted off on the fallback is dropped (counted in
+  ``late_swing_trajectories`` and logged): the foot lands on the fallback swing rather than
+  jump onto the trajectory mid-air.
 * /diagnostics: inputs dropped (NaN, wrong frame or feet) at once; every
   ``diagnostics_period_s`` a summary over the knots solved since the last one (the ``ticks``
   keys count knots): velocity saturation (fraction of saturated knots, the largest
@@ -187,6 +190,7 @@ class _Window:
         self.unconverged_ticks = 0
         self.joints_at_limit: set[str] = set()
         self.fallback_ticks = 0
+        self.late_swings = 0
 
 
 class WholeBodyIk(GuardedNode):
@@ -347,9 +351,21 @@ class WholeBodyIk(GuardedNode):
         except ContractError as exc:
             self.diagnostics.drop('/gait/swing_trajectory', str(exc))
             return
+        k = self.robot.foot_names.index(swing.foot)
         if self._moving:
+            now_ns = self.get_clock().now().nanoseconds
+            held = self._swing_paths[k]
+            if swing.start_ns < now_ns and (held is None or not held.covers(now_ns)):
+                # The foot lifted off without it and is on the fallback swing: switched now,
+                # it would jump to the trajectory (joints at many times their limit). It lands
+                # on the fallback; the trajectory is dropped and reported.
+                self._window.late_swings += 1
+                self.get_logger().warning(
+                    f'{swing.foot} swing trajectory came {(now_ns - swing.start_ns) * 1e-9:.3f} '
+                    f's after its lift-off: the foot stays on the fallback swing')
+                return
             self._references_changed(swing.start_ns)
-        self._swing_paths[self.robot.foot_names.index(swing.foot)] = SwingPath(swing)
+        self._swing_paths[k] = SwingPath(swing)
 
     def _on_tf(self, msg) -> None:
         if self._moving:
@@ -607,6 +623,7 @@ class WholeBodyIk(GuardedNode):
                 f'; {message}' if level >= WARN else '')
         values.update({'waiting_for': ','.join(waiting),
                        'fallback_swing_ticks': window.fallback_ticks,
+                       'late_swing_trajectories': window.late_swings,
                        'dropped': ','.join(f'{t}:{n}'
                                            for t, n in self.diagnostics.dropped.items())})
         return aspect, level, message, values

@@ -596,8 +596,9 @@ class CrawlSource(runtime.Node):
 
     def __init__(self, robot, q0, com_amplitude_m=0.03, com_period_s=4.0, nan_at_ns=None,
                  publish_period_s=0.05, horizon_s=0.5, sample_period_s=0.02,
-                 silent_from_ns=None, silent_for_s=0.0):
+                 silent_from_ns=None, silent_for_s=0.0, swing_lead_s=1.0):
         super().__init__('crawl_source')
+        self.swing_lead_ns = int(round(swing_lead_s * NS))
         self.horizon_times_ns = [int(round(k * sample_period_s * NS))
                                  for k in range(int(round(horizon_s / sample_period_s)) + 1)]
         self.silent = (silent_from_ns, None if silent_from_ns is None
@@ -655,7 +656,7 @@ class CrawlSource(runtime.Node):
         if self.nan_at_ns is not None and now == self.nan_at_ns:
             msg.points[0].transforms[0].translation.x = float('nan')
         self.com_publisher.publish(msg)
-        if not self.sent_swing and now >= self.swing.start_ns - NS:
+        if not self.sent_swing and now >= self.swing.start_ns - self.swing_lead_ns:
             self.swing_publisher.publish(swing_trajectory_to_msg(self.swing))
             self.sent_swing = True
 
@@ -748,6 +749,37 @@ def test_node_tracks_the_contract_references_checked_by_fk(inproc):
     assert int(values['fallback_swing_ticks']) == 0  # last second: no swing in progress
     assert any(int({kv.key: kv.value for kv in s.values}['fallback_swing_ticks']) > 0
                for s in inputs)
+
+
+def test_a_swing_trajectory_after_its_lift_off_leaves_the_foot_on_the_fallback_swing(inproc):
+    # The rear right swing (4-6 s) lifts off on the fallback swing; its trajectory comes 0.5 s
+    # later. Switched to it then, the foot would jump 2-3 cm (joints at many times their
+    # limit): it lands on the fallback, and the dropped trajectory is reported.
+    node, source, collector = run_node(7.0, swing_lead_s=-0.5)
+    robot, plan = node.robot, source.plan
+    swing = [s for s in plan.swings() if s.foot == 'rear_right'][0]
+    k = robot.foot_names.index('rear_right')
+    knots = knots_of(collector.commands[1:])
+    checked = 0
+    for now, (joints, _) in knots.items():
+        t_plan = (now - plan.start_ns) * 1e-9
+        if not swing.lift_off_s < t_plan < swing.touch_down_s:
+            continue
+        stance = plan.contacts_at(t_plan)
+        base = base_from_stance(robot, joints, np.array(plan.stance_positions_at(t_plan)),
+                                stance)
+        feet, _ = robot.foot_poses(robot.configuration(base, 0.0, joints))
+        expected, _ = fallback_swing_pose(swing, t_plan, 0.06)
+        assert np.linalg.norm(feet[k] - expected) <= 1e-4, t_plan
+        checked += 1
+    assert checked > 1.5 * NS // KNOT_NS
+    late = [int({kv.key: kv.value for kv in s.values}['late_swing_trajectories'])
+            for s in collector.status('inputs')]
+    assert sum(late) == 1
+    # (The first second's window holds the start from the nominal posture.)
+    saturation = collector.status('velocity saturation')[1:]
+    assert len(saturation) >= 5
+    assert all(level_value(s.level) == 0 for s in saturation), [s.message for s in saturation]
 
 
 class RevisedSource(CrawlSource):
