@@ -154,8 +154,11 @@ setup(
         # ...and the live view, so they need the Foxglove SDK and a WebSocket client to talk to
         # it: the SDK ships a server only, and the sync client of websockets is the
         # client the test speaks the Foxglove protocol with. Used by the tests alone.
-        # pytest-xdist runs the suite on every core (test/conftest.py groups the tests).
-        'test': ['pytest', 'pytest-xdist', 'hypothesis', 'ruff', 'example-robot-data',
+        # pytest-xdist runs the suite on every core (test/conftest.py groups the tests). Its
+        # groups (--dist loadgroup) are silently ignored under pytest 9.2 (pytest-xdist issue
+        # #1386: it marks a test's group in its node id, which pytest 9.2 no longer reads), so
+        # pytest stays below 9.2 until a pytest-xdist release reads them again.
+        'test': ['pytest<9.2', 'pytest-xdist', 'hypothesis', 'ruff', 'example-robot-data',
                  'mujoco', 'imageio[ffmpeg]', VIEW_REQUIREMENT, 'websockets>=13'],
         'robots': ['example-robot-data'],
         # The physics simulator (MuJoCo) and, for the walks' videos, an ffmpeg writer.

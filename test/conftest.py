@@ -54,11 +54,13 @@ def pytest_configure(config):
                             'real time (BETWEEN_PROCESSES)')
 
 
+@pytest.hookimpl(tryfirst=True)
 def pytest_collection_modifyitems(config, items):
     """Group the tests for ``--dist loadgroup``.
 
     A module's tests stay on one worker (its module-scoped fixtures are made once), and the
-    real-time graphs all run on one.
+    real-time graphs all run on one. (First: pytest-xdist's worker reads the groups in its own
+    hook, which would otherwise run before this one and find none.)
     """
     for item in items:
         module = item.module.__name__.rpartition('.')[2] if item.module else item.nodeid
@@ -68,3 +70,25 @@ def pytest_collection_modifyitems(config, items):
         else:
             group = SHARING.get(module, module)
         item.add_marker(pytest.mark.xdist_group(group))
+
+
+
+def pytest_sessionstart(session):
+    """Refuse to run ungrouped under a pytest that drops ``--dist loadgroup``'s groups.
+
+    pytest-xdist up to 3.8 marks a test's group in its node id, which pytest 9.2 no longer
+    reads (pytest-xdist issue #1386): the groups are dropped without a word, and two real-time
+    graphs then share the cores. (The test extra keeps pytest below 9.2.)
+    """
+    from importlib.metadata import version
+
+    config = session.config
+    if getattr(config, 'workerinput', None) is not None or config.getvalue('dist') != 'loadgroup':
+        return
+    pytest_version = tuple(int(part) for part in pytest.__version__.split('.')[:2])
+    xdist_version = tuple(int(part) for part in version('pytest-xdist').split('.')[:2])
+    if pytest_version >= (9, 2) and xdist_version <= (3, 8):
+        raise pytest.UsageError(
+            f'pytest {pytest.__version__} with pytest-xdist {version("pytest-xdist")} ignores '
+            f'--dist loadgroup (pytest-xdist issue #1386): install the test extra again '
+            f'(it keeps pytest below 9.2), e.g. sh tools/venv.sh')
