@@ -83,7 +83,8 @@ def pytest_sessionstart(session):
     from importlib.metadata import version
 
     config = session.config
-    if getattr(config, 'workerinput', None) is not None or config.getvalue('dist') != 'loadgroup':
+    if (getattr(config, 'workerinput', None) is not None
+            or config.getoption('dist', default=None) != 'loadgroup'):
         return
     pytest_version = tuple(int(part) for part in pytest.__version__.split('.')[:2])
     xdist_version = tuple(int(part) for part in version('pytest-xdist').split('.')[:2])
