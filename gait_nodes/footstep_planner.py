@@ -7,6 +7,7 @@ plan changes), ``/gait/zmp_reference`` (the next ``zmp_horizon_s``, 2.5 s, every
 publication period, so that a late reference is ridden through), ``/gait/command_status`` (one
 JSON answer per command), ``/diagnostics`` and, with each plan, its footholds on
 ``/gait/markers`` for RViz and Foxglove (namespace ``footsteps``, :mod:`gait_nodes.markers`;
+again once a second while no new plan comes, for displays that join late;
 ``publish_markers: false`` turns them off).
 
 The gait settings are ROS parameters (defaults in ``config/footstep_planner.yaml``); a
@@ -64,6 +65,7 @@ from gait_nodes import callback_times
 from gait_nodes.cli import run_node
 from gait_nodes.contract import (
     ContractError,
+    FootstepPlan,
     ZmpReferenceMessages,
     base_transforms,
     footsteps_to_msg,
@@ -114,6 +116,8 @@ GAIT_FIELDS = tuple(GaitParameters.__dataclass_fields__)
 NODE_SETTINGS = {'rate_hz': (0.01, True, 1000.0, 'Hz'), 'zmp_horizon_s': (1.6, True, 60.0, 's'),
                  'zmp_sample_period_s': (0.0, False, 0.1, 's'),
                  'cmd_vel_timeout_s': (0.0, True, 60.0, 's')}
+#: The newest plan's footholds go to /gait/markers again after this long without a plan [s].
+FOOTHOLDS_REPEAT_S = 1.0
 #: Node settings that are on or off: publish_markers, the footholds on /gait/markers.
 NODE_FLAGS = ('publish_markers',)
 #: Most samples in one /gait/zmp_reference.
@@ -234,6 +238,7 @@ class FootstepPlanner(GuardedNode):
         self._mirroring = False  # setting the declared parameters to what the plan walks
         self._commands = itertools.count(1)
         self._zmp_messages = ZmpReferenceMessages()
+        self._shown: FootstepPlan | None = None  # the newest plan published
         self.footsteps_publisher = self.create_publisher(
             get_message('trajectory_msgs/msg/MultiDOFJointTrajectory'), 'gait/footsteps',
             qos_profile_latched)
@@ -258,6 +263,7 @@ class FootstepPlanner(GuardedNode):
         self.add_post_set_parameters_callback(self.on_parameters_set)
         self.timer = self.create_timer(1.0 / self.settings['rate_hz'], self.tick)
         self.create_timer(1.0, self.report_state)
+        self._footholds_timer = self.create_timer(FOOTHOLDS_REPEAT_S, self._show_footholds)
         self.worker.start()
         # The command checks' first calls made now (the schema's validator, the robot's checks:
         # a third of a second), not in the first command's callback.
@@ -402,14 +408,25 @@ class FootstepPlanner(GuardedNode):
                                            report.values)])
         if output.footsteps is not None:
             self.footsteps_publisher.publish(footsteps_to_msg(output.footsteps))
-            if self.settings['publish_markers']:
-                self.markers_publisher.publish(footsteps_markers(
-                    output.footsteps, self._now_ns(), self.robot.foot_radius_m))
+            self._shown = output.footsteps
+            self._show_footholds()
         if output.zmp_reference is not None:
             self.zmp_publisher.publish(self._zmp_messages.to_msg(output.zmp_reference))
         for line in output.log:
             self.get_logger().info(line)
         self._listen(self.core.listening)
+
+    def _show_footholds(self) -> None:
+        """The newest plan's footholds on /gait/markers (if ``publish_markers``).
+
+        With each plan, and again a second after the last showing while no new plan comes (a
+        standing robot's plan changes seldom: a display that joins late shows them within a
+        second).
+        """
+        self._footholds_timer.reset()
+        if self.settings['publish_markers'] and self._shown is not None:
+            self.markers_publisher.publish(footsteps_markers(
+                self._shown, self._now_ns(), self.robot.foot_radius_m))
 
     def _on_event(self, event) -> None:
         """A worker's answer to a command or a change (its plans live: the supervisor's)."""

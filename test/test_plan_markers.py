@@ -68,14 +68,27 @@ def split_markers(arrays) -> dict[str, list]:
     return by_namespace
 
 
-def check_plan_markers(messages: dict, robot) -> dict[str, list]:
-    """Each footsteps and swing_paths marker is its plan's or its swing's; returns them."""
+def check_plan_markers(messages: dict, robot, swinging: bool = True) -> dict[str, list]:
+    """Each footsteps and swing_paths marker is its plan's or its swing's; returns them.
+
+    ``swinging``: swings were planned (and their paths shown); else none was.
+    """
     markers = split_markers(messages['/gait/markers'])
     assert set(markers) <= {'gait', 'footsteps', 'swing_paths'}
     diameter = 2.0 * robot.foot_radius_m
     plans = messages['/gait/footsteps']
-    assert plans and [t for t, _ in markers['footsteps']] == [t for t, _ in plans]
-    for (t_ns, marker), (_, footsteps) in zip(markers['footsteps'], plans, strict=True):
+    # Each plan's footholds when it is published, and the newest plan's again once a second
+    # while no new one comes.
+    plan_times = [t for t, _ in plans]
+    marker_times = [t for t, _ in markers['footsteps']]
+    assert plans and set(plan_times) <= set(marker_times)
+    shown = [max(k for k, t in enumerate(plan_times) if t <= t_ns) for t_ns in marker_times]
+    for (earlier, _), (later, _), plan_before, plan_after in zip(
+            markers['footsteps'], markers['footsteps'][1:], shown, shown[1:], strict=False):
+        if plan_after == plan_before:
+            assert later - earlier >= NS
+    for (t_ns, marker), k in zip(markers['footsteps'], shown, strict=True):
+        footsteps = plans[k][1]
         assert (marker.header.frame_id, marker.id, marker.type, marker.action) == \
             ('odom', 0, marker.SPHERE_LIST, marker.ADD)
         assert time_msg_to_ns(marker.header.stamp) == t_ns
@@ -89,6 +102,9 @@ def check_plan_markers(messages: dict, robot) -> dict[str, list]:
             assert colours.setdefault(foot, colour) == colour
         assert len({(c.r, c.g, c.b) for c in colours.values()}) == len(robot.foot_names)
     swings = messages['/gait/swing_trajectory']
+    if not swinging:
+        assert not swings and 'swing_paths' not in markers
+        return markers
     assert swings and [t for t, _ in markers['swing_paths']] == [t for t, _ in swings]
     for (t_ns, marker), (_, swing) in zip(markers['swing_paths'], swings, strict=True):
         assert (marker.header.frame_id, marker.type, marker.action) == \
@@ -230,3 +246,27 @@ def test_a_point_foot_gets_the_default_foothold_size_and_a_swing_lasts_past_land
     assert path.id == 3 and (path.lifetime.sec, path.lifetime.nanosec) == (3, 500_000_000)
     (late,) = swing_path_markers(swing, 3, 9 * NS).markers  # sent after its touch-down
     assert (late.lifetime.sec, late.lifetime.nanosec) == (1, 0)
+
+
+def test_a_standing_robots_footholds_are_shown_again_each_second():
+    # A display that joins while the robot stands gets the footholds within a second: the
+    # standing plan is published once, its markers again every second.
+    scenario = get_scenario('biped_walk')
+    runtime.init(args=['test', '--ros-args', '-p', f'robot:={scenario.robot}'],
+                 runtime='inproc', signal_handlers=False)
+    try:
+        nodes = [graph.load_class(graph.NODES[name])() for name in graph.available_nodes()]
+        listener = Listener(0.0)
+        executor = runtime.SingleThreadedExecutor()
+        for node in [*nodes, listener]:
+            executor.add_node(node)
+        executor.spin_for(5.0)
+        messages = listener.messages
+        markers = check_plan_markers(messages, load_robot_description(scenario.robot),
+                                     swinging=False)
+        plans = messages['/gait/footsteps']
+        assert len(markers['footsteps']) >= len(plans) + 3
+        times = [t for t, _ in markers['footsteps']]
+        assert max(b - a for a, b in zip(times, times[1:], strict=False)) <= NS + 10**8
+    finally:
+        runtime.shutdown()
