@@ -19,16 +19,18 @@ from gait_nodes.errors import ConfigError
 
 def write_stance(name_or_path: str | os.PathLike, directory: str | os.PathLike,
                  body_height_m: float, rear_width_m: float | None = None,
-                 front_x_m: float | None = None) -> Path:
+                 front_x_m: float | None = None, rear_x_m: float | None = None) -> Path:
     """A copy of a quadruped's robot YAML with its feet ``body_height_m`` below the body.
 
     Args:
         name_or_path: The robot (a shipped name or a YAML path).
-        directory: Where the copy goes (``<name>_h<height>[_r<width>].yaml``).
+        directory: Where the copy goes
+            (``<name>_h<height>[_r<width>][_f<front x>][_b<rear x>].yaml``).
         body_height_m: Depth of the ground below the base [m] (every foot's nominal z).
         rear_width_m: The rear feet's lateral distance from the centre line [m] (None: as
             they are).
         front_x_m: The front feet's distance ahead of the base [m] (None: as they are).
+        rear_x_m: The rear feet's distance behind the base [m] (None: as they are).
 
     Returns:
         The copy's path (a valid robot YAML: give it wherever a robot name goes).
@@ -45,7 +47,7 @@ def write_stance(name_or_path: str | os.PathLike, directory: str | os.PathLike,
 
     description = load_robot_description(name_or_path)
     for name, value in (('body_height_m', body_height_m), ('rear_width_m', rear_width_m),
-                        ('front_x_m', front_x_m)):
+                        ('front_x_m', front_x_m), ('rear_x_m', rear_x_m)):
         if value is not None and not (isinstance(value, (int, float)) and 0.0 < value < 10.0):
             raise ConfigError(f'{name} must be in (0, 10) m, got {value!r}')
     data = yaml.safe_load(description.path.read_text())
@@ -56,10 +58,13 @@ def write_stance(name_or_path: str | os.PathLike, directory: str | os.PathLike,
             y = float(np.copysign(rear_width_m, y))
         if front_x_m is not None and x > 0.0:
             x = float(front_x_m)
+        elif rear_x_m is not None and x < 0.0:
+            x = -float(rear_x_m)
         foot['nominal_position_m'] = [x, y, -float(body_height_m)]
     data['body_height_m'] = float(body_height_m)
     suffix = (f'_h{body_height_m:g}' + ('' if rear_width_m is None else f'_r{rear_width_m:g}')
-              + ('' if front_x_m is None else f'_f{front_x_m:g}'))
+              + ('' if front_x_m is None else f'_f{front_x_m:g}')
+              + ('' if rear_x_m is None else f'_b{rear_x_m:g}'))
     data['description'] = (f'{description.name} at another stance ({suffix[1:]}), a copy of '
                            f'{description.path}')
     path = Path(directory) / f'{description.name}{suffix}.yaml'
