@@ -628,7 +628,7 @@ class RoboSimianLimbIk:
                               f'straight down (it has link 7\'s x along {down.tolist()})')
         #: (F,) +1 or -1: limb ``k`` at ``sign * q`` is the front-right limb's mirror image at q.
         self.angle_signs = np.ones(len(feet))
-        #: (family, target and yaw bytes) -> (principal solution or None).
+        #: family -> {target and yaw bytes: principal solution, or None where infeasible}.
         self._solved: dict[int, dict[bytes, np.ndarray | None]] = {}
         self._check_structure(where)
         nominal = (self.mirrors[reference]
@@ -757,19 +757,22 @@ class RoboSimianLimbIk:
         """:meth:`_solve_reference` (wrapped) of front-right targets, each solved once."""
         memo = self._solved.setdefault(family, {})
         keys = [row.tobytes() for row in np.column_stack([targets, yaws])]
-        missing = [k for k, key in enumerate(keys) if key not in memo]
+        found = {key: memo[key] for key in keys if key in memo}
+        missing = {}  # key -> its first row
+        for k, key in enumerate(keys):
+            if key not in found:
+                missing.setdefault(key, k)
         if missing:
-            q_new, feasible_new = self._solve_reference(targets[missing], yaws[missing], family,
+            rows = list(missing.values())
+            q_new, feasible_new = self._solve_reference(targets[rows], yaws[rows], family,
                                                         wrap=True)
-            if len(memo) + len(missing) > MEMO_SIZE:
+            if len(memo) + len(rows) > MEMO_SIZE:
                 memo.clear()
-            for k, q_row, ok in zip(missing, q_new, feasible_new, strict=True):
-                memo[keys[k]] = q_row if ok else None
-        found = [memo.get(key, False) for key in keys]
-        if any(value is False for value in found):   # (cleared while solving: a large call)
-            return self._solve_reference(targets, yaws, family, wrap=True)
-        feasible = np.array([value is not None for value in found], dtype=bool)
-        q = np.array([self.centers[family] if value is None else value for value in found])
+            for key, q_row, ok in zip(missing, q_new, feasible_new, strict=True):
+                memo[key] = found[key] = q_row if ok else None
+        values = [found[key] for key in keys]
+        feasible = np.array([value is not None for value in values], dtype=bool)
+        q = np.array([self.centers[family] if value is None else value for value in values])
         return q.reshape(len(keys), 7), feasible
 
     def solutions(self, targets_in_base, yaws_rad, foot: str = 'front_right'
