@@ -224,6 +224,10 @@ class FootstepPlanner(GuardedNode):
             job_done=lambda kind, seconds: callback_times.record(self.get_name(),
                                                                  f'worker {kind}', seconds),
             check=self.timings.check_joint_speeds)
+        if self.context.runtime != 'inproc':
+            # Beside the clock, the first walk's planning time is measured before it is asked
+            # (the deterministic caller plans in no time).
+            self.worker.submit_rehearsal(Twist2D(params.max_vx_m_s))
         # Under inproc every node starts together; elsewhere the robot may be somewhere already.
         self.core = PlannerSupervisor(self.robot, self.worker, self.faults,
                                       supervisor_settings(self.settings), start_ns,

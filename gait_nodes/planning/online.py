@@ -175,7 +175,7 @@ class Snapshot:
 
 @dataclasses.dataclass
 class _Job:
-    kind: str  # 'command' | 'velocity' | 'change' | 'replace' | 'stand'
+    kind: str  # 'command' | 'velocity' | 'change' | 'replace' | 'stand' | 'rehearsal'
     payload: object
     command_id: str = ''  # a change's key
     commands: list[tuple[str, str]] = dataclasses.field(default_factory=list)  # (id, text)
@@ -326,6 +326,18 @@ class OnlinePlanner:
             self._jobs.appendleft(_Job('replace', (make, token)))
         self._wake.set()
 
+    def submit_rehearsal(self, twist: Twist2D) -> None:
+        """Plan walking ``twist`` from the live plan on a fork, as a change would, and drop it.
+
+        A walk from standstill is the slowest change to plan (every probe of its first cycles
+        through the limb IK). Without an estimate of its planning time the first one is
+        planned to join a lead that covers none of it, misses it and is planned again from
+        later (twice the work, and a later start). The rehearsal, done while the robot stands
+        before anything was asked, measures that time for the first change (the planner's
+        caches keep what it solved) and changes nothing else.
+        """
+        self._submit(_Job('rehearsal', twist), replaces='rehearsal')
+
     def submit_stand(self, hold_s: float) -> None:
         """Stop at a safe stand now and hold it ``hold_s`` (see :meth:`GaitPlanner.stand`)."""
         with self._lock:
@@ -434,6 +446,8 @@ class OnlinePlanner:
             self._emit(Replaced(token, None))
         elif job.kind == 'stand':
             self._live.stand(self._now_s(), job.payload)
+        elif job.kind == 'rehearsal':
+            self._rehearse(job)
         else:
             self._plan_change(job)
 
@@ -484,6 +498,17 @@ class OnlinePlanner:
             lead_s = least_s + margin_s + 2.0 * self._work_s
         self._refuse(job, f'busy: the planner could not plan it ahead of the motion '
                           f'({MAX_ATTEMPTS} tries, the last {self._work_s:.2f} s); send it again')
+
+    def _rehearse(self, job: _Job) -> None:
+        """See :meth:`submit_rehearsal`: the change's planning time, its plan dropped."""
+        started = time.monotonic()
+        try:
+            self._candidate(dataclasses.replace(job, kind='velocity'), self._live.fork(),
+                            self._now_s() + self._least_lead_s() + LEAD_MARGIN_S)
+        except Exception:  # noqa: BLE001, S110 (a walk that cannot be planned is said when asked)
+            pass
+        if self._threaded and self._work_s == 0.0:
+            self._work_s = time.monotonic() - started
 
     def _candidate(self, job: _Job, fork: GaitPlanner, at_s: float):
         """``job`` applied to ``fork`` from ``at_s``, planned and checked past its join."""
