@@ -89,13 +89,13 @@ SCENARIOS: dict[str, Scenario] = {s.name: s for s in (
     # (foot radius + the swing's toe distance, which the 0.18 m via height keeps short). 0.08 m
     # stairs walk too, but the closing step's swing then puts an ankle on its joint limit.
     Scenario('biped_stairs',
-             'small humanoid: start, walk up three 0.07 m stairs (Lucy\'s stairway: footholds '
+             'small humanoid: start, walk up three 0.05 m stairs (Lucy\'s stairway: footholds '
              'on the treads, the COM climbing with the support), stop on the landing',
              'biped', {'gait': 'biped', 'swing': 'polynomial', 'com_method': 'preview',
-                       'step_height_m': 0.18, 'step_period_s': 2.0, 'duty_factor': 0.72,
-                       'stairs_start_x_m': 0.25, 'stairs_rise_m': 0.07, 'stairs_tread_m': 0.3,
+                       'step_height_m': 0.14, 'step_period_s': 2.0, 'duty_factor': 0.72,
+                       'stairs_start_x_m': 0.45, 'stairs_rise_m': 0.05, 'stairs_tread_m': 0.3,
                        'stairs_count': 3},
-             (_vel(0.0, 0.075), _vel(12.0, 0.0)), 24.0),
+             (_vel(0.0, 0.05), _vel(30.0, 0.0)), 40.0),
     Scenario('go2_trot',
              'Unitree Go2 (example-robot-data), trot with sway compensation',
              'go2', {'gait': 'trot', 'swing': 'polynomial', 'com_method': 'sway',

@@ -112,12 +112,13 @@ def test_footholds_are_on_the_treads_at_the_stair_heights(raw):
     robot = load_robot_description(SCENARIO.robot)
     params = GaitParameters.for_robot(robot, **{k: v for k, v in SCENARIO.settings.items()
                                                 if k in GaitParameters.__dataclass_fields__})
-    keep_out = check_walkable(STAIRS, robot, params)
+    keep_before, keep_after = check_walkable(STAIRS, robot, params)
     for plan in raw['plans']:
         footholds = plan.positions_in_world.reshape(-1, 3)
         assert np.allclose(footholds[:, 2], STAIRS.height_at(footholds[:, 0]), atol=1e-9)
-        to_riser = np.abs(footholds[:, :1] - STAIRS.risers_x_m[None, :]).min(axis=1)
-        assert to_riser.min() >= keep_out - 1e-9
+        to_riser = STAIRS.risers_x_m[None, :] - footholds[:, :1]  # > 0: ahead of the foot
+        assert np.all(to_riser[to_riser > 0] >= keep_before - 1e-9)
+        assert np.all(-to_riser[to_riser <= 0] >= keep_after - 1e-9)
     last = raw['plans'][-1].positions_in_world[-1]
     assert last[:, 2] == pytest.approx([STAIRS.total_rise_m] * 2)
 
@@ -141,9 +142,9 @@ def test_feet_land_where_planned_and_clear_the_stairs_in_swing(raw, feet):
         if k < len(stamps) and stamps[k] - touch_down_ns < 10_000_000:
             errors.append(np.linalg.norm(soles[k, names.index(foot)] - end))
     assert len(errors) >= 6 and max(errors) < FOOT_TOLERANCE_M
-    # Every foot at every sample: its disc above the ground under it (on it in stance).
-    radius = load_robot_description(SCENARIO.robot).foot_radius_m
-    clearance = soles[:, :, 2] - STAIRS.highest_under(soles[:, :, 0], radius)
+    # Every foot at every sample: its sole above the ground under it (on it in stance).
+    extent = load_robot_description(SCENARIO.robot).sole_extent_x_m
+    clearance = soles[:, :, 2] - STAIRS.highest_under(soles[:, :, 0], *extent)
     assert clearance.min() > -1e-4
     # The feet did climb, from the ground to the landing.
     assert soles[0, :, 2] == pytest.approx([0.0, 0.0], abs=1e-5)

@@ -20,6 +20,7 @@ from gait_nodes.errors import ParameterError, TerrainError
 from gait_nodes.planning.footsteps import GaitPlanner, Twist2D, plan_walk
 from gait_nodes.planning.gait_params import GaitParameters
 from gait_nodes.planning.terrain import (
+    EDGE_MARGIN_M,
     FLAT,
     Staircase,
     check_walkable,
@@ -108,18 +109,18 @@ def test_a_value_table_swing_and_a_short_tread_are_refused():
     stairs = Staircase(0.4, 0.05, 0.3, 3)
     with pytest.raises(TerrainError, match='value-table swing is built for flat ground'):
         check_walkable(stairs, BIPED, biped_params(swing='value_table'))
-    needed = 2.0 * keep_out_m(stairs, BIPED.foot_radius_m, STEP_HEIGHT_M,
-                              BIPED.reach.max_step_length_m)
+    needed = sum(keep_out_m(stairs, BIPED.sole_extent_x_m, STEP_HEIGHT_M,
+                            BIPED.reach.max_step_length_m))
     with pytest.raises(TerrainError, match=f'tread must be >= {needed:.4g} m'):
         check_walkable(Staircase(0.4, 0.05, 0.9 * needed, 3), BIPED, biped_params())
-    assert check_walkable(FLAT, BIPED, biped_params(swing='value_table')) == 0.0
+    assert check_walkable(FLAT, BIPED, biped_params(swing='value_table')) == (0.0, 0.0)
 
 
 # --- footholds --------------------------------------------------------------------------------
 
 
 @pytest.mark.parametrize('start_x_m, rise_m, tread_m', [
-    (0.4, 0.05, 0.3),      # the scenario: the footholds are 0.075 m from the risers
+    (0.4, 0.05, 0.3),      # the scenario
     (0.36, 0.05, 0.3),     # risers where the feet would land: steps shortened or lengthened
     (0.5, 0.08, 0.37),     # a tread that is no multiple of the stride
     (0.45, -0.05, 0.3),    # a staircase down
@@ -127,12 +128,18 @@ def test_a_value_table_swing_and_a_short_tread_are_refused():
 def test_footholds_lie_on_one_tread_at_its_height_and_the_swings_clear_the_risers(
         start_x_m, rise_m, tread_m):
     stairs = Staircase(start_x_m, rise_m, tread_m, 3)
-    keep_out = check_walkable(stairs, BIPED, biped_params())
+    keep_before, keep_after = check_walkable(stairs, BIPED, biped_params())
+    behind, ahead = BIPED.sole_extent_x_m
+    assert (behind, ahead) == pytest.approx((0.08, 0.12))  # the sole box, not the 0.05 m disc
     planner, plan = walk(stairs)
     feet = plan.positions_in_world.reshape(-1, 3)
     assert np.allclose(feet[:, 2], stairs.height_at(feet[:, 0]), atol=1e-12)
-    distances = np.abs(feet[:, :1] - stairs.risers_x_m[None, :]).min(axis=1)
-    assert distances.min() >= keep_out - 1e-9 > BIPED.foot_radius_m
+    to_riser = stairs.risers_x_m[None, :] - feet[:, :1]  # > 0: the riser is ahead of the foot
+    assert to_riser[to_riser > 0].min() >= keep_before - 1e-9 > ahead
+    assert (-to_riser[to_riser <= 0]).min() >= keep_after - 1e-9 > behind
+    # The whole sole on one tread, the toe distance (at least the edge margin) from each riser.
+    assert not any(stairs.riser_under(x, behind + EDGE_MARGIN_M, ahead + EDGE_MARGIN_M)
+                   for x in feet[:, 0])
     swings = plan.swings()
     climbed = [s.end_in_world[2] - s.start_in_world[2] for s in swings]
     assert max(np.abs(climbed)) == pytest.approx(abs(rise_m))
@@ -140,7 +147,7 @@ def test_footholds_lie_on_one_tread_at_its_height_and_the_swings_clear_the_riser
         step = swing.end_in_world[:2] - swing.start_in_world[:2]
         assert abs(step[0]) <= BIPED.reach.max_step_length_m + 1e-9
         assert swing_clearance_m(stairs, swing.start_in_world, swing.end_in_world,
-                                 STEP_HEIGHT_M, BIPED.foot_radius_m) >= -1e-12
+                                 STEP_HEIGHT_M, BIPED.sole_extent_x_m) >= -1e-12
     # The walk ends on the landing, both feet side by side (the closing step) on one tread.
     last = plan.positions_in_world[-1]
     assert last[:, 2] == pytest.approx([stairs.total_rise_m] * 2)
@@ -151,7 +158,11 @@ def test_a_swing_that_cuts_a_riser_is_seen():
     stairs = Staircase(0.2, 0.05, 0.3, 3)
     # Toe 0.01 m from the riser: the foot is still low when it gets there.
     assert swing_clearance_m(stairs, (0.14, 0.0, 0.0), (0.44, 0.0, 0.05), STEP_HEIGHT_M,
-                             0.05) < -0.01
+                             (0.05, 0.05)) < -0.01
+    # A sole reaching further ahead of its frame hits it sooner, and lower.
+    assert swing_clearance_m(stairs, (0.1, 0.0, 0.0), (0.4, 0.0, 0.05), STEP_HEIGHT_M,
+                             (0.08, 0.12)) < swing_clearance_m(
+        stairs, (0.1, 0.0, 0.0), (0.4, 0.0, 0.05), STEP_HEIGHT_M, (0.05, 0.05)) < 0.0
 
 
 def test_the_flat_default_plans_the_same_walk():
@@ -329,7 +340,7 @@ def test_the_planner_node_refuses_bad_stairs_with_the_range_and_walks_on_unchang
                                  lambda msg: statuses.append(json.loads(msg.data)), 10)
         command = user.create_publisher(get_message('std_msgs/msg/String'), '/gait/command', 10)
         twist = get_message('geometry_msgs/msg/Twist')()
-        twist.linear.x = 0.1
+        twist.linear.x = 0.05
         user.create_publisher(get_message('geometry_msgs/msg/Twist'), '/cmd_vel',
                               10).publish(twist)
         executor = runtime.SingleThreadedExecutor()

@@ -613,14 +613,15 @@ class GaitPlanner:
 
     def _check_footholds(self, terrain: Staircase, placed: Sequence[np.ndarray],
                          compare_heights: bool) -> None:
-        radius = self.robot.foot_radius_m
+        behind, ahead = self.robot.sole_extent_x_m
         for positions in placed:
             for foot, (x, y) in zip(self.layout.names, positions, strict=True):
-                if terrain.distance_to_riser_m(x) < radius:
+                if terrain.riser_under(x, behind, ahead):
                     raise TerrainError(
                         f'the staircase puts a riser under the {foot} foot (at x = {x:.4g} m, '
-                        f'radius {radius:g} m): stairs_start_x_m = {terrain.start_x_m:g} m '
-                        f'must leave the feet on a tread')
+                        f'reaching {behind:g} m behind and {ahead:g} m ahead): '
+                        f'stairs_start_x_m = {terrain.start_x_m:g} m must leave the feet on a '
+                        f'tread')
                 if compare_heights:
                     now_m = float(self._terrain.height_at(x))
                     then_m = float(terrain.height_at(x))

@@ -7,19 +7,24 @@ forever. ``count = 0`` is flat ground at ``z = 0``, the default. In Lucy's terms
 tread to the next has the step height ``delta = rise_m`` (the vertical distance between the two
 ankles, eqs. (1)-(2)); the example walks ``lambda = 0.3 m``, ``delta = 0.1 m``.
 
-Footholds. A foot is a disc of the robot's ``foot_radius_m``, and it must lie on one tread: the
-planner keeps each foothold's centre at least :func:`keep_out_m` from every riser, the foot
-radius plus the larger of :data:`EDGE_MARGIN_M` and the swing's *toe distance*
+Footholds. A foot reaches ``behind`` and ``ahead`` of its foot frame along x (the robot's
+:attr:`~gait_nodes.robot.description.RobotDescription.sole_extent_x_m`: a disc of
+``foot_radius_m``, or the sole the YAML gives it, facing +x: the staircase is walked straight up
+or down), and it must lie on one tread: the planner keeps each foothold's frame at least
+:func:`keep_out_m` before every riser (what the foot reaches ahead) and after it (what it
+reaches behind), each plus the larger of :data:`EDGE_MARGIN_M` and the swing's *toe distance*
 (:func:`toe_distance_m`): how far the polynomial swing (:mod:`gait_nodes.swing.polynomial`,
 sixth order, via point ``step_height_m`` above the higher foothold) moves forward before it is
-one stair high, at the robot's longest stride. So a swing that starts just before a riser has
-lifted over it before its toe gets there, and, by the swing's symmetry in time, one that lands
-just past a riser going down has cleared it with its heel (Lucy's intermediate condition, used
+one stair and :data:`STAIR_CLEARANCE_M` high, at the robot's longest stride. So a swing that
+starts just before a riser has lifted over it before its toe gets there, and, by the swing's
+symmetry in time, one that lands just past a riser going down has cleared it with its heel
+(Lucy's intermediate condition, used
 "to lift the foot whenever an obstacle has to be cleared"). A target inside a keep-out zone
 moves to the zone's nearer end (the step shortened or lengthened, as Lucy's planner adapts the
 step length to the stairway), or to the other end when the nearer one is out of reach
 (:meth:`Staircase.foothold_candidates`); :func:`swing_clearance_m` measures what a swing
-leaves between the foot's disc and the stairs.
+leaves between the foot and the stairs. (The planner's disc alone put the biped's toe 45 mm
+into the first stair, whose edge it landed on in physics: docs/physics.md.)
 
 Only the polynomial swing knows about heights: the value-table swing (thesis, flat ground) is
 refused on stairs (:func:`check_walkable`).
@@ -35,8 +40,12 @@ import numpy as np
 
 from gait_nodes.errors import TerrainError
 
-#: Least horizontal distance [m] between a foot's disc and a riser at a foothold.
+#: Least horizontal distance [m] between a foot and a riser at a foothold.
 EDGE_MARGIN_M = 0.01
+#: Height [m] a swing's foot keeps above a stair's edge as it passes it. With none (the foot
+#: exactly one stair high as its toe reaches the riser) the biped's toe, a few millimetres
+#: behind its setpoint on position drives, caught the stair's nosing in physics.
+STAIR_CLEARANCE_M = 0.02
 #: Samples of a swing checked against the stairs (:func:`swing_clearance_m`).
 CLEARANCE_SAMPLES = 401
 #: Footstep planner parameters of the staircase: name -> (lowest, highest, unit), both included.
@@ -118,39 +127,46 @@ class Staircase:
         stair = np.clip(np.floor((x - self.start_x_m) / self.tread_m) + 1.0, 0.0, self.count)
         return stair * self.rise_m + 0.0  # no -0.0 before a staircase down
 
-    def highest_under(self, x_m, radius_m: float) -> np.ndarray:
-        """Highest ground [m] under a disc of ``radius_m`` [m] centred at ``x_m``."""
-        return np.maximum(self.height_at(np.asarray(x_m) - radius_m),
-                          self.height_at(np.asarray(x_m) + radius_m))
+    def highest_under(self, x_m, behind_m: float, ahead_m: float | None = None) -> np.ndarray:
+        """Highest ground [m] under a foot at ``x_m`` reaching ``behind_m`` and ``ahead_m``.
 
-    def distance_to_riser_m(self, x_m: float) -> float:
-        """Horizontal distance [m] from ``x_m`` to the nearest riser (inf on flat ground)."""
+        ``ahead_m`` None: as far as ``behind_m`` (a disc of that radius).
+        """
+        x = np.asarray(x_m)
+        ahead_m = behind_m if ahead_m is None else ahead_m
+        return np.maximum(self.height_at(x - behind_m), self.height_at(x + ahead_m))
+
+    def riser_under(self, x_m: float, behind_m: float, ahead_m: float) -> bool:
+        """Whether a riser is under a foot at ``x_m`` reaching ``behind_m`` and ``ahead_m``."""
         if self.flat:
-            return math.inf
-        return float(np.min(np.abs(self.risers_x_m - x_m)))
+            return False
+        risers = self.risers_x_m
+        return bool(np.any((risers > x_m - behind_m) & (risers < x_m + ahead_m)))
 
-    def foothold_candidates(self, x_m: float, keep_out: float) -> tuple[float, float]:
+    def foothold_candidates(self, x_m: float, keep_out: tuple[float, float]
+                            ) -> tuple[float, float]:
         """``(nearest, other)`` allowed foothold x for a target ``x_m`` [m].
 
-        Both are ``x_m`` when it is at least ``keep_out`` [m] from every riser; otherwise the
-        two ends of the riser's keep-out zone, the nearer first (ties: the one before the
-        riser, a shorter step forward).
+        Both are ``x_m`` when it is at least ``keep_out[0]`` [m] before and ``keep_out[1]``
+        after every riser (:func:`keep_out_m`); otherwise the two ends of the riser's keep-out
+        zone, the nearer first (ties: the one before the riser, a shorter step forward).
         """
         if self.flat:
             return x_m, x_m
-        risers = self.risers_x_m
-        k = int(np.argmin(np.abs(risers - x_m)))
-        if abs(x_m - risers[k]) >= keep_out:
-            return x_m, x_m
-        before, after = risers[k] - keep_out, risers[k] + keep_out
-        return (before, after) if x_m - before <= after - x_m else (after, before)
+        keep_before, keep_after = keep_out
+        for riser in self.risers_x_m:
+            before, after = riser - keep_before, riser + keep_after
+            if before < x_m < after:
+                return (before, after) if x_m - before <= after - x_m else (after, before)
+        return x_m, x_m
 
 
 FLAT = Staircase()
 
 
-def toe_distance_m(rise_m: float, step_height_m: float, stride_m: float) -> float:
-    """How far [m] the polynomial swing moves forward before it is ``|rise_m|`` high.
+def toe_distance_m(rise_m: float, step_height_m: float, stride_m: float,
+                   clearance_m: float = 0.0) -> float:
+    """How far [m] the polynomial swing moves forward before it is ``|rise_m| + clearance_m`` high.
 
     The swing of :func:`gait_nodes.swing.polynomial.polynomial_swing` over ``stride_m`` up one
     stair of ``|rise_m|``, via point ``step_height_m`` above the upper foothold at mid-swing; the
@@ -165,71 +181,88 @@ def toe_distance_m(rise_m: float, step_height_m: float, stride_m: float) -> floa
     coefficients = sixth_order_coefficients(
         [0.0, 0.0], [stride_m, rise], [0.5 * stride_m, rise + step_height_m], 1.0, 0.5)
     path = evaluate(coefficients, np.linspace(0.0, 1.0, 2001))
-    high = np.flatnonzero(path[:, 1] >= rise)
+    high = np.flatnonzero(path[:, 1] >= rise + clearance_m)
+    if not len(high):
+        raise TerrainError(f'a swing {step_height_m:g} m above a stair of {rise:g} m never '
+                           f'clears it by {clearance_m:g} m')
     return float(path[high[0], 0])
 
 
-def keep_out_m(staircase: Staircase, foot_radius_m: float, step_height_m: float,
-               max_stride_m: float) -> float:
-    """Least distance [m] from a foothold's centre to any riser (see the module docstring)."""
-    toe = toe_distance_m(staircase.rise_m, step_height_m, max_stride_m)
-    return foot_radius_m + max(EDGE_MARGIN_M, toe)
+def keep_out_m(staircase: Staircase, sole_extent_x_m: tuple[float, float],
+               step_height_m: float, max_stride_m: float) -> tuple[float, float]:
+    """Least distances [m] of a foothold's frame before and after any riser (module docstring).
+
+    Args:
+        staircase: The terrain.
+        sole_extent_x_m: How far the foot reaches behind and ahead of its frame [m].
+        step_height_m: The swing's via height above the higher foothold [m].
+        max_stride_m: The longest stride [m] (the toe distance grows with it).
+    """
+    toe = max(EDGE_MARGIN_M, toe_distance_m(staircase.rise_m, step_height_m, max_stride_m,
+                                            STAIR_CLEARANCE_M))
+    behind, ahead = sole_extent_x_m
+    return ahead + toe, behind + toe
 
 
-def check_walkable(staircase: Staircase, robot, params) -> float:
+def check_walkable(staircase: Staircase, robot, params) -> tuple[float, float]:
     """Raise :class:`TerrainError` unless ``params`` can walk ``staircase`` on ``robot``.
 
     Args:
         staircase: The terrain.
-        robot: Robot description (foot radius, reach).
+        robot: Robot description (the foot's extent, reach).
         params: Gait parameters (swing method, step height).
 
     Returns:
-        The keep-out distance [m] of the footholds from the risers (0 on flat ground).
+        The keep-out distances [m] of the footholds' frames before and after each riser
+        (:func:`keep_out_m`; 0 on flat ground).
     """
     if staircase.flat:
-        return 0.0
+        return 0.0, 0.0
     if params.swing != 'polynomial':
         raise TerrainError(f'swing = {params.swing!r} cannot walk stairs: the value-table swing '
                            f'is built for flat ground; use swing = polynomial or stairs_count = 0')
-    keep_out = keep_out_m(staircase, robot.foot_radius_m, params.step_height_m,
-                          robot.reach.max_step_length_m)
-    if staircase.tread_m < 2.0 * keep_out:
+    behind, ahead = robot.sole_extent_x_m
+    keep_before, keep_after = keep_out_m(staircase, (behind, ahead), params.step_height_m,
+                                         robot.reach.max_step_length_m)
+    toe = keep_before - ahead
+    if staircase.tread_m < keep_before + keep_after:
         raise TerrainError(
             f'stairs_tread_m = {staircase.tread_m:g} is too short for {robot.name}: a foothold '
-            f'stays {keep_out:.4g} m from each riser (foot radius {robot.foot_radius_m:g} m + '
-            f'the swing\'s toe distance at step_height_m = {params.step_height_m:g} m, '
-            f'at least {EDGE_MARGIN_M:g} m), so the tread must be >= {2.0 * keep_out:.4g} m')
+            f'stays {keep_before:.4g} m before each riser and {keep_after:.4g} m after it (the '
+            f'foot reaches {ahead:g} m ahead of its frame and {behind:g} m behind, plus the '
+            f'swing\'s toe distance at step_height_m = {params.step_height_m:g} m, at least '
+            f'{EDGE_MARGIN_M:g} m), so the tread must be >= {keep_before + keep_after:.4g} m')
     # A stride longer than a tread crosses several risers: the j-th, a toe's keep-out plus
     # (j - 1) treads ahead, must find the foot j stairs high already.
     stride = robot.reach.max_step_length_m
     crossed = math.ceil(stride / staircase.tread_m - 1e-9)
     for j in range(2, crossed + 1):
-        needed = toe_distance_m(j * staircase.rise_m, params.step_height_m, stride)
-        room = keep_out - robot.foot_radius_m + (j - 1) * staircase.tread_m
+        needed = toe_distance_m(j * staircase.rise_m, params.step_height_m, stride,
+                                STAIR_CLEARANCE_M)
+        room = toe + (j - 1) * staircase.tread_m
         if needed > room:
             raise TerrainError(
                 f'stairs_tread_m = {staircase.tread_m:g} is too short for {robot.name}\'s '
                 f'stride of up to {stride:g} m: a swing over {j} risers reaches the {j}-th '
                 f'{room:.4g} m after lift-off but is {j} stairs high only after {needed:.4g} '
                 f'm; use a longer tread or a higher step_height_m')
-    return keep_out
+    return keep_before, keep_after
 
 
 def swing_clearance_m(staircase: Staircase, start_in_world, end_in_world,
-                      step_height_m: float, radius_m: float,
+                      step_height_m: float, sole_extent_x_m: tuple[float, float],
                       samples: int = CLEARANCE_SAMPLES) -> float:
-    """Least height [m] of a polynomial swing's foot disc above the ground under it.
+    """Least height [m] of a polynomial swing's foot above the ground under it.
 
     The swing is :func:`gait_nodes.swing.polynomial.polynomial_swing`'s path (its timing does
-    not change the path); negative: the disc passes through a riser or a tread.
+    not change the path); negative: the foot passes through a riser or a tread.
 
     Args:
         staircase: The terrain.
         start_in_world: (3,) lift-off place [m].
         end_in_world: (3,) landing place [m].
         step_height_m: Via height above the higher foothold [m].
-        radius_m: Foot disc radius [m].
+        sole_extent_x_m: How far the foot reaches behind and ahead of its frame [m].
         samples: Points checked along the swing.
     """
     from gait_nodes.swing.polynomial import evaluate, sixth_order_coefficients
@@ -240,4 +273,4 @@ def swing_clearance_m(staircase: Staircase, start_in_world, end_in_world,
     via[2] = max(start[2], end[2]) + step_height_m
     coefficients = sixth_order_coefficients(start, end, via, 1.0, 0.5)
     path = evaluate(coefficients, np.linspace(0.0, 1.0, samples))
-    return float(np.min(path[:, 2] - staircase.highest_under(path[:, 0], radius_m)))
+    return float(np.min(path[:, 2] - staircase.highest_under(path[:, 0], *sole_extent_x_m)))

@@ -197,6 +197,23 @@ class RobotDescription:
         return float(self.joint_acceleration_limits_rad_s2.get(
             joint, self.joint_acceleration_limit_rad_s2))
 
+    @property
+    def sole_extent_x_m(self) -> tuple[float, float]:
+        """How far a foot reaches behind and ahead of its foot frame along the foot's x [m].
+
+        The larger of the planner's disc (``foot_radius_m``) and the contact shape the YAML gives
+        the foot (``physics.foot``): the biped's sole box reaches 0.12 m ahead of its sole frame
+        and 0.08 m behind, where its 0.05 m disc says 0.05 m both ways. The footholds keep their
+        distance from stair edges with it (:mod:`gait_nodes.planning.terrain`).
+        """
+        behind = ahead = self.foot_radius_m
+        if self.physics is not None:
+            foot = self.physics.foot
+            half = foot.size_m[0] if foot.shape != 'box' else 0.5 * foot.size_m[0]
+            centre = float(foot.centre_in_foot[0])
+            behind, ahead = max(behind, half - centre), max(ahead, half + centre)
+        return float(behind), float(ahead)
+
     def nominal_stance_in_base(self) -> np.ndarray:
         """(F, 3) nominal foot positions in the base frame [m]."""
         return np.array([foot.nominal_position_in_base for foot in self.feet])
