@@ -1,14 +1,14 @@
 """The static crawl's stance: RoboSimian walked at body heights and feet places.
 
-The walker's stance (``config/robots/robosimian.yaml``: the feet's nominal places and the
-body's height) decides how fast the limbs move their feet (the limb's own speed map) and how
-much room the ZMP keeps in the support triangles of the static crawl's swings. This script
-walks the default scenario (``robosimian_static_crawl``) on copies of the robot YAML that
-differ only in the ground's depth below the body, the rear feet's lateral place, the front
-feet's place ahead of the base, the rear feet's place behind it and the stride cap
-(``reach.max_step_length_m``: the velocity clamp picks the fastest stride below it), with the
-project's own command, one inproc run each (deterministic; the copies from
-:func:`gait_nodes.robot.stance.write_stance`):
+The walker's stance (``config/robots/robosimian.yaml``: the static crawl's own stance,
+``gait_stances.static_crawl``, and the body's height) decides how fast the limbs move their
+feet (the limb's own speed map) and how much room the ZMP keeps in the support triangles of
+the static crawl's swings. This script walks the default scenario (``robosimian_static_crawl``)
+on copies of the robot YAML that differ only in the ground's depth below the body, the rear
+feet's lateral place, the static crawl's front feet's place ahead of the base and rear feet's
+place behind it and its longest step (``max_step_length_m``: the velocity clamp picks the
+fastest stride below it), with the project's own command, one inproc run each
+(deterministic; the copies from :func:`gait_nodes.robot.stance.write_stance`):
 
     python -m gait_nodes run --fast --robot COPY.yaml --record BAG --no-plot --json
 
@@ -60,7 +60,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--rear-x', default='0.54,0.6',
                         help="rear feet's places behind the base [m]")
     parser.add_argument('--strides', default='0.2,0.3',
-                        help='stride caps (reach.max_step_length_m) [m]')
+                        help="stride caps (the static crawl's max_step_length_m) [m]")
     parser.add_argument('--keep', default=None, help='keep the YAML copies and bags here')
     options = parser.parse_args(argv)
     heights = [float(v) for v in options.heights.split(',')]
@@ -78,9 +78,10 @@ def main(argv: list[str] | None = None) -> int:
         folder.mkdir(parents=True, exist_ok=True)
         for height, width, front, rear, stride in itertools.product(heights, widths, fronts,
                                                                      rears, strides):
-            copy = write_stance('robosimian', folder, height, width, front, rear)
+            copy = write_stance('robosimian', folder, height, width, front, rear,
+                                gait='static_crawl')
             data = yaml.safe_load(copy.read_text())
-            data['reach']['max_step_length_m'] = stride
+            data['gait_stances']['static_crawl']['max_step_length_m'] = stride
             copy = copy.with_name(f'{copy.stem}_s{stride:g}.yaml')
             copy.write_text(yaml.safe_dump(data, sort_keys=False))
             gait = walk(copy, folder / f'{copy.stem}_bag')

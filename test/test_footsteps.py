@@ -236,3 +236,40 @@ def test_planner_refuses_non_finite_velocity_and_keeps_its_plan():
     planner.advance(10.0)
     after = planner.footstep_plan()
     np.testing.assert_array_equal(before.positions_in_world, after.positions_in_world)
+
+
+@pytest.mark.parametrize('gait', ['crawl', 'trot'])
+def test_a_gait_with_its_own_stance_walks_it_and_stands_at_the_nominal_one(gait, tmp_path):
+    # The gait plants its front feet 0.55 m ahead of the base and its rear feet 0.4 m behind;
+    # the robot stands with them 0.5 m either way, as it does for a gait without a stance.
+    import yaml
+
+    from gait_nodes.robot.description import load_robot_description
+
+    data = yaml.safe_load(QUADRUPED.path.read_text())
+    data['urdf'] = str(QUADRUPED.urdf_path)
+    data['gait_stances'] = {gait: {'front_x_m': 0.55, 'rear_x_m': 0.4}}
+    path = tmp_path / 'quadruped.yaml'
+    path.write_text(yaml.safe_dump(data))
+    plans = []
+    for description in (QUADRUPED, load_robot_description(path)):
+        params = GaitParameters.for_robot(description, **GAITS[gait][1])
+        commands = [(0.3, Twist2D(0.08)), (14.0, Twist2D())]
+        plans.append(plan_walk(description, params, commands, 24.0).footstep_plan())
+    nominal, own = plans
+    front = QUADRUPED.nominal_stance_in_base()[:, 0] > 0
+    # Standing, before and after: the nominal stance.
+    np.testing.assert_allclose(own.positions_in_world[0], nominal.positions_in_world[0])
+    last = own.positions_in_world[-1, :, :2]
+    np.testing.assert_allclose(last - last.mean(axis=0), QUADRUPED.nominal_stance_in_base()[
+        :, :2] - QUADRUPED.nominal_stance_in_base()[:, :2].mean(axis=0), atol=1e-9)
+    # Walking: every foothold where the nominal stance's is, moved by the stances' difference
+    # (the same path, the same times: the first swings' move is the difference too).
+    landings = {(s.foot, round(s.lift_off_s, 9)): s for s in nominal.swings()}
+    walked = [(s, landings[(s.foot, round(s.lift_off_s, 9))]) for s in own.swings()
+              if 2.0 < s.lift_off_s < 12.0]
+    assert len(walked) >= 8
+    for swing, same in walked:
+        shift = 0.05 if front[QUADRUPED.foot_names.index(swing.foot)] else 0.1
+        assert swing.end_in_world[0] - same.end_in_world[0] == pytest.approx(shift, abs=1e-9)
+        assert swing.end_in_world[1] == pytest.approx(same.end_in_world[1], abs=1e-12)

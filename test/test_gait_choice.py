@@ -24,11 +24,12 @@ def at_1_rad_s(robosimian):
     return auto_choice(robosimian)
 
 
-def check_steady_walks(choice, stride_m):
+def check_steady_walks(choice, robot):
     for candidate in choice.candidates:
         assert candidate.speed_m_s > 0, candidate.describe()
-        # Steady walking: a foot moves at most one stride a cycle (two steps), and a re-timed
-        # step only ever lasts longer than the rhythm's.
+        # Steady walking: a foot moves at most one stride a cycle (two steps), the gait's
+        # longest, and a re-timed step only ever lasts longer than the rhythm's.
+        stride_m = robot.max_step_length_m(candidate.gait)
         assert candidate.speed_m_s * 2 * candidate.step_period_s <= stride_m * (1 + 1e-6)
         assert candidate.step_period_s >= candidate.rhythm_period_s * (1 - 1e-9)
     feasible = [c for c in choice.candidates if c.feasible]
@@ -43,7 +44,7 @@ def test_auto_walks_the_static_crawl_on_robosimian_at_1_rad_s_and_says_why(robos
     choice = at_1_rad_s
     assert choice.joint_velocity_limit_rad_s == 1.0
     assert {c.gait for c in choice.candidates} == set(robosimian.gaits)
-    check_steady_walks(choice, robosimian.reach.max_step_length_m)
+    check_steady_walks(choice, robosimian)
     assert choice.gait == 'static_crawl' == auto_gait(robosimian)
     params = GaitParameters.for_robot(robosimian, timing='joint_limit')
     assert params.gait == 'auto' and params.resolved_gait(robosimian) == 'static_crawl'
@@ -85,7 +86,7 @@ def test_at_3_rad_s_auto_walks_the_trot_the_static_crawl_gaining_less(robosimian
     fast = load_robot_model(str(write_at_joint_velocity_limit('robosimian', 3.0, tmp_path)))
     choice = compare_gaits(fast)
     assert choice.joint_velocity_limit_rad_s == 3.0
-    check_steady_walks(choice, robosimian.reach.max_step_length_m)
+    check_steady_walks(choice, robosimian)
     slow = {c.gait: c for c in at_1_rad_s.candidates}
     quick = {c.gait: c for c in choice.candidates}
     # The ZMP gaits' rhythm is their swings' and body moves' times, each max|dq| / W at the

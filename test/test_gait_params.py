@@ -45,13 +45,19 @@ def test_defaults_take_the_robot_stance_and_heights():
 
 
 def test_default_stride_fits_the_robot_reach():
-    # The class default (0.3 m), or the robot's reach when that is shorter (a Go2: 0.2 m).
+    # The class default (0.3 m), or the robot's reach when that is shorter (a Go2: 0.2 m); a
+    # robot whose gaits reach differently: the longest (RoboSimian's static crawl: 0.3 m, its
+    # other gaits 0.2 m; each steps at most its own, tested in test_gait_choice).
     default = GaitParameters.__dataclass_fields__['step_length_m'].default
     go2 = load_robot_description('go2')
-    for description in (QUADRUPED, BIPED, go2):
+    robosimian = load_robot_description('robosimian')
+    for description in (QUADRUPED, BIPED, go2, robosimian):
         params = GaitParameters.for_robot(description)
-        assert params.step_length_m == min(default, description.reach.max_step_length_m)
+        assert params.step_length_m == min(default, description.longest_step_m)
         params.check_robot(description)
+    assert robosimian.reach.max_step_length_m == 0.2
+    assert robosimian.max_step_length_m('static_crawl') == 0.3
+    assert GaitParameters.for_robot(robosimian).step_length_m == 0.3
     assert GaitParameters.for_robot(go2).step_length_m == 0.2
     assert GaitParameters.for_robot(go2, step_length_m=0.1).step_length_m == 0.1
 

@@ -282,7 +282,7 @@ def test_the_static_crawl_holds_the_body_still_under_every_swing_and_outwalks_th
     speed = np.hypot(*np.gradient(base[:, 1:3], t, axis=0).T)
     swings = [s for s in executed(inspection.series.plans, end_ns)
               if s['lift_off_ns'] >= start_ns and s['touch_down_ns'] < end_ns - 10**6]
-    assert len(swings) >= 6
+    assert len(swings) >= 5  # a whole cycle and one more (the first ones go to its stance)
     swinging = np.zeros(len(t), bool)
     for swing in swings:
         inside = (t > swing['lift_off_ns'] * 1e-9 + 0.02) & (t < swing['touch_down_ns'] * 1e-9

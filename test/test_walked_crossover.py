@@ -33,7 +33,8 @@ def test_each_gait_is_walked_at_the_limit_and_read_from_its_bag(tiny_crossover):
         assert row.zmp_outside == 0 and row.joint_samples_over == 0
         assert row.joint_peak_ratio <= 1.0 + 1e-9 and row.com_error_m < 0.01
         # A foot moves at most one stride (0.2 m) a cycle (two steps), and so does the body.
-        assert row.speed_m_s * 2 * row.step_period_s <= robosimian.reach.max_step_length_m * 1.02
+        assert row.speed_m_s * 2 * row.step_period_s <= robosimian.max_step_length_m(
+            row.gait) * 1.02
         # The graph walks the rhythm the planner times at 2.5 rad/s (re-timed steps included).
         plan = planned.candidate(row.gait)
         assert row.step_period_s == pytest.approx(plan.step_period_s, rel=0.03)

@@ -186,7 +186,9 @@ def clamp_velocity(twist: Twist2D, params: GaitParameters, robot: RobotDescripti
                          f'({settings[i]})')
             values[i] = clamped
     result = Twist2D(*values)
-    offsets = layout.offsets(params.step_width_m)
+    gait = params.resolved_gait(robot)
+    offsets = layout.offsets(params.step_width_m, gait)
+    stride = min(params.step_length_m, robot.max_step_length_m(gait))
 
     def fits(candidate: Twist2D) -> bool:
         try:
@@ -196,7 +198,7 @@ def clamp_velocity(twist: Twist2D, params: GaitParameters, robot: RobotDescripti
         if abs(candidate.wz_rad_s) * cycle > robot.reach.max_turn_rad + 1e-12:
             return False
         moved = place(integrate_pose(np.zeros(3), candidate, cycle), offsets) - offsets
-        return bool(np.all(np.abs(moved[:, 0]) <= params.step_length_m + 1e-12)
+        return bool(np.all(np.abs(moved[:, 0]) <= stride + 1e-12)
                     and np.all(np.abs(moved[:, 1]) <= robot.reach.max_step_width_m + 1e-12))
 
     if not fits(result):
@@ -219,10 +221,11 @@ def clamp_velocity(twist: Twist2D, params: GaitParameters, robot: RobotDescripti
         cycle = params.cycle_s if cycle_of is None else cycle_of(reduced)
         rhythm = ('' if cycle_of is None else
                   ' at the fastest rhythm the joint velocity limit allows')
+        own = '' if stride == params.step_length_m else f', {gait} at most {stride:g} m'
         notes.append(f'twist ({result.vx_m_s:g}, {result.vy_m_s:g}, {result.wz_rad_s:g}) '
                      f'scaled by {low:.3f} to ({reduced.vx_m_s:.4g}, {reduced.vy_m_s:.4g}, '
                      f'{reduced.wz_rad_s:.4g}) to keep each swing within one stride{rhythm} '
-                     f'(step_length_m {params.step_length_m:g} m, reach.max_step_width_m '
+                     f'(step_length_m {params.step_length_m:g} m{own}, reach.max_step_width_m '
                      f'{robot.reach.max_step_width_m:g} m, reach.max_turn_rad '
                      f'{robot.reach.max_turn_rad:g} rad per {cycle:.4g} s cycle)')
         result = reduced
@@ -790,7 +793,9 @@ class GaitPlanner:
         params, twist = self._params, self._twist
         gait = params.resolved_gait(self.robot)
         groups = self.layout.swing_groups(gait)
-        offsets = self.layout.offsets(params.step_width_m)
+        # A gait with its own stance walks it; standing (and the closing steps of a stop) is
+        # the nominal stance, which the robot starts from.
+        offsets = self.layout.offsets(params.step_width_m, None if twist.is_zero() else gait)
         t0 = state.time_s
         params = self.timed(params, twist)
         if timed is not None:
@@ -883,8 +888,8 @@ class GaitPlanner:
                 if forward is not None and foot in state.measured \
                         and (target - positions[foot]) @ forward[foot] < 0.0:
                     continue
-                target = self._on_tread(positions[foot],
-                                        self._within_reach(positions[foot], target, yaw), yaw)
+                target = self._on_tread(positions[foot], self._within_reach(
+                    positions[foot], target, yaw, gait), yaw, gait)
                 if (np.linalg.norm(target - positions[foot]) > ALREADY_THERE
                         or abs(wrap_angle(yaw - foot_yaws[foot])) > ALREADY_THERE):
                     after[foot], after_yaws[foot] = target, yaw
@@ -1364,7 +1369,8 @@ class GaitPlanner:
         """(F, 3) ``positions`` with the ground's height under each."""
         return np.column_stack([positions, self._terrain.height_at(positions[:, 0])])
 
-    def _on_tread(self, start: np.ndarray, target: np.ndarray, yaw: float) -> np.ndarray:
+    def _on_tread(self, start: np.ndarray, target: np.ndarray, yaw: float,
+                  gait: str) -> np.ndarray:
         """``target`` moved along x out of the risers' keep-out zones (see the module docstring).
 
         The nearer end of the zone if the step stays within reach, else the other end, else
@@ -1375,18 +1381,19 @@ class GaitPlanner:
         candidates = [np.array([x, target[1]]) for x in
                       self._terrain.foothold_candidates(float(target[0]), self._keep_out_m)]
         for candidate in candidates:
-            if np.allclose(self._within_reach(start, candidate, yaw), candidate,
+            if np.allclose(self._within_reach(start, candidate, yaw, gait), candidate,
                            rtol=0.0, atol=1e-12):
                 return candidate
         return min(candidates, key=lambda c: abs(c[0] - start[0]))
 
-    def _within_reach(self, start: np.ndarray, target: np.ndarray, yaw: float) -> np.ndarray:
-        """``target``, pulled towards ``start`` if the step is longer than the robot reaches."""
+    def _within_reach(self, start: np.ndarray, target: np.ndarray, yaw: float,
+                      gait: str) -> np.ndarray:
+        """``target``, pulled towards ``start`` if the step is longer than ``gait`` reaches."""
         c, s = math.cos(yaw), math.sin(yaw)
         step = target - start
         along, across = c * step[0] + s * step[1], -s * step[0] + c * step[1]
         reach = self.robot.reach
-        scale = min(1.0, reach.max_step_length_m / max(abs(along), 1e-15),
+        scale = min(1.0, self.robot.max_step_length_m(gait) / max(abs(along), 1e-15),
                     reach.max_step_width_m / max(abs(across), 1e-15))
         return start + scale * step
 

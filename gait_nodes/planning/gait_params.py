@@ -163,8 +163,9 @@ class GaitParameters:
         """Parameters with the robot's defaults, checked for it.
 
         The robot gives the stance width, the heights and the longest stride: the class default
-        ``step_length_m``, or the robot's ``reach.max_step_length_m`` when that is shorter (a
-        Go2 reaches 0.2 m), so that the defaults always suit the robot.
+        ``step_length_m``, or the longest step of the robot's gaits when that is shorter (a
+        Go2 reaches 0.2 m), so that the defaults always suit the robot. A gait steps at most
+        its own longest step (:meth:`RobotDescription.max_step_length_m`).
         """
         params = cls(**{**cls.robot_defaults(robot), **values})
         params.check_robot(robot)
@@ -174,7 +175,7 @@ class GaitParameters:
     def robot_defaults(cls, robot: RobotDescription) -> dict[str, float]:
         """The settings whose defaults come from the robot (see :meth:`for_robot`)."""
         return {'step_length_m': min(cls.__dataclass_fields__['step_length_m'].default,
-                                     robot.reach.max_step_length_m),
+                                     robot.longest_step_m),
                 'step_width_m': nominal_stance_width_m(robot),
                 'com_height_m': robot.com_height_m,
                 'body_height_m': robot.body_height_m}
@@ -212,10 +213,11 @@ class GaitParameters:
             raise GaitParameterError(f'gait {gait!r} is not possible for {robot.name} '
                                      f'({robot.kind}); its gaits: {list(robot.gaits)}')
         reach = robot.reach
-        if self.step_length_m > reach.max_step_length_m:
+        if self.step_length_m > robot.longest_step_m:
             raise GaitParameterError(
                 f'step_length_m = {self.step_length_m:g} is beyond the reach of {robot.name}: '
-                f'must be <= {reach.max_step_length_m:g} m (reach.max_step_length_m)')
+                f'must be <= {robot.longest_step_m:g} m (reach.max_step_length_m, or a gait\'s '
+                f'own in gait_stances)')
         nominal = nominal_stance_width_m(robot)
         low = max(2.0 * robot.foot_radius_m, nominal - 2.0 * reach.max_step_width_m)
         high = nominal + 2.0 * reach.max_step_width_m

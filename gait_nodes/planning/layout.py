@@ -7,6 +7,7 @@ each side.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -24,12 +25,15 @@ class FootLayout:
         nominal_xy: (F, 2) nominal foot positions in the base frame [m].
         left: (F,) True for the feet on the left (y > 0).
         roles: Foot index by role: quadruped "fl", "fr", "rl", "rr"; biped "l", "r".
+        gait_xy: Gait -> (F, 2) its own stance, for the gaits the robot gives one
+            (``gait_stances``); the others walk the nominal one.
     """
 
     names: tuple[str, ...]
     nominal_xy: np.ndarray
     left: np.ndarray
     roles: dict[str, int]
+    gait_xy: dict[str, np.ndarray] = dataclasses.field(default_factory=dict)
 
     @classmethod
     def of(cls, robot: RobotDescription) -> FootLayout:
@@ -52,30 +56,37 @@ class FootLayout:
                               f'frame, got {xy.tolist()}')
         xy.setflags(write=False)
         left.setflags(write=False)
-        return cls(robot.foot_names, xy, left, roles)
+        gait_xy = {}
+        for gait in robot.gait_stances:
+            gait_xy[gait] = robot.nominal_stance_in_base(gait)[:, :2]
+            gait_xy[gait].setflags(write=False)
+        return cls(robot.foot_names, xy, left, roles, gait_xy)
 
     @property
     def count(self) -> int:
         """Number of feet."""
         return len(self.names)
 
-    def offsets(self, step_width_m: float) -> np.ndarray:
+    def offsets(self, step_width_m: float, gait: str | None = None) -> np.ndarray:
         """(F, 2) foot positions in the base frame for a stance ``step_width_m`` wide [m].
 
-        A new array each call (the caller may edit it), copied from the one worked out for that
-        width (the planner asks for the same width hundreds of times per velocity it times).
+        ``gait``'s own stance (:attr:`gait_xy`) if it has one, else the nominal one. A new
+        array each call (the caller may edit it), copied from the one worked out for that width
+        (the planner asks for the same width hundreds of times per velocity it times).
         """
         known = self.__dict__.setdefault('_offsets', {})
-        if step_width_m not in known:
+        stance = gait if gait in self.gait_xy else None
+        key = (step_width_m, stance)
+        if key not in known:
             if len(known) > 64:
                 known.clear()
             y = self.nominal_xy[:, 1]
             nominal_width = y[self.left].mean() - y[~self.left].mean()
             shift = 0.5 * (step_width_m - nominal_width)
-            result = self.nominal_xy.copy()
+            result = (self.nominal_xy if stance is None else self.gait_xy[stance]).copy()
             result[:, 1] += np.where(self.left, shift, -shift)
-            known[step_width_m] = result
-        return known[step_width_m].copy()
+            known[key] = result
+        return known[key].copy()
 
     def swing_groups(self, gait: str) -> tuple[tuple[tuple[int, ...], ...], ...]:
         """The gait's steps in cycle order, each a sequence of swing slots (sets of feet).

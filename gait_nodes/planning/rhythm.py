@@ -106,8 +106,8 @@ def _rotate(vectors: np.ndarray, angle: float) -> np.ndarray:
     return vectors @ np.array([[c, -s], [s, c]]).T
 
 
-def cycle_displacements(layout: FootLayout, params: GaitParameters, twist, cycle_s: float
-                        ) -> tuple[np.ndarray, float]:
+def cycle_displacements(layout: FootLayout, params: GaitParameters, twist, cycle_s: float,
+                        gait: str | None = None) -> tuple[np.ndarray, float]:
     """(F, 2) displacement of each foot over one cycle in the body frame [m], and the turn.
 
     Steady walking: a foot moves, per swing, what the body moves in one cycle (the footholds
@@ -116,7 +116,7 @@ def cycle_displacements(layout: FootLayout, params: GaitParameters, twist, cycle
     """
     from gait_nodes.planning.footsteps import integrate_pose, place
 
-    offsets = layout.offsets(params.step_width_m)
+    offsets = layout.offsets(params.step_width_m, gait)
     pose = integrate_pose(np.zeros(3), twist, cycle_s)
     moved = place(pose, offsets) - offsets
     return _rotate(moved, -0.5 * pose[2]), float(pose[2])
@@ -177,7 +177,7 @@ def walking_rhythm(gait: str, layout: FootLayout, params: GaitParameters, twist,
     # with it, until it no longer changes.
     body_move_s = 0.0
     for _ in range(MAX_ITERATIONS):
-        displacements, turn = cycle_displacements(layout, params, twist, rhythm.cycle_s)
+        displacements, turn = cycle_displacements(layout, params, twist, rhythm.cycle_s, gait)
         try:
             # A static crawl's swings each take their own time (the planner shares a step's
             # period among them): its cycle holds their mean.

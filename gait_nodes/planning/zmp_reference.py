@@ -128,7 +128,7 @@ def _steady_crawl_steps(layout: FootLayout, params, step_length_m: float):
     ``mid`` ((F, 2), before the hind and before the fore swing) are relative to the body's pose
     at the start of the step.
     """
-    offsets = layout.offsets(params.step_width_m)
+    offsets = layout.offsets(params.step_width_m, 'crawl')
     cycle, half = params.cycle_s, params.step_period_s
     swing, transfer = params.swing_s, params.transfer_s('crawl')
     speed = step_length_m / cycle

@@ -31,6 +31,12 @@ Format (lengths in metres, angles in radians, in the base frame: x forward, y le
       max_step_length_m: 0.5     # longest step along x a foot can make
       max_step_width_m: 0.2      # largest sideways displacement of a foot in one step
       max_turn_rad: 0.35         # largest yaw change of the body per gait cycle
+    gait_stances:                # optional, quadrupeds: a gait's own stance, walked instead
+      static_crawl:              # of the nominal one and reach.max_step_length_m
+        front_x_m: 0.58          # front feet ahead of the base, rear feet behind it (y and z
+        rear_x_m: 0.54           # stay the nominal ones); the robot stands at the nominal
+                                 # stance and its first steps go there
+        max_step_length_m: 0.3   # the gait's longest step (optional: reach's)
     extra: {}                    # robot-specific settings (e.g. ik families), free form
     physics:                     # the physics simulator's model (optional; see below)
       joint_stiffness_nm_per_rad: 3000.0   # every joint's position gain kp [N m/rad]
@@ -112,6 +118,21 @@ class Reach:
 
 
 @dataclass(frozen=True)
+class GaitStance:
+    """A gait's own stance (``gait_stances`` in the robot YAML).
+
+    Attributes:
+        front_x_m: The front feet's place ahead of the base [m].
+        rear_x_m: The rear feet's place behind the base [m].
+        max_step_length_m: The gait's longest step along x [m] (None: the reach's).
+    """
+
+    front_x_m: float
+    rear_x_m: float
+    max_step_length_m: float | None = None
+
+
+@dataclass(frozen=True)
 class FootShape:
     """The contact geometry of every foot in the physics model, in the foot frame.
 
@@ -170,6 +191,7 @@ class RobotDescription:
     description: str = ''
     extra: Mapping[str, object] = field(default_factory=dict)
     physics: PhysicsDescription | None = None
+    gait_stances: Mapping[str, GaitStance] = field(default_factory=dict)
 
     @property
     def foot_names(self) -> tuple[str, ...]:
@@ -214,9 +236,30 @@ class RobotDescription:
             behind, ahead = max(behind, half - centre), max(ahead, half + centre)
         return float(behind), float(ahead)
 
-    def nominal_stance_in_base(self) -> np.ndarray:
-        """(F, 3) nominal foot positions in the base frame [m]."""
-        return np.array([foot.nominal_position_in_base for foot in self.feet])
+    def nominal_stance_in_base(self, gait: str | None = None) -> np.ndarray:
+        """(F, 3) nominal foot positions in the base frame [m]: ``gait``'s own, if it has one.
+
+        A gait of ``gait_stances`` puts the front feet (x above the feet's mean) its
+        ``front_x_m`` ahead of the base and the rear ones ``rear_x_m`` behind.
+        """
+        stance = np.array([foot.nominal_position_in_base for foot in self.feet])
+        if gait in self.gait_stances:
+            own = self.gait_stances[gait]
+            front = stance[:, 0] > stance[:, 0].mean()
+            stance[:, 0] = np.where(front, own.front_x_m, -own.rear_x_m)
+        return stance
+
+    def max_step_length_m(self, gait: str | None = None) -> float:
+        """Longest step along x [m]: ``gait``'s own (``gait_stances``), else the reach's."""
+        own = self.gait_stances.get(gait)
+        if own is not None and own.max_step_length_m is not None:
+            return own.max_step_length_m
+        return self.reach.max_step_length_m
+
+    @property
+    def longest_step_m(self) -> float:
+        """Longest step along x of any of the robot's gaits [m]."""
+        return max(self.max_step_length_m(gait) for gait in (None, *self.gaits))
 
 
 def robots_dir() -> Path:
@@ -403,7 +446,7 @@ def load_robot_description(name_or_path: str | os.PathLike) -> RobotDescription:
     known = {'name', 'description', 'urdf', 'kind', 'gaits', 'base_frame', 'feet',
              'foot_radius_m', 'body_height_m', 'com_height_m', 'joint_velocity_limit_rad_s',
              'joint_velocity_limits_rad_s', 'joint_acceleration_limit_rad_s2',
-             'joint_acceleration_limits_rad_s2', 'reach', 'extra', 'physics'}
+             'joint_acceleration_limits_rad_s2', 'reach', 'gait_stances', 'extra', 'physics'}
     unknown = sorted(set(data) - known)
     if unknown:
         raise ConfigError(f'{path}: unknown keys {unknown}; allowed: {sorted(known)}')
@@ -465,6 +508,7 @@ def load_robot_description(name_or_path: str | os.PathLike) -> RobotDescription:
         extra=dict(extra),
         physics=_physics(top, extra, top.number('foot_radius_m', 0.0, 0.5))
         if 'physics' in data else None,
+        gait_stances=_gait_stances(top, kind, gaits),
     )
     for foot in description.feet:
         if foot.nominal_position_in_base[2] >= 0:
@@ -472,6 +516,30 @@ def load_robot_description(name_or_path: str | os.PathLike) -> RobotDescription:
             raise ConfigError(f'{path}: feet.{foot.name}.nominal_position_m: the foot must be '
                               f'below the base (z < 0), got z = {z}')
     return description
+
+
+def _gait_stances(top: _Reader, kind: str, gaits: tuple[str, ...]
+                  ) -> dict[str, GaitStance]:
+    """``gait_stances``, validated."""
+    if 'gait_stances' not in top.data:
+        return {}
+    stances = top.mapping('gait_stances')
+    if kind != 'quadruped':
+        top.fail('gait_stances', f'a {kind} has no front and rear feet to place')
+    result = {}
+    for gait in stances.data:
+        if gait not in gaits:
+            stances.fail(str(gait), f'is not one of the robot\'s gaits {list(gaits)}')
+        stance = stances.mapping(str(gait))
+        keys = ['front_x_m', 'max_step_length_m', 'rear_x_m']
+        unknown = sorted(set(stance.data) - set(keys))
+        if unknown:
+            stances.fail(str(gait), f'unknown keys {unknown}; allowed: {keys}')
+        longest = (stance.number('max_step_length_m', 0.0, 5.0)
+                   if 'max_step_length_m' in stance.data else None)
+        result[str(gait)] = GaitStance(stance.number('front_x_m', 0.0, 5.0),
+                                       stance.number('rear_x_m', 0.0, 5.0), longest)
+    return result
 
 
 def _foot_shape(physics: _Reader, extra: Mapping, foot_radius_m: float) -> FootShape:

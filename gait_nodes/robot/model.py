@@ -323,12 +323,15 @@ class RobotModel:
         """(3, nv) COM Jacobian (d com / d v, with Pinocchio's free-flyer velocity)."""
         return pin.jacobianCenterOfMass(self.model, data or self._data, q).copy()
 
-    def nominal_feet_in_world(self, base_position_in_world=None,
-                              base_yaw_rad: float = 0.0) -> np.ndarray:
-        """(F, 3) nominal contact points for a base at a position (default: standing at origin)."""
+    def nominal_feet_in_world(self, base_position_in_world=None, base_yaw_rad: float = 0.0,
+                              gait: str | None = None) -> np.ndarray:
+        """(F, 3) nominal contact points for a base at a position (default: standing at origin).
+
+        ``gait``'s own stance if the robot gives it one (``gait_stances``).
+        """
         if base_position_in_world is None:
             base_position_in_world = (0.0, 0.0, self.description.body_height_m)
-        stance = self.description.nominal_stance_in_base()
+        stance = self.description.nominal_stance_in_base(gait)
         return np.asarray(base_position_in_world) + stance @ yaw_rotation(base_yaw_rad).T
 
 

@@ -19,7 +19,8 @@ from gait_nodes.errors import ConfigError
 
 def write_stance(name_or_path: str | os.PathLike, directory: str | os.PathLike,
                  body_height_m: float, rear_width_m: float | None = None,
-                 front_x_m: float | None = None, rear_x_m: float | None = None) -> Path:
+                 front_x_m: float | None = None, rear_x_m: float | None = None,
+                 gait: str | None = None) -> Path:
     """A copy of a quadruped's robot YAML with its feet ``body_height_m`` below the body.
 
     Args:
@@ -31,6 +32,8 @@ def write_stance(name_or_path: str | os.PathLike, directory: str | os.PathLike,
             they are).
         front_x_m: The front feet's distance ahead of the base [m] (None: as they are).
         rear_x_m: The rear feet's distance behind the base [m] (None: as they are).
+        gait: Place the front and rear feet in ``gait``'s own stance (``gait_stances``) rather
+            than the nominal one (None); a gait's stance the YAML gives is kept otherwise.
 
     Returns:
         The copy's path (a valid robot YAML: give it wherever a robot name goes).
@@ -52,17 +55,30 @@ def write_stance(name_or_path: str | os.PathLike, directory: str | os.PathLike,
             raise ConfigError(f'{name} must be in (0, 10) m, got {value!r}')
     data = yaml.safe_load(description.path.read_text())
     data['urdf'] = str(description.urdf_path.resolve())
+    nominal = gait is None
     for foot in data['feet'].values():
         x, y, _ = foot['nominal_position_m']
         if rear_width_m is not None and x < 0.0:
             y = float(np.copysign(rear_width_m, y))
-        if front_x_m is not None and x > 0.0:
+        if nominal and front_x_m is not None and x > 0.0:
             x = float(front_x_m)
-        elif rear_x_m is not None and x < 0.0:
+        elif nominal and rear_x_m is not None and x < 0.0:
             x = -float(rear_x_m)
         foot['nominal_position_m'] = [x, y, -float(body_height_m)]
+    if not nominal and (front_x_m is not None or rear_x_m is not None):
+        shipped = description.gait_stances.get(gait)
+        if shipped is None:
+            stance = description.nominal_stance_in_base()[:, 0]
+            shipped = (float(stance.max()), float(-stance.min()))
+        else:
+            shipped = (shipped.front_x_m, shipped.rear_x_m)
+        stances = data.setdefault('gait_stances', {})
+        own = stances.setdefault(gait, {})
+        own['front_x_m'] = float(front_x_m if front_x_m is not None else shipped[0])
+        own['rear_x_m'] = float(rear_x_m if rear_x_m is not None else shipped[1])
     data['body_height_m'] = float(body_height_m)
     suffix = (f'_h{body_height_m:g}' + ('' if rear_width_m is None else f'_r{rear_width_m:g}')
+              + ('' if nominal else f'_{gait}')
               + ('' if front_x_m is None else f'_f{front_x_m:g}')
               + ('' if rear_x_m is None else f'_b{rear_x_m:g}'))
     data['description'] = (f'{description.name} at another stance ({suffix[1:]}), a copy of '

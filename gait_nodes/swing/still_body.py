@@ -38,6 +38,8 @@ from gait_nodes.swing.timing import (
     lattice_interpolated,
 )
 
+#: The gait this module times (its stance: ``gait_stances`` in the robot YAML, if given).
+GAIT = 'static_crawl'
 #: Relative extra time of the steady rhythm's swings and body moves over their probe at the
 #: nominal stance (the planner re-times a planned step that needs more).
 STILL_MARGIN = 0.05
@@ -94,15 +96,15 @@ class StillBody:
             self.robot.configuration(np.zeros(3), 0.0))
         height = float(self.robot.description.body_height_m)
         self._base = np.array([0.0, 0.0, height])
-        self._feet = self.robot.nominal_feet_in_world(self._base, 0.0)
-        self._reference_xy = np.asarray(self.robot.description.feet[
-            timing._reference].nominal_position_in_base[:2], dtype=float)
-        # Each foot swings around its own nominal place: its offset from the front-right
-        # limb's, in that limb's (mirrored) coordinates (a stance need not be a rectangle).
-        self._offsets = [tuple(np.round(np.asarray(foot.nominal_position_in_base[:2], dtype=float)
-                                        * mirror - self._reference_xy, 6).tolist())
-                         for foot, mirror in zip(self.robot.description.feet,
-                                                 timing._mirror_floats, strict=True)]
+        # The static crawl's stance (the robot's own for the gait, if it gives one).
+        stance = self.robot.description.nominal_stance_in_base(GAIT)
+        self._feet = self.robot.nominal_feet_in_world(self._base, 0.0, GAIT)
+        # Each foot swings around its own place in that stance: its offset from the place the
+        # swing shape is centred on (the front-right limb's nominal one), in that limb's
+        # (mirrored) coordinates (a stance need not be a rectangle).
+        centre = self.robot.description.feet[timing._reference].nominal_position_in_base[:2]
+        self._offsets = [tuple(np.round(stance[k, :2] * mirror - centre, 6).tolist())
+                         for k, mirror in enumerate(timing._mirror_floats)]
 
     @property
     def factor(self) -> float:
