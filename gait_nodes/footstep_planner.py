@@ -92,6 +92,7 @@ from gait_nodes.planning.online import (
     Changed,
     ChangeRefused,
     OnlinePlanner,
+    Rehearsed,
 )
 from gait_nodes.planning.supervisor import (
     DEPENDENCIES,
@@ -275,9 +276,16 @@ class FootstepPlanner(GuardedNode):
         parameters_from_mapping(params, {}, self.robot)
 
     def _log_rhythm(self, planner: GaitPlanner, params: GaitParameters) -> None:
-        """Log the gait and its rhythm (with joint-limit timing: the fastest forward walk)."""
-        if planner.swing_timing is not None:
-            # Time the fastest forward walk now, so that a first /cmd_vel walks at once.
+        """Log the gait and its rhythm (with joint-limit timing: the fastest forward walk).
+
+        Beside the clock the worker times the fastest forward walk, in its rehearsal (logged
+        when done: :meth:`_on_event`), while the node runs; the deterministic caller times it
+        here, so that a first /cmd_vel walks at once.
+        """
+        if planner.swing_timing is not None and self.context.runtime != 'inproc':
+            timing = (f'timing from the joint limit ({self._timing_reason}): the fastest forward '
+                      f'walk is being planned')
+        elif planner.swing_timing is not None:
             fastest, _ = planner.set_velocity(Twist2D(params.max_vx_m_s), 0.0)
             planner.set_velocity(Twist2D(), 0.0)
             rhythm = planner.rhythm(params, fastest)
@@ -446,6 +454,15 @@ class FootstepPlanner(GuardedNode):
         elif isinstance(event, ChangeRefused):
             self.diagnostics.report('timing', WARN, f'{self._timing_reason}; a change '
                                     f'({event.key}) could not be planned: {event.reason}')
+        elif isinstance(event, Rehearsed):
+            if event.applied is None:
+                self.get_logger().warning(f'the fastest forward walk cannot be planned: '
+                                          f'{event.reason}')
+            elif event.rhythm is not None:
+                self.get_logger().info(
+                    f'fastest forward walk {event.applied.vx_m_s:.4g} m/s, swing '
+                    f'{event.rhythm.swing_s:.3f} s, step period {event.rhythm.step_period_s:.3f} '
+                    f's (planned in {event.seconds:.2f} s, while the robot stands)')
 
     def _report_timing(self, reason: str, final: bool) -> None:
         if reason != self._timing_reason or final != self._timing_final:

@@ -381,10 +381,14 @@ def first_walk(rehearsed: bool) -> tuple[int, float]:
             deadline = time.monotonic() + 10.0
             while 'rehearsal' not in done and time.monotonic() < deadline:
                 time.sleep(0.01)
-            assert done == ['rehearsal'] and len(SlowToWalk.plans) == 1
+            # The fastest walk searched, then the walk planned as a change would be.
+            assert done == ['rehearsal'] and len(SlowToWalk.plans) == 2
             assert worker.snapshot.planner.twist.is_zero()  # nothing walks yet
-            assert not worker.events()
+            (found,) = worker.events()  # what it found, and nothing else
+            assert isinstance(found, online.Rehearsed) and found.reason == ''
+            assert 0.0 < found.applied.vx_m_s <= 0.1 and found.seconds >= 0.5  # as clamped
         submitted_ns = clock()
+        before = len(SlowToWalk.plans)
         worker.submit_velocity(Twist2D(0.1))
         deadline = time.monotonic() + 20.0
         applied = []
@@ -395,7 +399,7 @@ def first_walk(rehearsed: bool) -> tuple[int, float]:
         joined_s = (event.takes_effect_ns - submitted_ns) / NS
         # Its own planning time covered, and the margin for the plan to go out.
         assert joined_s >= 0.2 + online.LEAD_MARGIN_S + 0.5
-        return len(SlowToWalk.plans) - rehearsed, joined_s
+        return len(SlowToWalk.plans) - before, joined_s
     finally:
         worker.stop()
 

@@ -135,6 +135,25 @@ class VelocityApplied:
 
 
 @dataclasses.dataclass(frozen=True)
+class Rehearsed:
+    """What a rehearsal (:meth:`OnlinePlanner.submit_rehearsal`) found, its plan dropped.
+
+    Attributes:
+        requested: The twist rehearsed.
+        applied: The twist the planner would walk for it (None: it cannot be walked).
+        rhythm: The rhythm of that walk (None: fixed timing, or it cannot be walked).
+        reason: Why it cannot be walked ('' if it can).
+        seconds: The rehearsal's planning time [s] (wall time).
+    """
+
+    requested: Twist2D
+    applied: Twist2D | None
+    rhythm: object
+    reason: str
+    seconds: float
+
+
+@dataclasses.dataclass(frozen=True)
 class ChangeRefused:
     """A change without a command (``submit_change``) could not be planned; nothing changed."""
 
@@ -334,7 +353,8 @@ class OnlinePlanner:
         planned to join a lead that covers none of it, misses it and is planned again from
         later (twice the work, and a later start). The rehearsal, done while the robot stands
         before anything was asked, measures that time for the first change (the planner's
-        caches keep what it solved) and changes nothing else.
+        caches keep what it solved) and changes nothing else; a :class:`Rehearsed` event says
+        what it found.
         """
         self._submit(_Job('rehearsal', twist), replaces='rehearsal')
 
@@ -503,12 +523,23 @@ class OnlinePlanner:
         """See :meth:`submit_rehearsal`: the change's planning time, its plan dropped."""
         started = time.monotonic()
         try:
-            self._candidate(dataclasses.replace(job, kind='velocity'), self._live.fork(),
-                            self._now_s() + self._least_lead_s() + LEAD_MARGIN_S)
-        except Exception:  # noqa: BLE001, S110 (a walk that cannot be planned is said when asked)
+            # The fastest walk in the twist's direction is searched once for good (the
+            # planner's caches keep it): not a part of what a change takes to plan.
+            self._live.fork().set_velocity(job.payload, self._now_s())
+        except Exception:  # noqa: BLE001, S110 (the candidate below says why)
             pass
+        planning = time.monotonic()
+        fork = self._live.fork()
+        try:
+            result = self._candidate(dataclasses.replace(job, kind='velocity'), fork,
+                                     self._now_s() + self._least_lead_s() + LEAD_MARGIN_S)
+            applied = fork.twist if result is UNCHANGED else result[0]
+            rhythm, reason = fork.rhythm(), ''
+        except Exception as exc:  # noqa: BLE001 (reported; a change asking it is refused then)
+            applied, rhythm, reason = None, None, str(exc)
         if self._threaded and self._work_s == 0.0:
-            self._work_s = time.monotonic() - started
+            self._work_s = time.monotonic() - planning
+        self._emit(Rehearsed(job.payload, applied, rhythm, reason, time.monotonic() - started))
 
     def _candidate(self, job: _Job, fork: GaitPlanner, at_s: float):
         """``job`` applied to ``fork`` from ``at_s``, planned and checked past its join."""
