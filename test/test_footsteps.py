@@ -273,3 +273,42 @@ def test_a_gait_with_its_own_stance_walks_it_and_stands_at_the_nominal_one(gait,
         shift = 0.05 if front[QUADRUPED.foot_names.index(swing.foot)] else 0.1
         assert swing.end_in_world[0] - same.end_in_world[0] == pytest.approx(shift, abs=1e-9)
         assert swing.end_in_world[1] == pytest.approx(same.end_in_world[1], abs=1e-12)
+
+
+@pytest.mark.parametrize('gait', ['crawl', 'trot'])
+def test_a_robot_stands_where_its_com_is_before_and_after_a_walk(gait, tmp_path):
+    """com_xy_m: the standing ZMP is the COM of the nominal posture, not the stance's centre.
+
+    Planned at the diagonals' crossing, a robot whose COM is elsewhere would move its body as
+    soon as the graph starts, before any walk (RoboSimian's went 60 mm back and forth).
+    """
+    import yaml
+
+    from gait_nodes.robot.description import load_robot_description
+
+    data = yaml.safe_load(QUADRUPED.path.read_text())
+    data['urdf'] = str(QUADRUPED.urdf_path)
+    data['com_xy_m'] = [0.04, -0.01]
+    path = tmp_path / 'quadruped.yaml'
+    path.write_text(yaml.safe_dump(data))
+    description = load_robot_description(path)
+    params = GaitParameters.for_robot(description, **GAITS[gait][1])
+    standing = GaitPlanner(description, params, base_pose=(1.0, 2.0, 0.5))
+    com = place(np.array([1.0, 2.0, 0.5]), np.array([[0.04, -0.01]]))[0]
+    np.testing.assert_allclose(standing.zmp(np.array([0.0, 1.0, 5.0])), [com] * 3, atol=1e-12)
+    planner = plan_walk(description, params, [(0.3, Twist2D(0.08, 0.0, 0.05)),
+                                              (10.0, Twist2D())], 20.0)
+    assert planner.steps[-1].kind == 'stand'
+    plan = planner.footstep_plan()
+    # Stopped: the COM's place in the base frame, under the pose the feet stand at.
+    feet = plan.positions_in_world[-1, :, :2]
+    yaw = plan.yaws_rad[-1][0]
+    offsets = FootLayout.of(description).offsets(params.step_width_m)
+    centre = feet.mean(axis=0) - place(np.array([0.0, 0.0, yaw]), offsets).mean(axis=0)
+    assert np.linalg.norm(centre) > 0.3  # it did walk
+    expected = place(np.array([*centre, yaw]), np.array([[0.04, -0.01]]))[0]
+    np.testing.assert_allclose(planner.zmp(np.array([planner.steps[-1].end_s])), [expected],
+                               atol=1e-9)
+    # Without com_xy_m: the diagonals' crossing, as before.
+    np.testing.assert_allclose(GaitPlanner(QUADRUPED, params).zmp(np.array([0.0])), [[0, 0]],
+                               atol=1e-12)

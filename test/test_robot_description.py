@@ -50,6 +50,10 @@ def write_variant(tmp_path, change):
     (lambda d: d.update(gait_stances={'trot': {'front_x_m': 0.3, 'rear_y_m': 0.3}}),
      r"unknown keys \['rear_y_m'\]"),
     (lambda d: d.update(gait_stances={'trot': {'front_x_m': 0.3}}), 'rear_x_m: missing'),
+    (lambda d: d.update(com_xy_m=[0.0]), r'com_xy_m: must be a list of 2 finite numbers'),
+    (lambda d: d.update(com_xy_m=[0.0, float('nan')]), r'com_xy_m: must be a list of 2 finite'),
+    (lambda d: d.update(com_xy_m=[2.0, 0.0]), r'com_xy_m: the COM at standstill must lie '
+                                              r'between the nominal feet'),
 ])
 def test_bad_yaml_is_refused_with_path_and_reason(tmp_path, change, expected):
     path = write_variant(tmp_path, change)

@@ -136,6 +136,8 @@ def test_nominal_stance_puts_feet_and_com_where_the_yaml_says(name):
     # The feet are on the ground, the COM height in the YAML is the model's (to 1 cm).
     np.testing.assert_allclose(feet[:, 2], 0.0, atol=1e-6)
     assert robot.com(q)[2] == pytest.approx(robot.description.com_height_m, abs=0.01)
+    # Where it stands: the planner's standing ZMP (to 0.1 mm).
+    np.testing.assert_allclose(robot.com(q)[:2], robot.description.com_xy_m, atol=1e-4)
     assert np.all(robot.within_limits(robot.joint_positions(q)))
 
 
@@ -232,5 +234,7 @@ def test_real_robots_load_and_stand(name):
     np.testing.assert_allclose(feet, robot.nominal_feet_in_world(), atol=1e-6)
     assert np.all(robot.within_limits(robot.joint_positions(q)))
     assert robot.com(q)[2] == pytest.approx(robot.description.com_height_m, abs=0.01)
+    if robot.description.com_xy_m is not None:
+        np.testing.assert_allclose(robot.com(q)[:2], robot.description.com_xy_m, atol=1e-4)
     expected_joints = {'go2': 12, 'solo12': 12, 'talos': 32}[name]
     assert len(robot.joint_names) == expected_joints

@@ -407,7 +407,7 @@ class GaitPlanner:
         pose = np.array(base_pose, dtype=float)
         positions = place(pose, self.layout.offsets(params.step_width_m))
         yaws = np.full(self.layout.count, pose[2])
-        zmp = zmp_reference.stand_point(self.layout, positions)
+        zmp = zmp_reference.standing_zmp(self.layout, positions, pose[2])
         self._airborne: tuple[np.ndarray, float] | None = None
         self._kept_heights: tuple[np.ndarray, np.ndarray] | None = None
         self._bases: dict[tuple, tuple[np.ndarray, np.ndarray]] = {}
@@ -904,7 +904,8 @@ class GaitPlanner:
             path = dict(path, path_start_s=path['path_start_s'] + t_end - planned[1])
         if not slots:
             times = np.array([t0, t_end])
-            points = np.array([state.zmp, zmp_reference.stand_point(self.layout, positions)])
+            points = np.array([state.zmp, zmp_reference.standing_zmp(self.layout, positions,
+                                                                     rest[2])])
             kept = self._all_down_margin(points, positions)
             kind = 'stand'
         else:
@@ -1316,7 +1317,7 @@ class GaitPlanner:
                     duration_s: float | None = None) -> Step:
         t0 = state.time_s
         t_end = t0 + (self._params.step_period_s if duration_s is None else duration_s)
-        settled = zmp_reference.stand_point(self.layout, state.positions)
+        settled = zmp_reference.standing_zmp(self.layout, state.positions, rest[2])
         after = dataclasses.replace(state, time_s=t_end, zmp=settled, mode='standing',
                                     rest_pose=rest, last_anchor=rest)
         points = np.array([state.zmp, settled])

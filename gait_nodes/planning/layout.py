@@ -27,6 +27,8 @@ class FootLayout:
         roles: Foot index by role: quadruped "fl", "fr", "rl", "rr"; biped "l", "r".
         gait_xy: Gait -> (F, 2) its own stance, for the gaits the robot gives one
             (``gait_stances``); the others walk the nominal one.
+        com_xy: (2,) the COM of the robot standing at the nominal stance, in the base frame
+            (``com_xy_m``; None: not given, the stance's centre stands in for it).
     """
 
     names: tuple[str, ...]
@@ -34,6 +36,7 @@ class FootLayout:
     left: np.ndarray
     roles: dict[str, int]
     gait_xy: dict[str, np.ndarray] = dataclasses.field(default_factory=dict)
+    com_xy: np.ndarray | None = None
 
     @classmethod
     def of(cls, robot: RobotDescription) -> FootLayout:
@@ -60,7 +63,7 @@ class FootLayout:
         for gait in robot.gait_stances:
             gait_xy[gait] = robot.nominal_stance_in_base(gait)[:, :2]
             gait_xy[gait].setflags(write=False)
-        return cls(robot.foot_names, xy, left, roles, gait_xy)
+        return cls(robot.foot_names, xy, left, roles, gait_xy, robot.com_xy_m)
 
     @property
     def count(self) -> int:

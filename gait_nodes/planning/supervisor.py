@@ -68,7 +68,7 @@ from gait_nodes.planning.online import (
     Replaced,
     VelocityApplied,
 )
-from gait_nodes.planning.zmp_reference import stand_point
+from gait_nodes.planning.zmp_reference import standing_zmp
 from gait_nodes.watchdog import InputWatchdog
 
 NS_PER_S = 1_000_000_000
@@ -627,7 +627,7 @@ class PlannerSupervisor:
         planner = self.planner
         nominal = place(pose, planner.layout.offsets(planner.params.step_width_m))
         return measured_start(feet, yaws, com, nominal, np.full(len(nominal), pose[2]),
-                              stand_point(planner.layout, nominal),
+                              standing_zmp(planner.layout, nominal, pose[2]),
                               planner.terrain.height_at(feet[:, 0]))
 
     def _plan_from_robot(self, now_ns: int, token: str) -> None:

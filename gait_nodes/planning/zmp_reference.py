@@ -44,6 +44,27 @@ def stand_point(layout: FootLayout, positions: np.ndarray) -> np.ndarray:
     return crossing[0]
 
 
+def standing_zmp(layout: FootLayout, positions: np.ndarray, yaw_rad: float) -> np.ndarray:
+    """ZMP of a robot standing still on ``positions`` in its nominal posture: its COM.
+
+    The robot's COM at the nominal stance (``layout.com_xy``) moved with the stance: the
+    :func:`stand_point` of ``positions`` plus the COM's offset from the nominal stance's own,
+    turned by ``yaw_rad``. A robot standing up (the nominal stance) is planned where its COM
+    already is, so that nothing moves before a walk is asked for; it stops there too. Without
+    ``com_xy`` (or with the stance so far off the nominal one that the COM would not lie between
+    the feet) it is the stand point.
+    """
+    point = stand_point(layout, positions)
+    if layout.com_xy is None:
+        return point
+    offset = np.asarray(layout.com_xy, dtype=float) - stand_point(layout, layout.nominal_xy)
+    c, s = np.cos(yaw_rad), np.sin(yaw_rad)
+    moved = point + np.array([c * offset[0] - s * offset[1], s * offset[0] + c * offset[1]])
+    if len(positions) > 2 and support.support_margin(moved, positions, 0.0) <= 0.0:
+        return point
+    return moved
+
+
 def biped_knots(positions: np.ndarray, stance: int, times: Sequence[float],
                 z0: np.ndarray) -> np.ndarray:
     """(3, 2) knots at ``times = (t0, t1, t_end)``: to the stance ankle, then held there."""

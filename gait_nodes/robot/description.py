@@ -23,6 +23,8 @@ Format (lengths in metres, angles in radians, in the base frame: x forward, y le
     foot_radius_m: 0.055         # each foot is a disc of this radius on the ground
     body_height_m: 0.65          # base origin above the ground at standstill
     com_height_m: 0.60           # COM above the ground at standstill (preview control's zc)
+    com_xy_m: [0.0, 0.0]         # optional: the COM at standstill, in the base frame (where a
+                                 # standing robot's ZMP is; default: the stance's centre)
     joint_velocity_limit_rad_s: 1.0      # every joint unless listed below
     joint_velocity_limits_rad_s: {}      # joint -> limit, overrides
     joint_acceleration_limit_rad_s2: 20.0   # every joint unless listed below (required)
@@ -70,6 +72,7 @@ import numpy as np
 import yaml
 
 from gait_nodes.errors import ConfigError
+from gait_nodes.geometry import disc_support_margin
 from gait_nodes.paths import data_dir
 
 KINDS = ('quadruped', 'biped')
@@ -192,6 +195,7 @@ class RobotDescription:
     extra: Mapping[str, object] = field(default_factory=dict)
     physics: PhysicsDescription | None = None
     gait_stances: Mapping[str, GaitStance] = field(default_factory=dict)
+    com_xy_m: np.ndarray | None = None
 
     @property
     def foot_names(self) -> tuple[str, ...]:
@@ -444,7 +448,8 @@ def load_robot_description(name_or_path: str | os.PathLike) -> RobotDescription:
         raise ConfigError(f'{path}: a robot YAML must be a mapping at the top level')
     top = _Reader(path, data)
     known = {'name', 'description', 'urdf', 'kind', 'gaits', 'base_frame', 'feet',
-             'foot_radius_m', 'body_height_m', 'com_height_m', 'joint_velocity_limit_rad_s',
+             'foot_radius_m', 'body_height_m', 'com_height_m', 'com_xy_m',
+             'joint_velocity_limit_rad_s',
              'joint_velocity_limits_rad_s', 'joint_acceleration_limit_rad_s2',
              'joint_acceleration_limits_rad_s2', 'reach', 'gait_stances', 'extra', 'physics'}
     unknown = sorted(set(data) - known)
@@ -509,7 +514,13 @@ def load_robot_description(name_or_path: str | os.PathLike) -> RobotDescription:
         physics=_physics(top, extra, top.number('foot_radius_m', 0.0, 0.5))
         if 'physics' in data else None,
         gait_stances=_gait_stances(top, kind, gaits),
+        com_xy_m=top.vector('com_xy_m', 2) if 'com_xy_m' in data else None,
     )
+    if description.com_xy_m is not None and kind == 'quadruped':
+        feet_xy = description.nominal_stance_in_base()[:, :2]
+        if disc_support_margin(description.com_xy_m.reshape(1, 2), feet_xy, 0.0)[0] <= 0.0:
+            top.fail('com_xy_m', f'the COM at standstill must lie between the nominal feet '
+                                 f'{feet_xy.tolist()}, got {description.com_xy_m.tolist()}')
     for foot in description.feet:
         if foot.nominal_position_in_base[2] >= 0:
             z = foot.nominal_position_in_base[2]
