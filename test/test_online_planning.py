@@ -351,18 +351,33 @@ def test_a_stop_that_joins_before_a_commands_boundary_reschedules_it_and_says_so
 
 
 class SlowToWalk(GaitPlanner):
-    """A planner whose every new velocity takes 0.5 s more to plan (a slow machine)."""
+    """A planner on a slow machine: a search, then 0.5 s to plan each new velocity.
 
+    The fastest walk in a new direction takes 1 s to search, once for every fork (as the
+    planner's shared caches keep it).
+    """
+
+    searched: set = set()
     plans: list[float] = []
 
     def set_velocity(self, twist, now_s):
-        """As the planner's, 0.5 s later."""
-        time.sleep(0.5)
-        SlowToWalk.plans.append(now_s)
+        """As the planner's, after the search the first time ``twist`` is asked."""
+        if twist not in SlowToWalk.searched:
+            time.sleep(1.0)
+            SlowToWalk.searched.add(twist)
+        self.unplanned = True
         return super().set_velocity(twist, now_s)
 
+    def advance(self, until_s):
+        """As the planner's, 0.5 s later when a new velocity is planned."""
+        if getattr(self, 'unplanned', False):
+            self.unplanned = False
+            time.sleep(0.5)
+            SlowToWalk.plans.append(until_s)
+        return super().advance(until_s)
 
-def first_walk(rehearsed: bool) -> tuple[int, float]:
+
+def first_walk(rehearsed: bool, twist: Twist2D = Twist2D(0.1)) -> tuple[int, float]:
     """A threaded worker's first walk from standstill: its plans, and its join after asked [s]."""
     start = time.monotonic_ns()
 
@@ -373,7 +388,7 @@ def first_walk(rehearsed: bool) -> tuple[int, float]:
     worker = OnlinePlanner(SlowToWalk(QUADRUPED), 0, clock, cover_s=6.0, lead_s=LEAD_S,
                            standing_lead_s=0.2, threaded=True,
                            job_done=lambda kind, seconds: done.append(kind))
-    SlowToWalk.plans = []
+    SlowToWalk.plans, SlowToWalk.searched = [], set()
     worker.start()
     try:
         if rehearsed:
@@ -382,14 +397,15 @@ def first_walk(rehearsed: bool) -> tuple[int, float]:
             while 'rehearsal' not in done and time.monotonic() < deadline:
                 time.sleep(0.01)
             # The fastest walk searched, then the walk planned as a change would be.
-            assert done == ['rehearsal'] and len(SlowToWalk.plans) == 2
+            assert done == ['rehearsal'] and len(SlowToWalk.plans) == 1
+            assert SlowToWalk.searched == {Twist2D(0.1)}
             assert worker.snapshot.planner.twist.is_zero()  # nothing walks yet
             (found,) = worker.events()  # what it found, and nothing else
             assert isinstance(found, online.Rehearsed) and found.reason == ''
-            assert 0.0 < found.applied.vx_m_s <= 0.1 and found.seconds >= 0.5  # as clamped
+            assert 0.0 < found.applied.vx_m_s <= 0.1 and found.seconds >= 1.5  # as clamped
         submitted_ns = clock()
         before = len(SlowToWalk.plans)
-        worker.submit_velocity(Twist2D(0.1))
+        worker.submit_velocity(twist)
         deadline = time.monotonic() + 20.0
         applied = []
         while not applied and time.monotonic() < deadline:
@@ -411,3 +427,12 @@ def test_in_a_thread_a_rehearsed_first_walk_is_planned_once_and_joins_sooner():
     rehearsed_plans, rehearsed_joined_s = first_walk(rehearsed=True)
     assert (plans, rehearsed_plans) == (2, 1)
     assert rehearsed_joined_s < joined_s - 0.5
+
+
+def test_in_a_thread_a_new_directions_search_is_not_counted_as_planning_time():
+    # Rehearsed forwards, asked sideways: the fastest sideways walk is searched (1 s) before
+    # the join is set, so the walk's own 0.5 s fits its lead and it is planned once.
+    plans, joined_s = first_walk(rehearsed=True, twist=Twist2D(0.0, 0.05))
+    assert plans == 1
+    assert SlowToWalk.searched == {Twist2D(0.1), Twist2D(0.0, 0.05)}
+    assert joined_s >= 1.0 + 0.2 + online.LEAD_MARGIN_S  # after the search

@@ -477,6 +477,8 @@ class OnlinePlanner:
         A change that cannot be walked from the first boundary it can join (the feet where that
         step leaves them) is tried from the next ones, up to :data:`JOIN_BOUNDARIES`.
         """
+        if job.kind == 'velocity' and self._threaded:
+            self._search_fastest(job.payload)
         least_s = self._least_lead_s()
         margin_s = LEAD_MARGIN_S + self._delivery_s
         lead_s = least_s + margin_s + WORK_HEADROOM * self._work_s
@@ -522,12 +524,7 @@ class OnlinePlanner:
     def _rehearse(self, job: _Job) -> None:
         """See :meth:`submit_rehearsal`: the change's planning time, its plan dropped."""
         started = time.monotonic()
-        try:
-            # The fastest walk in the twist's direction is searched once for good (the
-            # planner's caches keep it): not a part of what a change takes to plan.
-            self._live.fork().set_velocity(job.payload, self._now_s())
-        except Exception:  # noqa: BLE001, S110 (the candidate below says why)
-            pass
+        self._search_fastest(job.payload)
         planning = time.monotonic()
         fork = self._live.fork()
         try:
@@ -540,6 +537,18 @@ class OnlinePlanner:
         if self._threaded and self._work_s == 0.0:
             self._work_s = time.monotonic() - planning
         self._emit(Rehearsed(job.payload, applied, rhythm, reason, time.monotonic() - started))
+
+    def _search_fastest(self, twist: Twist2D) -> None:
+        """Search the fastest walk in ``twist``'s direction, before a velocity is timed.
+
+        The search (seconds, the first time a direction is asked) is done once for good: the
+        planner's caches keep it, shared by every fork. Done before the join is set, it is not
+        a part of the change's planning time, and the join is not missed for it.
+        """
+        try:
+            self._live.fork().set_velocity(twist, self._now_s())
+        except Exception:  # noqa: BLE001, S110 (the change itself says why)
+            pass
 
     def _candidate(self, job: _Job, fork: GaitPlanner, at_s: float):
         """``job`` applied to ``fork`` from ``at_s``, planned and checked past its join."""
