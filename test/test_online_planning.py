@@ -377,10 +377,7 @@ class SlowToWalk(GaitPlanner):
         return super().advance(until_s)
 
 
-FORWARD = Twist2D(0.1)
-
-
-def first_walk(rehearsed: bool, twist: Twist2D = FORWARD) -> tuple[int, float]:
+def first_walk(rehearsed: bool, twist: Twist2D = Twist2D(0.1)) -> tuple[int, float]:
     """A threaded worker's first walk from standstill: its plans, and its join after asked [s]."""
     start = time.monotonic_ns()
 

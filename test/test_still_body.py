@@ -220,49 +220,6 @@ def test_a_static_step_keeps_its_full_model_zmp_inside_and_slows_its_swings_for_
     assert step.zmp_margin_kept_m <= full_margin(1.0) + 1e-9  # it reports the smaller
 
 
-@pytest.mark.parametrize('margin', [0.01, 0.02])
-def test_every_static_crawl_swing_keeps_its_com_inside_the_triangle_of_the_foot_centres(
-        still, margin):
-    """The third stance foot is loaded: the COM stays zmp_margin_m inside the foot centres.
-
-    The planner's margin counts the feet as discs, which the COM can stand in only by pressing
-    a disc's edge; in physics the third foot then carries nothing and slides. Recomputed here
-    with the full model's COM (the base where the plan holds it, the swinging foot on its
-    placed path) against the triangle of the other three foot centres, at every 10 ms of every
-    swing, the first ones from the nominal stance included (they had 2.5-3.6 mm).
-    """
-    from gait_nodes.contract import Swing
-    from gait_nodes.geometry import disc_support_margin
-
-    model = robot()
-    params = GaitParameters.for_robot(model.description, gait='static_crawl',
-                                      timing='joint_limit', step_height_m=0.06,
-                                      zmp_margin_m=margin)
-    planner = GaitPlanner(model.description, params, swing_timing=still.source)
-    planner.set_velocity(Twist2D(0.1), 0.0)
-    planner.advance(20.0)
-    steps = [step for step in planner.steps if step.slots]
-    assert len(steps) >= 4
-    least = []
-    for step in steps:
-        positions = step.positions_start
-        for slot in step.slots:
-            foot = slot.feet[0]
-            feet = planner._with_heights(positions)
-            count = int(round((slot.touch_down_s - slot.lift_off_s) / 0.01))
-            swing = Swing(model.foot_names[foot], slot.lift_off_s, slot.touch_down_s,
-                          feet[foot], planner._with_heights(slot.positions_after)[foot],
-                          0.0, 0.0)
-            _, placed, yaws = still.source.swing_feet(
-                {foot: swing}, feet, np.zeros(4), 0.0, np.linspace(0.0, 1.0, count + 1))
-            com = still.com(np.repeat(step.bases[1][None], count + 1, axis=0), 0.0, placed,
-                            yaws)
-            stance = np.delete(positions, foot, axis=0)
-            least.append(disc_support_margin(com[:, :2], stance, 0.0).min())
-            positions = slot.positions_after
-    assert min(least) >= margin - 1e-3, np.round(least, 4)
-
-
 def test_a_value_table_swing_probed_with_accelerations_keeps_them_as_the_ik_commands_them():
     """Timed on the swing's own samples, the joints keep their acceleration limit on the ticks.
 

@@ -55,11 +55,6 @@ START_HOLD_FRACTION = 0.5
 #: the COM's drift over the longer swing); at most MAX_RETIMING times.
 RETIMING_ALLOWANCE = 0.02
 MAX_RETIMING = 4
-#: A static crawl's knot is moved further into the stance triangles at most this often, until
-#: the ZMP of every swing keeps zmp_margin_m inside the triangle of the foot centres (to
-#: KNOT_TOLERANCE_M): the swinging limb moves the COM, so its ZMP is not the knot's.
-MAX_KNOT_PLACING = 3
-KNOT_TOLERANCE_M = 2e-4
 #: Time from a measured start with feet in the air to their landing swing's lift-off [s].
 LANDING_LEAD_S = 0.2
 #: Largest spacing of a static crawl's ZMP reference samples [s].
@@ -779,8 +774,7 @@ class GaitPlanner:
                 self._before = (last.touch_down_s, last.positions_after, last.yaws_after)
 
     def _next_step(self, state: _State, timed: tuple | None = None,
-                   retimed: int = 0, planned: tuple[dict, float] | None = None,
-                   excursions: tuple | None = None, placed: int = 0) -> Step:
+                   retimed: int = 0, planned: tuple[dict, float] | None = None) -> Step:
         """The step after ``state``; with ``timed``, its (swing, transfer) times [s].
 
         ``timed`` may hold a third item: each swing slot's own time [s] (a static crawl's, whose
@@ -795,14 +789,6 @@ class GaitPlanner:
         rhythm's plan (``planned``: foot -> (target, yaw, anchor), and the rhythm's step end)
         and the path waits for the time it adds: a longer swing to a foothold further ahead
         would need more time again, and the strides would grow until a swing leaves the reach.
-
-        A static crawl's knot (the COM between its swings) is placed ``zmp_margin_m`` inside
-        the stance triangles of the foot centres; the ZMP of a swing moves with the swinging
-        limb, and where it comes nearer than that to its triangle's edge the step is planned
-        again (``placed`` times, at most :data:`MAX_KNOT_PLACING`) with the knot kept that far
-        inside at each of the swing's ``excursions`` (the knot they were measured from, and per
-        slot the (M, 2) offsets of its ZMP from it), as far as the triangles' common part
-        allows (until the knot no longer moves).
         """
         params, twist = self._params, self._twist
         gait = params.resolved_gait(self.robot)
@@ -924,8 +910,7 @@ class GaitPlanner:
             kind = 'stand'
         else:
             times = np.array([t0, t1, t_end])
-            points, kept = self._zmp_knots(gait, state, slots, times, groups[group_index],
-                                           excursions)
+            points, kept = self._zmp_knots(gait, state, slots, times, groups[group_index])
             kind = 'walk'
         after_state = _State(
             time_s=t_end, positions=positions, yaws=foot_yaws, zmp=points[-1], mode=mode,
@@ -949,7 +934,7 @@ class GaitPlanner:
             if not np.allclose(shares, (transfer, *durations), rtol=1e-9, atol=1e-12):
                 return self._next_step(
                     state, (float(np.mean(shares[1:])), shares[0], tuple(shares[1:])),
-                    retimed + 1, planned or (chosen, t_end), excursions, placed)
+                    retimed + 1, planned or (chosen, t_end))
         elif (needed > swing * (1.0 + 1e-9) or needed_transfer > transfer * (1.0 + 1e-9)) \
                 and retimed < MAX_RETIMING:
             swing = max(swing, needed * (1.0 + RETIMING_ALLOWANCE))
@@ -958,22 +943,10 @@ class GaitPlanner:
             transfer = max(in_rhythm.transfer_s, transfer,
                            needed_transfer * (1.0 + RETIMING_ALLOWANCE))
             return self._next_step(state, (swing, transfer), retimed + 1,
-                                   planned or (chosen, t_end), excursions, placed)
+                                   planned or (chosen, t_end))
         hold = START_HOLD_FRACTION * extra if kind == 'walk' else 0.0
         if bases is not None:
-            knot = points[1].copy()  # the COM between the swings
-            times, points, kept, full, centre, swing_points = self._still_body_zmp(
-                state, slots, bases, t0 + hold, t1)
-            if centre < params.zmp_margin_m - KNOT_TOLERANCE_M and placed < MAX_KNOT_PLACING:
-                # The third stance foot carries what the ZMP's distance from the diagonal of the
-                # other two gives it: the knot moved in by what each swing takes the ZMP out
-                # (in RoboSimian's steady walking the triangles' common part leaves no room
-                # for more than it has; its first swings, from the nominal stance, get 10 mm).
-                if excursions is None or not np.allclose(knot, excursions[0],
-                                                         atol=KNOT_TOLERANCE_M):
-                    moved = [p - knot for p in swing_points]
-                    return self._next_step(state, timed, retimed, planned or (chosen, t_end),
-                                           (knot, moved), placed + 1)
+            times, points, kept, full = self._still_body_zmp(state, slots, bases, t0 + hold, t1)
             if full < params.zmp_margin_m and retimed < MAX_RETIMING:
                 # The swinging limbs' momentum takes the ZMP off the cart-table one by what
                 # scales as 1 / T^2: slower swings bring it back inside the margin.
@@ -982,8 +955,7 @@ class GaitPlanner:
                                  1.05), 1.5)
                 slower = tuple(d * factor for d in durations)
                 return self._next_step(state, (float(np.mean(slower)), transfer, slower, True),
-                                       retimed + 1, planned or (chosen, t_end), excursions,
-                                       placed)
+                                       retimed + 1, planned or (chosen, t_end))
             kept = min(kept, full)
             if hold > 0.0:
                 times, points = np.concatenate([[t0], times]), np.concatenate([points[:1],
@@ -1123,8 +1095,8 @@ class GaitPlanner:
 
     def _still_body_zmp(self, state: _State, slots: Sequence[SwingSlot],
                         bases: tuple[np.ndarray, np.ndarray], move_from_s: float,
-                        move_to_s: float) -> tuple:
-        """(times, points, margin, full-model margin, centre margin, swing points) of a step.
+                        move_to_s: float) -> tuple[np.ndarray, np.ndarray, float]:
+        """(times, points, margin, full-model margin) of a static-crawl step's ZMP reference.
 
         The base moves from ``bases[0]`` to ``bases[1]`` between ``move_from_s`` and
         ``move_to_s`` (:func:`gait_nodes.swing.still_body.body_move`, every foot down) and
@@ -1134,9 +1106,7 @@ class GaitPlanner:
         ZMP, sampled every :data:`STILL_SAMPLE_S` or so. The margin is the least over the
         samples of the distance inside the support polygon of the feet down then (foot discs);
         the full-model margin is that of the ZMP with the limbs' momentum
-        (:meth:`_still_body_multibody_margin`); the centre margin, the least distance of the
-        reference inside the triangle of the stance feet's centres during the swings (feet as
-        points: what keeps the third stance foot loaded).
+        (:meth:`_still_body_multibody_margin`).
         """
         from gait_nodes.swing.still_body import body_move, cart_table_zmp
 
@@ -1167,13 +1137,8 @@ class GaitPlanner:
         stances = [positions for group in stances for positions in group]
         margin = min(support.support_margin(p, positions, self.robot.foot_radius_m)
                      for p, positions in zip(points, stances, strict=True))
-        swinging = len(times) - len(coms[0])
-        centre = min(support.support_margin(p, positions, 0.0) for p, positions in
-                     zip(points[-swinging:], stances[-swinging:], strict=True))
-        ends = np.cumsum([len(c) for c in coms])
-        swing_points = [points[start:end] for start, end in zip(ends[:-1], ends[1:], strict=True)]
         return times, points, margin, self._still_body_multibody_margin(
-            state, slots, bases, move_from_s, move_to_s), centre, swing_points
+            state, slots, bases, move_from_s, move_to_s)
 
     def _still_body_multibody_margin(self, state: _State, slots: Sequence[SwingSlot],
                                      bases: tuple[np.ndarray, np.ndarray], move_from_s: float,
@@ -1364,8 +1329,7 @@ class GaitPlanner:
         return min(support.support_margin(p, positions, self.robot.foot_radius_m)
                    for p in points)
 
-    def _zmp_knots(self, gait, state, slots, times, group,
-                   excursions: tuple | None = None) -> tuple[np.ndarray, float]:
+    def _zmp_knots(self, gait, state, slots, times, group) -> tuple[np.ndarray, float]:
         if gait == 'biped':
             stance = next(f for f in range(self.layout.count) if f not in group[0])
             return (zmp_reference.biped_knots(state.positions, stance, times, state.zmp),
@@ -1375,7 +1339,8 @@ class GaitPlanner:
                                              slots[-1].positions_after, group[0], times,
                                              state.zmp),
                     self.robot.foot_radius_m)
-        region = self._crawl_region(state, slots)
+        before = [state.positions] + [slot.positions_after for slot in slots[:-1]]
+        region = [(slot.feet, positions) for slot, positions in zip(slots, before, strict=True)]
         if gait == 'static_crawl':
             # The COM over the middle of the feet between the swings, where every stance limb
             # is as near its nominal place as the stride allows, moved into the region by as
@@ -1385,18 +1350,11 @@ class GaitPlanner:
             target = slots[0].positions_after.mean(axis=0)
             knots, _ = zmp_reference.crawl_knots(self.layout, region, target,
                                                  self._params.zmp_margin_m, state.zmp,
-                                                 target_is_point=True,
-                                                 excursions=excursions and excursions[1])
+                                                 target_is_point=True)
             return knots, self.robot.foot_radius_m
         knots, kept = zmp_reference.crawl_knots(self.layout, region, slots[0].positions_after,
                                                 self._params.zmp_margin_m, state.zmp)
         return knots, kept + self.robot.foot_radius_m
-
-    @staticmethod
-    def _crawl_region(state: _State, slots: Sequence[SwingSlot]) -> list:
-        """Each swing slot's feet and the (F, 2) positions before it (its stance triangle)."""
-        before = [state.positions] + [slot.positions_after for slot in slots[:-1]]
-        return [(slot.feet, positions) for slot, positions in zip(slots, before, strict=True)]
 
     @staticmethod
     def _path_pose(start_s, pose, twist, t_s) -> np.ndarray:

@@ -102,45 +102,36 @@ def trot_knots(layout: FootLayout, start: np.ndarray, end: np.ndarray,
 
 
 def crawl_region(layout: FootLayout, slots: Sequence[tuple[Sequence[int], np.ndarray]],
-                 margin_m: float, excursions: Sequence[np.ndarray] | None = None
-                 ) -> tuple[np.ndarray, np.ndarray]:
+                 margin_m: float) -> tuple[np.ndarray, np.ndarray]:
     """Half-planes ``(A, b)`` of the points ``margin_m`` inside every stance triangle of a step.
 
     Args:
         layout: Foot roles.
         slots: For each swing slot, the swinging feet and the (F, 2) positions before it.
         margin_m: Margin [m].
-        excursions: For each slot, (M, 2) offsets from the point of the ZMP during that swing
-            (a static crawl's: the swinging limb moves the COM); the point is kept far enough
-            inside that slot's triangle that the ZMP keeps the margin at every offset.
     """
     normals, offsets = [], []
-    for k, (feet, positions) in enumerate(slots):
+    for feet, positions in slots:
         stance = [f for f in range(layout.count) if f not in feet]
         hull = support.convex_hull(positions[stance])
         n, c = support.halfplanes(hull)
         normals.append(n)
-        reach = 0.0
-        if excursions is not None and len(excursions[k]):
-            reach = np.maximum((np.asarray(excursions[k], dtype=float) @ n.T).max(axis=0), 0.0)
-        offsets.append(c - margin_m - reach)
+        offsets.append(c - margin_m)
     return np.vstack(normals), np.concatenate(offsets)
 
 
 def crawl_knots(layout: FootLayout, slots: Sequence[tuple[Sequence[int], np.ndarray]],
                 mid_positions: np.ndarray, margin_m: float, z0: np.ndarray,
-                target_is_point: bool = False,
-                excursions: Sequence[np.ndarray] | None = None) -> tuple[np.ndarray, float]:
+                target_is_point: bool = False) -> tuple[np.ndarray, float]:
     """(3, 2) knots of a crawl step and the margin they keep [m].
 
     The target is the crossing of the diagonals of ``mid_positions`` (the feet between the hind
     and the fore swing, the thesis' ZMP), or ``mid_positions`` itself if ``target_is_point``;
     the knot is its projection into the region that keeps ``margin_m`` inside every stance
-    triangle of the step (with ``excursions``, at every offset of the ZMP from it:
-    :func:`crawl_region`). If that region is empty, the point of largest margin is used and the
+    triangle of the step. If that region is empty, the point of largest margin is used and the
     smaller margin returned.
     """
-    normals, offsets = crawl_region(layout, slots, margin_m, excursions)
+    normals, offsets = crawl_region(layout, slots, margin_m)
     target = mid_positions if target_is_point else stand_point(layout, mid_positions)
     point = support.project_onto_halfplanes(target, normals, offsets)
     kept = margin_m
