@@ -377,7 +377,10 @@ class SlowToWalk(GaitPlanner):
         return super().advance(until_s)
 
 
-def first_walk(rehearsed: bool, twist: Twist2D = Twist2D(0.1)) -> tuple[int, float]:
+FORWARD = Twist2D(0.1)
+
+
+def first_walk(rehearsed: bool, twist: Twist2D = FORWARD) -> tuple[int, float]:
     """A threaded worker's first walk from standstill: its plans, and its join after asked [s]."""
     start = time.monotonic_ns()
 
