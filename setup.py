@@ -143,6 +143,8 @@ setup(
         'mcap>=1.1',
         'mcap-ros2-support>=0.5',
         'pin>=3.0',
+        # The swings' fastest time law (TOPP-RA): gait_nodes.swing.time_law.
+        'toppra>=0.6',
         'matplotlib',
         'tqdm',
     ],

@@ -8,10 +8,12 @@ refuses a corrupt file or one made for another robot (URDF hash), joint velocity
 or step height, naming the file and what differs. For each swing of the latched footstep plan it
 publishes, ``lead_time_s`` before lift-off, the greedy minimum-time path from the table: the
 table's goal mapped onto the planned landing place, the path rotated with the body and mirrored
-for the limb, lift-off and landing exactly where planned, each segment timed with the fastest
-joint at ``joint_velocity_limit_rad_s``, filtered into a smooth swing
+for the limb, lift-off and landing exactly where planned, filtered into a smooth path
 (:func:`gait_nodes.swing.timing.smooth_trajectory`: the polyline's corners would make the foot
-change velocity in one tick) and the whole stretched to the swing's planned duration.
+change velocity in one tick), moved along in the fastest time law the limb's joint velocity
+(``joint_velocity_limit_rad_s``) and acceleration limits allow
+(:meth:`gait_nodes.swing.policy.SwingPolicy.fastest_swing`), and the whole stretched to the
+swing's planned duration.
 When the plan gives less time than the swing needs the timing is compressed to fit and the
 shortfall is reported on /diagnostics (the footstep planner with ``timing: joint_limit`` plans
 the time the swing needs, :mod:`gait_nodes.swing.timing`). With ``swing: polynomial`` it
@@ -57,7 +59,7 @@ from gait_nodes.runtime import Parameter, SetParametersResult, qos_profile_latch
 from gait_nodes.swing.cache import load_or_build
 from gait_nodes.swing.policy import SwingPolicy, limb_step, place_swing
 from gait_nodes.swing.polynomial import polynomial_swing
-from gait_nodes.swing.timing import smooth_trajectory
+from gait_nodes.swing.timing import evenly_resampled
 
 NODE_NAME = 'swing_leg_policy'
 FOOTSTEPS_TOPIC = '/gait/footsteps'
@@ -149,7 +151,6 @@ class SwingLegPolicy(GuardedNode):
         self._plan = None
         self._published: dict[tuple[str, int], tuple] = {}
         self._swing_times_of: tuple = (None, [])  # see _swing_times
-        self._lookups: dict[tuple, tuple] = {}
         self.published_count = 0
         self._publisher = self.create_publisher(
             get_message('trajectory_msgs/msg/MultiDOFJointTrajectory'),
@@ -223,7 +224,6 @@ class SwingLegPolicy(GuardedNode):
             self._followed = []
             if policy is not None:
                 self._tables[float(values['step_height_m'])] = policy
-        self._lookups.clear()
         self.diagnostics.report('settings', OK, self._describe())
         return SetParametersResult(successful=True)
 
@@ -383,13 +383,10 @@ class SwingLegPolicy(GuardedNode):
         mirror = ik.mirrors[ik.foot_index[swing.foot]]
         yaw = body_yaw(plan, swing.lift_off_s)
         step_fr, turn = limb_step(swing, mirror, yaw)
-        key = (table.step_height_m, round(step_fr[0], 6), round(step_fr[1], 6), round(turn, 6))
-        if key not in self._lookups:
-            self._lookups[key] = policy.path_for_step(step_fr, turn)
-        path, clamped = self._lookups[key]
-        polyline, _ = place_swing(path, swing, lift_ns, mirror, yaw, table.ground_z_m)
-        trajectory, needed = smooth_trajectory(polyline, swing.duration_s,
-                                               self._values['sample_period_s'])
+        path, clamped = policy.fastest_swing(step_fr, turn, swing.foot)
+        polyline, needed = place_swing(path, swing, lift_ns, mirror, yaw, table.ground_z_m,
+                                       swing.duration_s)
+        trajectory = evenly_resampled(polyline, self._values['sample_period_s'])
         report = {'foot': swing.foot, 'lift_off_s': swing.lift_off_s,
                   'planned_s': swing.duration_s, 'needed_s': needed,
                   'joint_velocity_limit_rad_s': table.joint_velocity_limit_rad_s,

@@ -221,24 +221,27 @@ def test_a_static_step_keeps_its_full_model_zmp_inside_and_slows_its_swings_for_
 
 
 def test_a_value_table_swing_probed_with_accelerations_keeps_them_as_the_ik_commands_them():
-    """Timed on the swing's own samples, the joints keep their acceleration limit on the ticks.
+    """Timed on the swing's own samples, the joints keep their limits on the ticks.
 
-    RoboSimian with a 10 rad/s^2 limit (its swings are then held back by the acceleration
-    limit, not the velocity limit): played at its probed time on the 5 ms waypoints the
-    swing-leg policy publishes (the whole-body IK's ticks), one joint reaches the acceleration
-    limit and none exceeds it (the probe's 2 % tracking margin aside). Probed on the swing
-    shape's ~60 samples, the time was 5 % short: the joints then asked 1.1 times the limit.
+    RoboSimian with a 10 rad/s^2 limit (its swings then spend longer speeding up and slowing
+    down): played at its probed time on the 5 ms waypoints the swing-leg policy publishes (the
+    whole-body IK's ticks), one joint reaches its velocity or acceleration limit and none
+    exceeds either (the probe's 2 % tracking margin aside). Probed on the swing shape's ~60
+    samples, the time was 5 % short: the joints then asked 1.1 times the acceleration limit.
+    The swing's time law takes the acceleration limit in (:mod:`gait_nodes.swing.time_law`):
+    it is 0.2 s longer than at 20 rad/s^2.
     """
     from gait_nodes.robot.model import RobotModel
     from gait_nodes.swing.cache import load_or_build
     from gait_nodes.swing.policy import SwingPolicy, limb_step, place_swing
-    from gait_nodes.swing.timing import TableSwingTiming, smooth_trajectory
+    from gait_nodes.swing.timing import TableSwingTiming, evenly_resampled
 
     model = RobotModel(dataclasses.replace(robot().description,
                                            joint_acceleration_limit_rad_s2=10.0))
     table, _ = load_or_build(model, 2, 0.06, 1.0)
     timing = TableSwingTiming(SwingPolicy(table, model), model)
     still = StillBody(timing)
+    fast = StillBody(TableSwingTiming(SwingPolicy(table, robot()), robot()))
     base = np.array([0.0, 0.0, model.description.body_height_m])
     feet = model.nominal_feet_in_world(base, 0.0)
     yaws = np.zeros(len(feet))
@@ -248,14 +251,14 @@ def test_a_value_table_swing_probed_with_accelerations_keeps_them_as_the_ik_comm
         before = feet.copy()
         before[foot] = start
         swing = Swing(name, 0.0, 1.0, start, end, 0.0, 0.0)
-        velocity_s = still.step_s({foot: swing}, before, yaws, 0.0, base)
         duration_s = still.step_s({foot: swing}, before, yaws, 0.0, base, with_acceleration=True)
-        assert duration_s > 1.1 * velocity_s  # the acceleration limit is the one that holds
+        at_20_s = fast.step_s({foot: swing}, before, yaws, 0.0, base, with_acceleration=True)
+        assert duration_s > at_20_s + 0.1
         # The swing as swing_leg_policy publishes it for that duration, through the limb IK.
         mirror = timing.timing.ik.mirrors[timing.timing.ik.foot_index[name]]
-        path, _ = timing.policy.path_for_step(*limb_step(swing, mirror, 0.0))
-        polyline, _ = place_swing(path, swing, 0, mirror, 0.0, table.ground_z_m)
-        published, _ = smooth_trajectory(polyline, duration_s, 0.005)
+        path, _ = timing.policy.fastest_swing(*limb_step(swing, mirror, 0.0), name)
+        polyline, _ = place_swing(path, swing, 0, mirror, 0.0, table.ground_z_m, duration_s)
+        published = evenly_resampled(polyline, 0.005)
         count = len(published.times_s)
         placed = np.repeat(before[None], count, axis=0)
         placed[:, foot] = published.positions_in_world
@@ -264,8 +267,11 @@ def test_a_value_table_swing_probed_with_accelerations_keeps_them_as_the_ik_comm
         joints = still.joints(np.repeat(base[None], count, axis=0), 0.0, placed, placed_yaws,
                               limbs=[foot])
         dt = np.diff(published.times_s)
-        acceleration = np.diff(np.diff(joints, axis=0) / dt[:, None], axis=0) / dt[1:, None]
+        velocity = np.diff(joints, axis=0) / dt[:, None]
+        acceleration = np.diff(velocity, axis=0) / dt[1:, None]
+        velocity_ratio = (np.abs(velocity) / np.asarray(model.velocity_limits_rad_s)).max()
         ratio = (np.abs(acceleration) / np.asarray(model.acceleration_limits_rad_s2)).max()
-        # At the limit, but for the tracking margin and the two grids' sampling (the probe's
+        assert velocity_ratio <= 1.0 and ratio <= 1.0
+        # At a limit, but for the tracking margin and the two grids' sampling (the probe's
         # 5 ms are of the swing's own time, the published ones of the stretched swing's).
-        assert 1.0 / (1.0 + TRACKING_MARGIN) ** 2 - 0.03 < ratio <= 1.0
+        assert max(velocity_ratio, ratio) > 1.0 / (1.0 + TRACKING_MARGIN) ** 2 - 0.03

@@ -29,6 +29,31 @@ from gait_nodes.swing.table import ValueTable
 GOAL_TOLERANCE = 1e-9
 #: Most greedy steps before a descent is declared stuck.
 MAX_STEPS = 500
+#: Where around its place in the stance a swing is timed, outwards along the limb's x [m]: the
+#: time law is the fastest that keeps the joints within their limits with the swing moved by
+#: each of these (:meth:`SwingPolicy.fastest_swing`). The swing-leg policy does not know where
+#: the body will stand under a swing; the static crawl places it for the COM, which leaves
+#: RoboSimian's swings 2 cm inwards to 6.5 cm outwards of the stance at strides of 0.2-0.28 m.
+#: A law timed at the stance place alone runs some joint at its limit nearly everywhere, so
+#: the planner's probe where the swing happens stretched it by 7 % (rear feet, 0.22 m) to 57 %
+#: (fore feet, 0.28 m); over a spread of places, by 1 % for 4-5 % more time. Three places
+#: keep the joints within their limits at the places between them too (test_time_law).
+LAW_PLACEMENTS_M = (-0.02, 0.02, 0.06)
+#: Spacing of the smoothed path's samples in the table's timing, which the fastest time law
+#: re-times (:meth:`SwingPolicy.fastest_swing`) [s]: ~250 on a swing, 5 ms apart as the
+#: swing-leg policy sends them.
+LAW_SAMPLE_PERIOD_S = 0.005
+#: Every how many of those samples the limb's joints are solved for the time law (a cubic
+#: spline runs through them): 30 ms apart, where the smoothing changes the path over 120 ms.
+LAW_JOINT_STRIDE = 6
+#: Points of the law per sample of the path, where it is inverted (time -> place): near rest a
+#: sample's time step is long, and a place interpolated linearly in time there would jerk.
+LAW_DENSITY = 4
+#: Share of the joints' acceleration limits the law plans with: it meets them at its grid
+#: points (:data:`gait_nodes.swing.time_law.GRID_POINTS`), and the IK's joints between them
+#: (through a spline of samples 30 ms apart) read up to 5 % higher on RoboSimian's swings
+#: sampled 5 ms apart with 0.9.
+LAW_ACCELERATION_SHARE = 0.85
 
 
 def _wrap(angle):
@@ -93,10 +118,17 @@ class SwingPolicy:
     def __init__(self, table: ValueTable, robot, exact_lookahead: bool = False):
         table.check_for(robot)
         self.table = table
+        self.robot = robot
         self.timing = LimbTiming(robot, table.family, table.joint_velocity_limit_rad_s,
                                  table.ground_z_m)
         self.displacements = table.actions.displacements()
         self.exact_lookahead = exact_lookahead
+        self._fastest: dict[tuple, tuple[SwingPath, float]] = {}  # see fastest_swing
+        reference = next(f for f in robot.description.feet
+                         if (np.asarray(self.timing.ik.mirrors[self.timing.ik.foot_index[f.name]])
+                             == 1).all())
+        walking = robot.indices(reference.joints)[:6]
+        self._acceleration_limits = np.asarray(robot.acceleration_limits_rad_s2)[walking]
         q_nodes, _ = self.timing.joints(table.grid.points())
         #: Per node: the value, then the 6 walking joint angles.
         self._node_data = np.concatenate([table.values_s[..., None],
@@ -198,6 +230,89 @@ class SwingPolicy:
     def path_from(self, start: np.ndarray) -> SwingPath:
         """The timed greedy swing from a start state."""
         return self.timed_path(self.descend(start))
+
+    def fastest_swing(self, step_in_base: np.ndarray, step_yaw_rad: float,
+                      foot: str) -> tuple[SwingPath, float]:
+        """The swing of :meth:`path_for_step`, smoothed and moved along in the fastest time law.
+
+        The path is smoothed (:func:`gait_nodes.swing.timing.smooth_trajectory`) and timed by
+        :func:`gait_nodes.swing.time_law.fastest_times` for ``foot``'s limb swinging around its
+        place in the static crawl's stance (:meth:`law_centre`), moved by each of
+        :data:`LAW_PLACEMENTS_M`: the limb's speed depends on where it swings, and the
+        swing-leg policy, which does not know where the body will be, and the footstep planner,
+        which probes the swing where it happens and stretches it as far as that needs, time it
+        alike. Cached.
+
+        Returns:
+            ``(path, clamped_m)``: the smoothed path (states ``LAW_SAMPLE_PERIOD_S`` apart in the
+            table's timing, in front-right coordinates) with its fastest times, and
+            :meth:`path_for_step`'s clamp.
+        """
+        from scipy.interpolate import CubicSpline
+
+        from gait_nodes.swing.time_law import fastest_times
+        from gait_nodes.swing.timing import smooth_trajectory
+
+        centre = self.law_centre(foot)
+        key = (round(float(step_in_base[0]), 6), round(float(step_in_base[1]), 6),
+               round(float(step_yaw_rad), 6), *centre)
+        known = self._fastest.get(key)
+        if known is not None:
+            return known
+        path, clamped = self.path_for_step(step_in_base, step_yaw_rad)
+        polyline = SwingTrajectory('swing', 0, path.times_s, path.states[:, :3],
+                                   path.states[:, 3])
+        smoothed, _ = smooth_trajectory(polyline, None, LAW_SAMPLE_PERIOD_S)
+        states = np.column_stack([smoothed.positions_in_world, np.unwrap(smoothed.yaws_rad)])
+        solved = np.unique(np.r_[np.arange(0, len(states), LAW_JOINT_STRIDE), len(states) - 1])
+        offsets = np.asarray(centre) - 0.5 * (states[0, :2] + states[-1, :2])
+        placed = np.repeat(states[solved][None], len(LAW_PLACEMENTS_M), axis=0)
+        placed[..., :2] += offsets
+        placed[..., 0] += np.asarray(LAW_PLACEMENTS_M)[:, None]
+        q, feasible = self.timing.joints(placed.reshape(-1, 4))
+        if not feasible.all():
+            where = np.round(placed.reshape(-1, 4)[int(np.argmin(feasible))], 3).tolist()
+            raise SwingPolicyError(f'a swing by {np.round(step_in_base, 3).tolist()} m around '
+                                   f'{foot}\'s place in the stance leaves the reach of the limb '
+                                   f'at {where} (IK family {self.table.family})')
+        # Each placement's joints side by side: the law keeps every one within the limits.
+        q = q.reshape(len(LAW_PLACEMENTS_M), len(solved), -1).transpose(1, 0, 2)
+        u = smoothed.times_s
+        dense = np.linspace(u[0], u[-1], LAW_DENSITY * len(u))
+        dense_times = fastest_times(u[solved], q.reshape(len(solved), -1),
+                                    self.table.joint_velocity_limit_rad_s,
+                                    np.tile(LAW_ACCELERATION_SHARE * self._acceleration_limits,
+                                            len(LAW_PLACEMENTS_M)),
+                                    at=dense)
+        # The path sampled evenly in its new time (what is played is interpolated in time).
+        count = max(int(math.ceil(dense_times[-1] / LAW_SAMPLE_PERIOD_S)), 1)
+        times = np.linspace(0.0, dense_times[-1], count + 1)
+        along = np.interp(times, dense_times, dense)
+        # A cubic spline through the path's samples: linear pieces would bend at every sample,
+        # which the joints' accelerations on the 5 ms ticks read as kinks.
+        timed_states = CubicSpline(u, states)(along)
+        timed_states[:, 2] = np.maximum(timed_states[:, 2], self.table.ground_z_m)
+        timed_states[0], timed_states[-1] = states[0], states[-1]
+        timed = SwingPath(timed_states, times, path.lift_s, path.lower_s, path.predicted_s, 0,
+                          len(times) - 1)
+        if len(self._fastest) > 4096:
+            self._fastest.clear()
+        self._fastest[key] = (timed, clamped)
+        return timed, clamped
+
+    def law_centre(self, foot: str) -> tuple[float, float]:
+        """Where ``foot``'s swings are centred when timed, in front-right base coordinates [m].
+
+        The foot's place in the static crawl's stance (the value table's gait, thesis eq. (2);
+        the robot YAML's ``gait_stances``, else its nominal stance), mirrored.
+        """
+        from gait_nodes.swing.still_body import GAIT
+
+        description = self.robot.description
+        index = [f.name for f in description.feet].index(foot)
+        place = description.nominal_stance_in_base(GAIT)[index, :2]
+        mirror = self.timing.ik.mirrors[self.timing.ik.foot_index[foot]]
+        return (round(float(place[0] * mirror[0]), 9), round(float(place[1] * mirror[1]), 9))
 
     def path_for_step(self, step_in_base: np.ndarray, step_yaw_rad: float = 0.0,
                       free_yaw: bool = False) -> tuple[SwingPath, float]:

@@ -267,18 +267,19 @@ class StillBody:
         mirror = self.source._mirror_floats[foot]
         point = (float(step_in_base[0]) * mirror[0], float(step_in_base[1]) * mirror[1],
                  mirror[0] * mirror[1] * float(turn_rad))
-        offset = self._offsets[foot]
         return (1.0 + STILL_MARGIN) * self.factor * lattice_interpolated(
-            point, lambda node: self._node_swing_s(node, offset))
+            point, lambda node: self._node_swing_s(node, foot))
 
-    def _node_swing_s(self, node: tuple[int, int, int], offset: tuple[float, float]) -> float:
-        """Least swing time [s] at lattice node ``node``, the swing centred ``offset`` away."""
-        key = (*node, *offset)
+    def _node_swing_s(self, node: tuple[int, int, int], foot: int) -> float:
+        """Least swing time [s] of foot ``foot`` at lattice node ``node``, at its stance place."""
+        offset = self._offsets[foot]
+        key = (*node, *offset)  # mirrored feet (the same offset) share their times
         if key not in self._swing_s:
             if len(self._swing_s) > 4096:
                 self._swing_s.clear()
             step = np.array(node, dtype=float) * LATTICE
-            u, states = self.source.shape(step[:2], float(step[2]), fine=True)
+            u, states = self.source.shape(step[:2], float(step[2]), fine=True,
+                                          foot=self.robot.description.feet[foot].name)
             states[:, :2] += offset
             q, feasible = self.source.timing.joints(states)
             if not feasible.all():

@@ -141,6 +141,21 @@ def smooth_trajectory(trajectory: SwingTrajectory, duration_s: float | None = No
         needed
 
 
+def evenly_resampled(trajectory: SwingTrajectory, sample_period_s: float) -> SwingTrajectory:
+    """``trajectory`` sampled evenly in time, at most ``sample_period_s`` apart (ends kept)."""
+    times = np.asarray(trajectory.times_s, dtype=float)
+    count = max(int(math.ceil(times[-1] / sample_period_s - 1e-9)), 1)
+    out_t = np.linspace(0.0, times[-1], count + 1)
+    positions = np.column_stack([np.interp(out_t, times, trajectory.positions_in_world[:, i])
+                                 for i in range(3)])
+    yaws = np.interp(out_t, times, np.unwrap(trajectory.yaws_rad))
+    positions[0], positions[-1] = trajectory.positions_in_world[0], \
+        trajectory.positions_in_world[-1]
+    yaws[0], yaws[-1] = trajectory.yaws_rad[0], trajectory.yaws_rad[-1]
+    return SwingTrajectory(trajectory.foot, trajectory.start_ns, out_t, positions,
+                           np.angle(np.exp(1j * yaws)))
+
+
 class SwingTiming:
     """Least swing time of each foot for a displacement, at the joint velocity limit.
 
@@ -203,14 +218,15 @@ class SwingTiming:
         self._cache: dict[tuple[int, int, int], float] = {}
         self._transfer_cache: dict[tuple[int, int], float] = {}  # see steady_transfer_s
 
-    def shape(self, step_in_base: np.ndarray, turn_rad: float,
-              fine: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    def shape(self, step_in_base: np.ndarray, turn_rad: float, fine: bool = False,
+              foot: str | None = None) -> tuple[np.ndarray, np.ndarray]:
         """The swing by ``step_in_base`` as ``(u, states)``.
 
         ``u`` (N,) runs from 0 to 1 in the swing's own time law, evenly; ``states`` (N, 4) are
         the front-right foot's (x, y, z, yaw) in its base frame at the nominal stance (ground
         at ``-body_height_m``). ``fine``: sampled finely enough for the joints' accelerations
-        (:data:`ACCELERATION_PROBE_PERIOD_S`), not only their speeds.
+        (:data:`ACCELERATION_PROBE_PERIOD_S`), not only their speeds. ``foot``: the limb whose
+        swing it is (by name; the front-right one if None), where its time law depends on it.
         """
         raise NotImplementedError
 
@@ -434,36 +450,39 @@ class TableSwingTiming(SwingTiming):
                          'the swing value table')
         self.policy = policy
 
-    def shape(self, step_in_base, turn_rad, fine=False):
-        """The table's greedy path for the step, smoothed (see :meth:`SwingTiming.shape`).
+    def shape(self, step_in_base, turn_rad, fine=False, foot=None):
+        """The table's greedy path for the step, smoothed, in the fastest time law.
 
-        The path ends on the table's goal; it is moved (as the swing-leg policy moves it onto a
+        See :meth:`SwingTiming.shape` and :meth:`gait_nodes.swing.policy.SwingPolicy.
+        fastest_swing` (timed for ``foot``'s limb, by name; default the front-right one). The
+        path ends on the table's goal; it is moved (as the swing-leg policy moves it onto a
         planned swing) to run from half a step behind to half a step ahead of the nominal foot
         position, where a steady walk makes it: the limbs' speed depends on where they are.
         """
-        path, _ = self.policy.path_for_step(step_in_base, turn_rad)
-        polyline = SwingTrajectory('probe', 0, path.times_s, path.states[:, :3],
-                                   path.states[:, 3])
-        smoothed, needed = smooth_trajectory(polyline, None, needed_probe_period(path, fine))
-        states = np.column_stack([smoothed.positions_in_world, smoothed.yaws_rad])
+        foot = foot or self.robot.description.feet[self._reference].name
+        path, _ = self.policy.fastest_swing(step_in_base, turn_rad, foot)
+        resampled = evenly_resampled(
+            SwingTrajectory('probe', 0, path.times_s, path.states[:, :3], path.states[:, 3]),
+            needed_probe_period(path, fine))
+        states = np.column_stack([resampled.positions_in_world,
+                                  np.unwrap(resampled.yaws_rad)])
         nominal = self.robot.description.feet[self._reference].nominal_position_in_base
         states[:, :2] += np.asarray(nominal[:2]) - 0.5 * (states[0, :2] + states[-1, :2])
-        return smoothed.times_s / needed, states
-
+        return resampled.times_s / resampled.times_s[-1], states
 
     def world_shape(self, swing, body_yaw_rad, fine=False):
-        """The smoothed table swing placed on ``swing`` (see :meth:`SwingTiming.world_shape`)."""
+        """The table swing placed on ``swing`` (see :meth:`SwingTiming.world_shape`)."""
         from gait_nodes.swing.policy import limb_step, place_swing
 
         ik = self.timing.ik
         mirror = ik.mirrors[ik.foot_index[swing.foot]]
         step, turn = limb_step(swing, mirror, body_yaw_rad)
-        path, _ = self.policy.path_for_step(step, turn)
+        path, _ = self.policy.fastest_swing(step, turn, swing.foot)
         polyline, _ = place_swing(path, swing, 0, mirror, body_yaw_rad,
                                   self.policy.table.ground_z_m)
-        smoothed, needed = smooth_trajectory(polyline, None, needed_probe_period(path, fine))
-        states = np.column_stack([smoothed.positions_in_world, np.unwrap(smoothed.yaws_rad)])
-        return smoothed.times_s / needed, states
+        placed = evenly_resampled(polyline, needed_probe_period(path, fine))
+        states = np.column_stack([placed.positions_in_world, np.unwrap(placed.yaws_rad)])
+        return placed.times_s / placed.times_s[-1], states
 
 
 def joint_path_time_s(robot, u: np.ndarray, joints: np.ndarray,
@@ -553,10 +572,11 @@ class PolynomialSwingTiming(SwingTiming):
         self.nominal = np.asarray(feet[self._reference].nominal_position_in_base, dtype=float)
         self.step_height_m = float(step_height_m)
 
-    def shape(self, step_in_base, turn_rad, fine=False):
+    def shape(self, step_in_base, turn_rad, fine=False, foot=None):
         """The sixth-order swing around the nominal foot (see :meth:`SwingTiming.shape`).
 
-        A polynomial: its samples are exact, fine or not.
+        A polynomial: its samples are exact, fine or not; its time law is the same for every
+        foot.
         """
         from gait_nodes.swing.polynomial import evaluate, sixth_order_coefficients
 
