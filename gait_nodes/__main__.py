@@ -153,6 +153,48 @@ def _prepare_value_table(values: dict, names: list[str]) -> None:
                   log=lambda message: print(f'{PROG}: {message}', file=sys.stderr, flush=True))
 
 
+def _prepare_first_walk(values: dict, names: list[str], commands) -> None:
+    """Search the fastest walk of the scenario's first velocity before the graph starts.
+
+    With joint-limit timing the footstep planner searches, for a direction it has not walked
+    yet, the fastest rhythm the joints allow: for the static crawl, a value-table swing timed at
+    about a hundred lattice nodes (3-4 s on RoboSimian). Those times are kept on disk
+    (:mod:`gait_nodes.swing.still_body`); searched here once, the planner finds them and plans
+    the first walk in a fraction of a second, on a fresh machine as on a warm one. Only for the
+    graph's own settings (a ``-p`` override searches in the planner, on first use).
+    """
+    velocity = next((command.velocity for command in commands
+                     if command.velocity is not None and any(command.velocity)), None)
+    if velocity is None or 'footstep_planner' not in names:
+        return
+    from gait_nodes.footstep_planner import GAIT_FIELDS, shipped_defaults
+    from gait_nodes.planning.footsteps import GaitPlanner, Twist2D
+    from gait_nodes.planning.gait_params import NUMERIC_RANGES, GaitParameters
+    from gait_nodes.planning.timing_models import TimingModels
+    from gait_nodes.robot.description import load_robot_description
+    from gait_nodes.swing.cache import cache_dir
+    from gait_nodes.swing.still_body import GAIT, still_body_of
+
+    robot = load_robot_description(values['robot'])
+    defaults = {**GaitParameters.robot_defaults(robot), **shipped_defaults(), **values}
+    fields = {name: float(defaults[name]) if name in NUMERIC_RANGES else defaults[name]
+              for name in GAIT_FIELDS if name in defaults}
+    try:
+        params = GaitParameters(**fields)
+        if params.gait != GAIT or params.timing != 'joint_limit':
+            return
+        timing, _, final = TimingModels(robot).timing(params)
+        if not final or timing.timing is None:
+            return
+        if not still_body_of(timing).stored:
+            print(f'{PROG}: searching the fastest {GAIT} of {robot.name} at its joint limit '
+                  f'(once: the swing times are kept under {cache_dir()})', file=sys.stderr,
+                  flush=True)
+        GaitPlanner(robot, params, swing_timing=timing).set_velocity(Twist2D(*velocity), 0.0)
+    except GaitNodesError:
+        return  # the planner says what is wrong with these settings, in the graph
+
+
 def _selected_nodes(options) -> list[str]:
     available = graph.graph_nodes(options.simulator)
     if options.no_state_publisher:
@@ -583,6 +625,8 @@ def main(args: list[str] | None = None) -> int:
             _check_bag_directory(options.record)
         graph_params = _graph_params(options)
         _prepare_value_table(graph_params['/**']['ros__parameters'], names)
+        _prepare_first_walk(graph_params['/**']['ros__parameters'], names,
+                            get_scenario(options.scenario).commands)
         with tempfile.TemporaryDirectory(prefix='gait_nodes_run_') as tmp:
             params_file = Path(tmp) / 'graph_params.yaml'
             params_file.write_text(yaml.safe_dump(graph_params))

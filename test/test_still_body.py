@@ -275,3 +275,43 @@ def test_a_value_table_swing_probed_with_accelerations_keeps_them_as_the_ik_comm
         # At a limit, but for the tracking margin and the two grids' sampling (the probe's
         # 5 ms are of the swing's own time, the published ones of the stretched swing's).
         assert max(velocity_ratio, ratio) > 1.0 / (1.0 + TRACKING_MARGIN) ** 2 - 0.03
+
+
+def test_the_node_times_are_kept_on_disk_and_found_by_the_next_planner(tmp_path, monkeypatch):
+    """A second model of the same robot and swings takes the node times stored by the first.
+
+    Found, they are the same to the bit and none is computed again; a model with other joint
+    limits does not take them (it has its own file); an unreadable file is computed anew and
+    written again.
+    """
+    from gait_nodes.robot.model import RobotModel
+    from gait_nodes.swing import timing as timing_module
+
+    monkeypatch.setenv('XDG_CACHE_HOME', str(tmp_path))
+    first = StillBody(PolynomialSwingTiming(robot(), 2, 1.0, 0.06))
+    assert not first.stored
+    swing_s = first.swing_s(0, np.array([0.21, 0.0]))
+    transfer_s = first.steady_transfer_s(np.array([0.1, 0.0]))
+    files = list((tmp_path / 'gait_nodes').glob('still_robosimian_*.json'))
+    assert len(files) == 1
+
+    def no_shape(*args, **kwargs):
+        raise AssertionError('a stored node time was computed again')
+
+    with monkeypatch.context() as patched:
+        patched.setattr(timing_module.PolynomialSwingTiming, 'shape', no_shape)
+        second = StillBody(PolynomialSwingTiming(robot(), 2, 1.0, 0.06))
+        assert second.stored
+        assert second.swing_s(0, np.array([0.21, 0.0])) == swing_s
+        assert second.steady_transfer_s(np.array([0.1, 0.0])) == transfer_s
+        slower = RobotModel(dataclasses.replace(robot().description,
+                                                joint_velocity_limit_rad_s=0.5))
+        other = StillBody(PolynomialSwingTiming(slower, 2, 0.5, 0.06))
+        assert not other.stored
+        with pytest.raises(AssertionError, match='computed again'):
+            other.swing_s(0, np.array([0.21, 0.0]))
+    files[0].write_text('{"swing_s": [[1, 2')
+    third = StillBody(PolynomialSwingTiming(robot(), 2, 1.0, 0.06))
+    assert not third.stored
+    assert third.swing_s(0, np.array([0.21, 0.0])) == swing_s
+    assert StillBody(PolynomialSwingTiming(robot(), 2, 1.0, 0.06)).stored

@@ -24,6 +24,7 @@ from gait_nodes.contract import Swing, SwingTrajectory
 from gait_nodes.errors import SwingPolicyError
 from gait_nodes.swing.kinematics import FEASIBLE_BELOW_S, INFEASIBLE_S, LimbTiming
 from gait_nodes.swing.table import ValueTable
+from gait_nodes.swing.time_law import fastest_times
 
 #: A state this close to the goal on every axis is the goal.
 GOAL_TOLERANCE = 1e-9
@@ -250,7 +251,6 @@ class SwingPolicy:
         """
         from scipy.interpolate import CubicSpline
 
-        from gait_nodes.swing.time_law import fastest_times
         from gait_nodes.swing.timing import smooth_trajectory
 
         centre = self.law_centre(foot)

@@ -24,8 +24,13 @@ limb IK of its family:
 
 from __future__ import annotations
 
+import functools
+import hashlib
+import json
 import math
+import os
 import weakref
+from pathlib import Path
 
 import numpy as np
 
@@ -105,6 +110,14 @@ class StillBody:
         centre = self.robot.description.feet[timing._reference].nominal_position_in_base[:2]
         self._offsets = [tuple(np.round(stance[k, :2] * mirror - centre, 6).tolist())
                          for k, mirror in enumerate(timing._mirror_floats)]
+        self._stored = _stored_times_path(timing)
+        self._found_stored = False
+        self._load_stored()
+
+    @property
+    def stored(self) -> bool:
+        """Whether node times were found on disk for this model (see the module docstring)."""
+        return self._found_stored
 
     @property
     def factor(self) -> float:
@@ -287,6 +300,7 @@ class StillBody:
                                        f'reach of the limb (IK family {self.family})')
             reference = self._limbs[self.source._reference][1][:q.shape[1]]
             self._swing_s[key] = joint_path_time_s(_Limb(self.robot, reference), u, q, 'path')
+            self._store()
         return self._swing_s[key]
 
     def lift_and_lower_s(self) -> float:
@@ -306,7 +320,39 @@ class StillBody:
             self._transfer_s[key] = (1.0 + STILL_MARGIN) * self.transfer_s(
                 self._feet, np.zeros(len(self._feet)), 0.0, self._base - half,
                 self._base + half, True)
+            self._store()
         return self._transfer_s[key]
+
+    # --- the node times on disk ----------------------------------------------------------------
+
+    def _load_stored(self) -> None:
+        """Take the node times stored for this robot, model and code, if there are any."""
+        if self._stored is None:
+            return
+        try:
+            content = json.loads(self._stored.read_text())
+            swings = {tuple(key): float(value) for key, value in content['swing_s']}
+            transfers = {tuple(key): float(value) for key, value in content['transfer_s']}
+        except (OSError, ValueError, TypeError, KeyError):
+            return  # none yet, or unreadable: computed again and stored anew
+        self._swing_s.update(swings)
+        self._transfer_s.update(transfers)
+        self._found_stored = bool(swings)
+
+    def _store(self) -> None:
+        """Write the node times (atomically: planners of other processes may read them)."""
+        if self._stored is None:
+            return
+        content = {'swing_s': [[list(key), value] for key, value in self._swing_s.items()],
+                   'transfer_s': [[list(key), value] for key, value in
+                                  self._transfer_s.items()]}
+        try:
+            self._stored.parent.mkdir(parents=True, exist_ok=True)
+            partial = self._stored.with_name(f'{self._stored.name}.{os.getpid()}.tmp')
+            partial.write_text(json.dumps(content))
+            os.replace(partial, self._stored)
+        except OSError:
+            pass  # a read-only cache: the times are computed again next time
 
 
 class _Limb:
@@ -353,6 +399,51 @@ def body_move(u: np.ndarray) -> np.ndarray:
 
 
 _VIEWS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
+@functools.lru_cache(maxsize=1)
+def _source_digest() -> str:
+    """SHA-256 of this package's Python source (the node times follow from its code)."""
+    root = Path(__file__).resolve().parents[1]
+    digest = hashlib.sha256()
+    for path in sorted(root.rglob('*.py')):
+        digest.update(str(path.relative_to(root)).encode())
+        digest.update(path.read_bytes())
+    return digest.hexdigest()
+
+
+def _stored_times_path(timing) -> Path | None:
+    """The file of ``timing``'s still-body node times (None: a model it cannot name)."""
+    from importlib.metadata import version
+
+    from gait_nodes.swing.cache import cache_dir
+    from gait_nodes.swing.timing import PolynomialSwingTiming, TableSwingTiming
+
+    robot = timing.robot
+    description = robot.description
+    digest = hashlib.sha256(_source_digest().encode())
+    digest.update(version('toppra').encode())  # the time law's solver
+    digest.update(Path(description.urdf_path).read_bytes())
+    digest.update(Path(description.path).read_bytes())
+    # What the times follow from of a description that may differ from its file (a copy with
+    # other limits, say).
+    for values in (robot.velocity_limits_rad_s, robot.acceleration_limits_rad_s2,
+                   description.nominal_stance_in_base(GAIT),
+                   [foot.nominal_position_in_base for foot in description.feet],
+                   [description.body_height_m]):
+        digest.update(np.ascontiguousarray(values, dtype=float).tobytes())
+    digest.update(repr((type(timing).__name__, timing.family, timing.factor)).encode())
+    if isinstance(timing, TableSwingTiming):
+        table = timing.policy.table
+        digest.update(repr((table.joint_velocity_limit_rad_s, table.step_height_m,
+                            table.ground_z_m, table.goal.tolist())).encode())
+        digest.update(np.ascontiguousarray(table.values_s).tobytes())
+        digest.update(np.ascontiguousarray(table.grid.points()).tobytes())
+    elif isinstance(timing, PolynomialSwingTiming):
+        digest.update(repr(timing.step_height_m).encode())
+    else:
+        return None
+    return cache_dir() / f'still_{robot.name}_{digest.hexdigest()[:16]}.json'
 
 
 def still_body_of(timing) -> StillBody:

@@ -22,8 +22,15 @@ from __future__ import annotations
 import logging
 
 import numpy as np
+import toppra
+import toppra.algorithm
+import toppra.constraint
 
 from gait_nodes.errors import SwingPolicyError
+
+# Imported with the module, not at the first swing: toppra imports matplotlib's pyplot, about a
+# second, which a node must not spend in the callback of its first swing.
+logging.getLogger('toppra').setLevel(logging.WARNING)  # it logs every solve at INFO
 
 #: Grid points of the parameterization along the path (12 ms apart on a 1.2 s swing): the
 #: limits hold at them, and between them to about 1 % (velocity) and 5 % (acceleration); the
@@ -44,11 +51,6 @@ def fastest_times(u: np.ndarray, joints: np.ndarray, velocity_limits: np.ndarray
         SwingPolicyError: The path has fewer than two distinct samples, or the limits admit no
             motion along it.
     """
-    import toppra
-    import toppra.algorithm
-    import toppra.constraint
-
-    logging.getLogger('toppra').setLevel(logging.WARNING)  # it logs every solve at INFO
     u = np.asarray(u, dtype=float)
     joints = np.asarray(joints, dtype=float)
     if len(u) < 2 or not np.all(np.diff(u) > 0):
