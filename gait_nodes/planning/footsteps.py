@@ -402,6 +402,7 @@ class GaitPlanner:
         self._sways: dict = {}  # the steady crawl's sway (rhythm.transfer_move)
         self._clamped: dict = {}
         self._fastest: dict = {}  # the fastest feasible twist by direction (clamp_velocity)
+        self._probes: dict = {}  # a step's probes by its geometry (_probed)
         self._requested = Twist2D()
         self._twist = Twist2D()
         pose = np.array(base_pose, dtype=float)
@@ -917,17 +918,24 @@ class GaitPlanner:
             next_group=group_index + 1, rest_pose=rest, last_anchor=last_anchor,
             measured=(state.measured.difference(*(slot.feet for slot in slots))
                       if mode == 'walking' else frozenset()), **path)
-        bases = (self._still_bases(state, slots, points[1])
+        # The probes follow from where the feet go, not from when: a step planned again with
+        # other times (retimed, below) takes them from the first time.
+        geometry = self._step_geometry(gait, state, slots, points, params.com_height_m)
+        bases = (self._probed(('bases', geometry),
+                              lambda: self._still_bases(state, slots, points[1]))
                  if gait == 'static_crawl' and slots else None)
         # (A static crawl is timed for the joints' acceleration limits too: its swings and
         # moves run at the limits, the limb's own, with nothing else to slow them.)
         still = bases is not None
-        needs = self._slot_needs(gait, state, slots, points, params.com_height_m,
-                                 with_acceleration=still, bases=bases)
+        needs = self._probed(('needs', still, geometry), lambda: self._slot_needs(
+            gait, state, slots, points, params.com_height_m, with_acceleration=still,
+            bases=bases))
         needed = max(needs, default=0.0)
         transfer = params.transfer_s(gait)
-        needed_transfer = self._needed_transfer_s(state, points, params.com_height_m,
-                                                  with_acceleration=still, bases=bases)
+        needed_transfer = self._probed(('transfer', still, geometry),
+                                       lambda: self._needed_transfer_s(
+                                           state, points, params.com_height_m,
+                                           with_acceleration=still, bases=bases))
         slowed = timed is not None and len(timed) > 3 and timed[3]
         if still and not slowed and len(needs) == len(durations) and retimed < MAX_RETIMING:
             shares = _shared_times((transfer, *durations), (needed_transfer, *needs))
@@ -969,6 +977,28 @@ class GaitPlanner:
             points = np.concatenate([points[:1], points])
         return Step(gait, kind, t0, t_end, state.positions, state.yaws, tuple(slots), times,
                     points, kept, params, twist, after_state, self._settings, bases)
+
+    def _step_geometry(self, gait: str, state: _State, slots: Sequence[SwingSlot],
+                       zmp_points: np.ndarray, com_height_m: float) -> tuple:
+        """What a step's probes and body placement follow from (its times aside).
+
+        The gait, the feet before the step and after each swing slot, the ZMP knots, the COM
+        height, and the planner's swing timing model, terrain and timing setting.
+        """
+        return (gait, self._timing, self._terrain, self._params.timing, float(com_height_m),
+                state.positions.tobytes(), state.yaws.tobytes(),
+                np.asarray(zmp_points, dtype=float).tobytes(),
+                tuple((slot.feet, slot.positions_after.tobytes(), slot.yaws_after.tobytes())
+                      for slot in slots))
+
+    def _probed(self, key: tuple, compute):
+        """``compute()``, once per ``key`` (see :meth:`_step_geometry`; shared by forks)."""
+        known = self._probes.get(key)
+        if known is None:
+            if len(self._probes) > 64:
+                self._probes.clear()
+            known = self._probes[key] = compute()
+        return known
 
     def check_joint_speeds(self, probe, from_s: float) -> None:
         """Raise unless the joints can walk every step from ``from_s`` on in its planned time.
