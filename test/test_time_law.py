@@ -121,3 +121,24 @@ def test_a_table_swing_in_the_fastest_law_keeps_its_joints_within_the_limits(foo
     q, _ = swing_policy.timing.joints(placed)
     stretched = joint_path_time_s(limb, smooth.times_s / smooth.times_s[-1], q[:, :6], 'path')
     assert path.duration_s < 0.97 * stretched, (path.duration_s, stretched)
+
+
+def test_places_out_of_the_limbs_reach_are_left_out_of_the_law(monkeypatch):
+    # A place the limb cannot reach does not make the swing fail: the law keeps the limb
+    # within its limits at the places it reaches; at none, the smoothed path keeps the table's
+    # own timing (the planner's probe then stretches it as far as it needs).
+    from gait_nodes.swing import policy as policy_module
+
+    step = np.array([0.2, 0.0])
+    reachable, _ = SwingPolicy(tiny_table()[0], robot()).fastest_swing(step, 0.0, 'front_right')
+    monkeypatch.setattr(policy_module, 'LAW_PLACEMENTS_M', (*LAW_PLACEMENTS_M, 1.5))
+    with_far, _ = SwingPolicy(tiny_table()[0], robot()).fastest_swing(step, 0.0, 'front_right')
+    assert with_far.duration_s == reachable.duration_s
+    monkeypatch.setattr(policy_module, 'LAW_PLACEMENTS_M', (1.5,))
+    swing_policy = SwingPolicy(tiny_table()[0], robot())
+    none_reached, _ = swing_policy.fastest_swing(step, 0.0, 'front_right')
+    table_path, _ = swing_policy.path_for_step(step)
+    polyline = SwingTrajectory('x', 0, table_path.times_s, table_path.states[:, :3],
+                               table_path.states[:, 3])
+    smooth, _ = smooth_trajectory(polyline, None, 0.005)
+    assert none_reached.duration_s == pytest.approx(smooth.times_s[-1])

@@ -245,8 +245,9 @@ class SwingPolicy:
         alike. Cached.
 
         Returns:
-            ``(path, clamped_m)``: the smoothed path (states ``LAW_SAMPLE_PERIOD_S`` apart in the
-            table's timing, in front-right coordinates) with its fastest times, and
+            ``(path, clamped_m)``: the smoothed path in front-right coordinates, sampled
+            ``LAW_SAMPLE_PERIOD_S`` apart in its fastest time law (its ``lift_s``, ``lower_s``
+            and ``predicted_s`` are the table path's, in the table's timing), and
             :meth:`path_for_step`'s clamp.
         """
         from scipy.interpolate import CubicSpline
@@ -270,19 +271,23 @@ class SwingPolicy:
         placed[..., :2] += offsets
         placed[..., 0] += np.asarray(LAW_PLACEMENTS_M)[:, None]
         q, feasible = self.timing.joints(placed.reshape(-1, 4))
-        if not feasible.all():
-            where = np.round(placed.reshape(-1, 4)[int(np.argmin(feasible))], 3).tolist()
-            raise SwingPolicyError(f'a swing by {np.round(step_in_base, 3).tolist()} m around '
-                                   f'{foot}\'s place in the stance leaves the reach of the limb '
-                                   f'at {where} (IK family {self.table.family})')
-        # Each placement's joints side by side: the law keeps every one within the limits.
-        q = q.reshape(len(LAW_PLACEMENTS_M), len(solved), -1).transpose(1, 0, 2)
+        # The places the limb reaches all along (a long step far out may not be reachable at
+        # all of them); at none, the smoothed path keeps the table's timing, which the planner's
+        # probe stretches as far as it needs.
+        reached = feasible.reshape(len(LAW_PLACEMENTS_M), -1).all(axis=1)
         u = smoothed.times_s
+        if not reached.any():
+            timed = SwingPath(states, u - u[0], path.lift_s, path.lower_s, path.predicted_s, 0,
+                              len(u) - 1)
+            self._remember(key, (timed, clamped))
+            return timed, clamped
+        # Each place's joints side by side: the law keeps every one within the limits.
+        q = q.reshape(len(LAW_PLACEMENTS_M), len(solved), -1)[reached].transpose(1, 0, 2)
         dense = np.linspace(u[0], u[-1], LAW_DENSITY * len(u))
         dense_times = fastest_times(u[solved], q.reshape(len(solved), -1),
                                     self.table.joint_velocity_limit_rad_s,
                                     np.tile(LAW_ACCELERATION_SHARE * self._acceleration_limits,
-                                            len(LAW_PLACEMENTS_M)),
+                                            int(reached.sum())),
                                     at=dense)
         # The path sampled evenly in its new time (what is played is interpolated in time).
         count = max(int(math.ceil(dense_times[-1] / LAW_SAMPLE_PERIOD_S)), 1)
@@ -295,10 +300,13 @@ class SwingPolicy:
         timed_states[0], timed_states[-1] = states[0], states[-1]
         timed = SwingPath(timed_states, times, path.lift_s, path.lower_s, path.predicted_s, 0,
                           len(times) - 1)
+        self._remember(key, (timed, clamped))
+        return timed, clamped
+
+    def _remember(self, key: tuple, swing: tuple[SwingPath, float]) -> None:
         if len(self._fastest) > 4096:
             self._fastest.clear()
-        self._fastest[key] = (timed, clamped)
-        return timed, clamped
+        self._fastest[key] = swing
 
     def law_centre(self, foot: str) -> tuple[float, float]:
         """Where ``foot``'s swings are centred when timed, in front-right base coordinates [m].
