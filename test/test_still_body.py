@@ -315,3 +315,47 @@ def test_the_node_times_are_kept_on_disk_and_found_by_the_next_planner(tmp_path,
     assert not third.stored
     assert third.swing_s(0, np.array([0.21, 0.0])) == swing_s
     assert StillBody(PolynomialSwingTiming(robot(), 2, 1.0, 0.06)).stored
+
+
+def test_a_walk_planned_again_from_later_or_anew_takes_its_probes_from_the_first(still,
+                                                                                  monkeypatch):
+    # A change planned again from a later join, or by a planner that joined the graph where
+    # the robot stood, walks what the first planning probed: no limb IK again, and the same
+    # steps, later by the join's difference.
+    model = robot()
+    params = GaitParameters.for_robot(model.description, gait='static_crawl',
+                                      timing='joint_limit', step_height_m=0.06)
+    first = GaitPlanner(model.description, params, swing_timing=still.source)
+    first.advance(30.0)  # standing
+    walk = first.fork()
+    walk.set_velocity(Twist2D(0.1), 1.0)
+    walk.advance(25.0)
+    probes = []
+    for name in ('_still_bases', '_slot_needs', '_needed_transfer_s', '_still_body_zmp'):
+        original = getattr(GaitPlanner, name)
+
+        def counted(self, *args, _original=original, _name=name, **kwargs):
+            probes.append(_name)
+            return _original(self, *args, **kwargs)
+
+        monkeypatch.setattr(GaitPlanner, name, counted)
+    anew = first.anew(np.zeros(3))
+    anew.advance(30.0)
+    for planner, at_s in ((first.fork(), 3.3), (anew, 4.1)):
+        planner.set_velocity(Twist2D(0.1), at_s)
+        planner.advance(18.0)
+        assert probes == []
+        again = [step for step in planner.steps if step.slots]
+        before = [step for step in walk.steps if step.slots][:len(again)]
+        shift_s = again[0].start_s - before[0].start_s
+        assert len(again) >= 3 and shift_s > 1.0
+        for a, b in zip(again, before, strict=True):
+            assert a.start_s == pytest.approx(b.start_s + shift_s, abs=1e-9)
+            assert a.zmp_times_s == pytest.approx(b.zmp_times_s + shift_s, abs=1e-9)
+            assert np.array_equal(a.zmp_points, b.zmp_points)
+            assert a.positions_start == pytest.approx(b.positions_start, abs=1e-9)
+    # Elsewhere the feet go elsewhere: probed anew.
+    planner = first.anew(np.array([0.3, 0.0, 0.0]))
+    planner.set_velocity(Twist2D(0.1), 1.0)
+    planner.advance(6.0)
+    assert '_still_body_zmp' in probes

@@ -136,6 +136,15 @@ def wrap_angle(angle: np.ndarray) -> np.ndarray:
     return (np.asarray(angle) + np.pi) % (2.0 * np.pi) - np.pi
 
 
+def _rounded(values) -> bytes:
+    """``values`` to 1e-9 (metres, radians, seconds) as a memo key.
+
+    A step planned from another time (a change joining later) finds its feet where the first
+    planning put them but for the last bits of the path's arithmetic.
+    """
+    return (np.round(np.asarray(values, dtype=float), 9) + 0.0).tobytes()
+
+
 def _shared_times(planned: Sequence[float], needed: Sequence[float]) -> tuple[float, ...]:
     """A static-crawl step's phase times: its body move's and each swing slot's [s].
 
@@ -204,7 +213,8 @@ def clamp_velocity(twist: Twist2D, params: GaitParameters, robot: RobotDescripti
     if not fits(result):
         size = max(abs(value) / limit for value, limit in zip(values, limits, strict=True)
                    if value != 0.0)
-        direction = result.scaled(1.0 / size)
+        # (Rounded: twists along one direction find its search, whatever their size.)
+        direction = Twist2D(*(round(v, 12) for v in result.scaled(1.0 / size).as_tuple()))
         fastest = {} if fastest is None else fastest
         if (direction, params) not in fastest:
             if len(fastest) > 256:
@@ -465,12 +475,16 @@ class GaitPlanner:
 
         The robot, the parameters, the swing timing and the terrain are this plan's, and so are
         the rhythm and velocity caches, which follow from those alone: the new plan walks a
-        velocity this one has walked without searching its fastest rhythm again.
+        velocity this one has walked without searching its fastest rhythm again. So are the
+        steps' probes, which follow from where the feet go: a plan anew where the robot stood
+        in this one (a planner joining a graph, which rehearsed its first walk while it waited
+        for the robot's pose) walks that first walk without probing it again.
         """
         fresh = GaitPlanner(self.robot, self._params, base_pose=base_pose,
                             swing_timing=self._timing, start=start, terrain=self._terrain)
         fresh._rhythms, fresh._sways = self._rhythms, self._sways
         fresh._clamped, fresh._fastest = self._clamped, self._fastest
+        fresh._probes = self._probes
         fresh._settings = self._settings
         return fresh
 
@@ -954,7 +968,14 @@ class GaitPlanner:
                                    planned or (chosen, t_end))
         hold = START_HOLD_FRACTION * extra if kind == 'walk' else 0.0
         if bases is not None:
-            times, points, kept, full = self._still_body_zmp(state, slots, bases, t0 + hold, t1)
+            # Sampled on the step's own clock: the same step walked from another time (a change
+            # planned again from a later join) takes them from the first planning.
+            phases = _rounded([t1 - t0 - hold, *(t - t1 for slot in slots
+                                                 for t in (slot.lift_off_s, slot.touch_down_s))])
+            times, points, kept, full = self._probed(
+                ('zmp', geometry, phases), lambda: self._still_body_zmp(
+                    state, slots, bases, t0 + hold, t1, origin_s=t0 + hold))
+            times = times + (t0 + hold)
             if full < params.zmp_margin_m and retimed < MAX_RETIMING:
                 # The swinging limbs' momentum takes the ZMP off the cart-table one by what
                 # scales as 1 / T^2: slower swings bring it back inside the margin.
@@ -986,16 +1007,15 @@ class GaitPlanner:
         height, and the planner's swing timing model, terrain and timing setting.
         """
         return (gait, self._timing, self._terrain, self._params.timing, float(com_height_m),
-                state.positions.tobytes(), state.yaws.tobytes(),
-                np.asarray(zmp_points, dtype=float).tobytes(),
-                tuple((slot.feet, slot.positions_after.tobytes(), slot.yaws_after.tobytes())
+                _rounded(state.positions), _rounded(state.yaws), _rounded(zmp_points),
+                tuple((slot.feet, _rounded(slot.positions_after), _rounded(slot.yaws_after))
                       for slot in slots))
 
     def _probed(self, key: tuple, compute):
         """``compute()``, once per ``key`` (see :meth:`_step_geometry`; shared by forks)."""
         known = self._probes.get(key)
         if known is None:
-            if len(self._probes) > 64:
+            if len(self._probes) > 256:
                 self._probes.clear()
             known = self._probes[key] = compute()
         return known
@@ -1125,8 +1145,11 @@ class GaitPlanner:
 
     def _still_body_zmp(self, state: _State, slots: Sequence[SwingSlot],
                         bases: tuple[np.ndarray, np.ndarray], move_from_s: float,
-                        move_to_s: float) -> tuple[np.ndarray, np.ndarray, float]:
+                        move_to_s: float, origin_s: float = 0.0
+                        ) -> tuple[np.ndarray, np.ndarray, float, float]:
         """(times, points, margin, full-model margin) of a static-crawl step's ZMP reference.
+
+        The times are counted from ``origin_s``.
 
         The base moves from ``bases[0]`` to ``bases[1]`` between ``move_from_s`` and
         ``move_to_s`` (:func:`gait_nodes.swing.still_body.body_move`, every foot down) and
@@ -1164,6 +1187,7 @@ class GaitPlanner:
             stances.append(len(t) * [before[stance, :2]])
         times, com = np.concatenate(times), np.concatenate(coms)
         points = cart_table_zmp(times, com, float(com[:, 2].mean() - feet[:, 2].min()))
+        times = times - origin_s
         stances = [positions for group in stances for positions in group]
         margin = min(support.support_margin(p, positions, self.robot.foot_radius_m)
                      for p, positions in zip(points, stances, strict=True))

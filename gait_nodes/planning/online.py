@@ -39,6 +39,8 @@ import threading
 import time
 from collections.abc import Callable
 
+import numpy as np
+
 from gait_nodes.errors import GaitNodesError
 from gait_nodes.planning.footsteps import GaitPlanner, Twist2D
 
@@ -250,6 +252,9 @@ class OnlinePlanner:
         self._pending: set[str] = set()  # ids submitted, not decided yet
         self._to_apply: list[Answer] = []  # accepted, not taken effect yet
         self._work_s = 0.0  # the last candidate's planning time [s]
+        # The rehearsed walk (the twist walked) and its planning time from cold caches [s],
+        # until the first change: one that walks another twist counts that time in its lead.
+        self._rehearsed: tuple[Twist2D, float] | None = None
         self._delivery_s = 0.0  # how long the node took to publish a plan, lately [s]
         self._ready_s: float | None = None  # when the job's change was found in time
         self._wake = threading.Event()
@@ -352,9 +357,12 @@ class OnlinePlanner:
         through the limb IK). Without an estimate of its planning time the first one is
         planned to join a lead that covers none of it, misses it and is planned again from
         later (twice the work, and a later start). The rehearsal, done while the robot stands
-        before anything was asked, measures that time for the first change (the planner's
-        caches keep what it solved) and changes nothing else; a :class:`Rehearsed` event says
-        what it found.
+        before anything was asked, solves that walk (the planner's caches, shared by every
+        fork, keep its search and probes), then plans it once more and takes that time for the
+        first change's (which plans what the rehearsal solved); it changes nothing else. A
+        change that finds the caches cold (another direction) misses its join once and is
+        planned again from later, caches warm. A :class:`Rehearsed` event says what it found
+        (its time: both plannings).
         """
         self._submit(_Job('rehearsal', twist), replaces='rehearsal')
 
@@ -478,7 +486,13 @@ class OnlinePlanner:
         step leaves them) is tried from the next ones, up to :data:`JOIN_BOUNDARIES`.
         """
         if job.kind == 'velocity' and self._threaded:
-            self._search_fastest(job.payload)
+            walked = self._search_fastest(job.payload)
+            # (Another twist in the rehearsed direction walks the same fastest one, but for the
+            # last bits of its search's arithmetic.)
+            if self._rehearsed is not None and (walked is None or not np.allclose(
+                    walked.as_tuple(), self._rehearsed[0].as_tuple(), rtol=1e-6, atol=1e-9)):
+                self._work_s = max(self._work_s, self._rehearsed[1])  # its caches are cold
+        self._rehearsed = None
         least_s = self._least_lead_s()
         margin_s = LEAD_MARGIN_S + self._delivery_s
         lead_s = least_s + margin_s + WORK_HEADROOM * self._work_s
@@ -525,30 +539,42 @@ class OnlinePlanner:
         """See :meth:`submit_rehearsal`: the change's planning time, its plan dropped."""
         started = time.monotonic()
         self._search_fastest(job.payload)
+        velocity = dataclasses.replace(job, kind='velocity')
         planning = time.monotonic()
-        fork = self._live.fork()
         try:
-            result = self._candidate(dataclasses.replace(job, kind='velocity'), fork,
+            fork = self._live.fork()
+            result = self._candidate(velocity, fork,
                                      self._now_s() + self._least_lead_s() + LEAD_MARGIN_S)
             applied = fork.twist if result is UNCHANGED else result[0]
             rhythm, reason = fork.rhythm(), ''
+            cold_s = time.monotonic() - planning
+            # The change asked next plans what the rehearsal solved (the caches keep it): its
+            # lead counts the time of that planning, measured on a second fork, not the first.
+            planning = time.monotonic()
+            self._candidate(velocity, self._live.fork(),
+                            self._now_s() + self._least_lead_s() + LEAD_MARGIN_S)
+            warm_s = time.monotonic() - planning
         except Exception as exc:  # noqa: BLE001 (reported; a change asking it is refused then)
             applied, rhythm, reason = None, None, str(exc)
+            cold_s = warm_s = time.monotonic() - planning
         if self._threaded and self._work_s == 0.0:
-            self._work_s = time.monotonic() - planning
+            self._work_s = warm_s
+            if applied is not None:
+                self._rehearsed = (applied, cold_s)
         self._emit(Rehearsed(job.payload, applied, rhythm, reason, time.monotonic() - started))
 
-    def _search_fastest(self, twist: Twist2D) -> None:
+    def _search_fastest(self, twist: Twist2D) -> Twist2D | None:
         """Search the fastest walk in ``twist``'s direction, before a velocity is timed.
 
         The search (seconds, the first time a direction is asked) is done once for good: the
         planner's caches keep it, shared by every fork. Done before the join is set, it is not
-        a part of the change's planning time, and the join is not missed for it.
+        a part of the change's planning time, and the join is not missed for it. Returns the
+        twist walked (``twist`` as the planner reduces it; None: it cannot be walked).
         """
         try:
-            self._live.fork().set_velocity(twist, self._now_s())
-        except Exception:  # noqa: BLE001, S110 (the change itself says why)
-            pass
+            return self._live.fork().set_velocity(twist, self._now_s())[0]
+        except Exception:  # noqa: BLE001 (the change itself says why)
+            return None
 
     def _candidate(self, job: _Job, fork: GaitPlanner, at_s: float):
         """``job`` applied to ``fork`` from ``at_s``, planned and checked past its join."""
