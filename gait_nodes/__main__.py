@@ -41,6 +41,10 @@ PROG = 'python -m gait_nodes'
 STOP_TIMEOUT_S = 10.0
 #: Longest wait for a node to start (imports, robot model, a value table built on first use).
 START_TIMEOUT_S = 900.0
+#: Gait cycles of the scenario's first walk planned before the graph starts (its probes kept:
+#: :func:`_prepare_first_walk`), past its first step: as far as the footstep planner's first
+#: change is checked (gait_nodes.planning.online.CHECK_CYCLES).
+FIRST_WALK_CYCLES = 2.0
 
 
 def _positive_float(text: str) -> float:
@@ -158,10 +162,11 @@ def _prepare_first_walk(values: dict, names: list[str], commands) -> None:
 
     With joint-limit timing the footstep planner searches, for a direction it has not walked
     yet, the fastest rhythm the joints allow: for the static crawl, a value-table swing timed at
-    about a hundred lattice nodes (3-4 s on RoboSimian). Those times are kept on disk
-    (:mod:`gait_nodes.swing.still_body`); searched here once, the planner finds them and plans
+    about a hundred lattice nodes (3-4 s on RoboSimian), then probes the first steps through the
+    limb IK (1-2 s). Those times and probes are kept on disk
+    (:mod:`gait_nodes.swing.still_body`); planned here once, the planner finds them and plans
     the first walk in a fraction of a second, on a fresh machine as on a warm one. Only for the
-    graph's own settings (a ``-p`` override searches in the planner, on first use).
+    graph's own settings (a ``-p`` override plans in the planner, on first use).
     """
     velocity = next((command.velocity for command in commands
                      if command.velocity is not None and any(command.velocity)), None)
@@ -173,7 +178,7 @@ def _prepare_first_walk(values: dict, names: list[str], commands) -> None:
     from gait_nodes.planning.timing_models import TimingModels
     from gait_nodes.robot.description import load_robot_description
     from gait_nodes.swing.cache import cache_dir
-    from gait_nodes.swing.still_body import GAIT, still_body_of
+    from gait_nodes.swing.still_body import GAIT, keep_probes, kept_probes, still_body_of
 
     robot = load_robot_description(values['robot'])
     defaults = {**GaitParameters.robot_defaults(robot), **shipped_defaults(), **values}
@@ -190,7 +195,16 @@ def _prepare_first_walk(values: dict, names: list[str], commands) -> None:
             print(f'{PROG}: searching the fastest {GAIT} of {robot.name} at its joint limit '
                   f'(once: the swing times are kept under {cache_dir()})', file=sys.stderr,
                   flush=True)
-        GaitPlanner(robot, params, swing_timing=timing).set_velocity(Twist2D(*velocity), 0.0)
+        # And the first steps, whose probes (the limb IK of each swing and body move: a second
+        # or two) are kept on disk too: the footstep planner rehearses that walk while it waits
+        # for the robot's pose, and walks it when the velocity comes.
+        planner = GaitPlanner(robot, params, swing_timing=timing)
+        planner.take_probes(kept_probes(timing))
+        planner.set_velocity(Twist2D(*velocity), 0.0)
+        rhythm = planner.rhythm()
+        planner.advance(planner.next_boundary_s(0.0)
+                        + FIRST_WALK_CYCLES * (rhythm.cycle_s if rhythm else 0.0))
+        keep_probes(timing, planner.probes_to_keep())
     except GaitNodesError:
         return  # the planner says what is wrong with these settings, in the graph
 

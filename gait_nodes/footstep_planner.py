@@ -110,6 +110,7 @@ from gait_nodes.planning.timing_models import TimingModels, auto_reason, describ
 from gait_nodes.robot.description import load_robot_description
 from gait_nodes.runtime import Parameter, SetParametersResult, qos_profile_latched
 from gait_nodes.single_source import SingleSource
+from gait_nodes.swing.still_body import kept_probes
 
 NODE_NAME = 'footstep_planner'
 GAIT_FIELDS = tuple(GaitParameters.__dataclass_fields__)
@@ -210,6 +211,8 @@ class FootstepPlanner(GuardedNode):
         self.timings = TimingModels(self.robot, warn=self.get_logger().warning)
         timing, self._timing_reason, self._timing_final = self.timings.timing(params)
         planner = GaitPlanner(self.robot, params, swing_timing=timing, terrain=terrain)
+        if timing is not None:
+            planner.take_probes(kept_probes(timing))  # the main job's first walk, if kept
         self.diagnostics.report('timing', OK if self._timing_final else WARN,
                                 self._timing_reason)
         self._log_rhythm(planner, params)

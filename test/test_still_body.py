@@ -7,6 +7,7 @@ on its solutions.
 """
 
 import dataclasses
+import json
 
 import numpy as np
 import pytest
@@ -359,3 +360,73 @@ def test_a_walk_planned_again_from_later_or_anew_takes_its_probes_from_the_first
     planner.set_velocity(Twist2D(0.1), 1.0)
     planner.advance(6.0)
     assert '_still_body_zmp' in probes
+
+
+def test_a_first_walks_probes_kept_on_disk_plan_it_alike_in_another_planner(tmp_path,
+                                                                            monkeypatch):
+    """The main job's first walk, kept on disk, is planned from it by the graph's planner.
+
+    Another planner with an alike swing timing model (as in another process) takes the kept
+    probes and search: it probes and searches nothing and plans the same steps to the bit; a
+    walk elsewhere, or with
+    another model, is probed; an unreadable file or probe is probed again.
+    """
+    from gait_nodes.planning.terrain import STAIRS_DEFAULTS, Staircase
+    from gait_nodes.swing.still_body import MAX_KEPT_PROBES, keep_probes, kept_probes
+
+    monkeypatch.setenv('XDG_CACHE_HOME', str(tmp_path))
+    model = robot()
+    params = GaitParameters.for_robot(model.description, gait='static_crawl',
+                                      timing='joint_limit', step_height_m=0.06)
+
+    def first_walk(timing, pose=(0.0, 0.0, 0.0), terrain=None):
+        planner = GaitPlanner(model.description, params, swing_timing=timing,
+                              base_pose=np.array(pose), terrain=terrain)
+        planner.take_probes(kept_probes(timing))
+        planner.set_velocity(Twist2D(0.1), 0.0)
+        planner.advance(12.0)
+        return planner
+
+    timing = PolynomialSwingTiming(model, 2, 1.0, 0.06)
+    assert kept_probes(timing) == {}
+    first = first_walk(timing)
+    keep_probes(timing, first.probes_to_keep())
+    (path,) = (tmp_path / 'gait_nodes').glob('probes_still_robosimian_*.json')
+    assert 4 <= len(kept_probes(timing)) <= MAX_KEPT_PROBES
+    probes = []
+    for name in ('_still_bases', '_slot_needs', '_needed_transfer_s', '_still_body_zmp'):
+        original = getattr(GaitPlanner, name)
+
+        def counted(self, *args, _original=original, _name=name, **kwargs):
+            probes.append(_name)
+            return _original(self, *args, **kwargs)
+
+        monkeypatch.setattr(GaitPlanner, name, counted)
+    rhythms = []
+    rhythm = GaitPlanner.rhythm
+    monkeypatch.setattr(GaitPlanner, 'rhythm',
+                        lambda self, *args: rhythms.append(args) or rhythm(self, *args))
+    alike = PolynomialSwingTiming(model, 2, 1.0, 0.06)  # (another process's)
+    again = first_walk(alike, terrain=Staircase.from_parameters(STAIRS_DEFAULTS))  # (flat)
+    assert probes == []
+    # Nor searched its fastest walk (a bisection: 30 rhythms, and 6 for its steps): kept.
+    assert again.twist == first.twist and 0 < len(rhythms) <= 10
+    walked = [step for step in first.steps if step.slots]
+    assert len(walked) >= 3
+    for a, b in zip([step for step in again.steps if step.slots], walked, strict=True):
+        assert (a.start_s, a.end_s) == (b.start_s, b.end_s)
+        assert np.array_equal(a.zmp_times_s, b.zmp_times_s)
+        assert np.array_equal(a.zmp_points, b.zmp_points)
+        assert np.array_equal(a.bases, b.bases)
+    first_walk(alike, pose=(0.5, 0.0, 0.0))  # elsewhere
+    assert '_still_body_zmp' in probes
+    probes.clear()
+    first_walk(PolynomialSwingTiming(model, 2, 1.0, 0.08))  # another model: its own file
+    assert '_still_body_zmp' in probes
+    probes.clear()
+    path.write_text(json.dumps({'probes': {name: {'tuple': 'x'} for name in
+                                           kept_probes(timing)}}))
+    assert first_walk(alike).steps[-1].end_s == first.steps[-1].end_s
+    assert '_still_body_zmp' in probes
+    path.write_text('{"probes": {"')
+    assert kept_probes(timing) == {}

@@ -102,7 +102,8 @@ def test_a_table_swing_in_the_fastest_law_keeps_its_joints_within_the_limits(foo
     played = np.arange(0.0, path.duration_s, 0.005)
     states = np.column_stack([np.interp(played, path.times_s, path.states[:, i])
                               for i in range(4)])
-    for outwards in (*LAW_PLACEMENTS_M, 0.0, 0.04):  # between them too
+    between = 0.5 * (np.asarray(LAW_PLACEMENTS_M[1:]) + np.asarray(LAW_PLACEMENTS_M[:-1]))
+    for outwards in (*LAW_PLACEMENTS_M, *between):  # between them too
         placed = states.copy()
         placed[:, :2] += centre + (outwards, 0.0) - 0.5 * (states[0, :2] + states[-1, :2])
         q, feasible = swing_policy.timing.joints(placed)

@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import hashlib
 import math
 import operator
 from collections.abc import Sequence
@@ -136,6 +137,56 @@ def wrap_angle(angle: np.ndarray) -> np.ndarray:
     return (np.asarray(angle) + np.pi) % (2.0 * np.pi) - np.pi
 
 
+class _Unnamed:
+    """What :func:`_probe_name` cannot name (a model, a terrain but flat ground)."""
+
+
+def _probe_name(key: tuple, timing, terrain) -> str | None:
+    """The name of a step's probe ``key`` (:meth:`GaitPlanner._probed`), or None.
+
+    Another process planning the same step with an alike swing timing model names it alike;
+    None: a probe not on flat ground (not kept).
+    """
+    def plain(value):
+        if value is timing:
+            return 'timing'
+        if value is terrain:
+            return 'flat' if terrain.flat else _Unnamed
+        if dataclasses.is_dataclass(value) and not isinstance(value, type):
+            return (type(value).__name__, plain(dataclasses.astuple(value)))
+        if isinstance(value, tuple):
+            items = tuple(plain(item) for item in value)
+            return _Unnamed if _Unnamed in items else items
+        if value is None or isinstance(value, (str, bytes, bool, int, float)):
+            return value
+        return _Unnamed
+
+    named = plain(key)
+    return None if named is _Unnamed else hashlib.sha256(repr(named).encode()).hexdigest()[:40]
+
+
+def _encoded(value):
+    """A probe (numbers, arrays, tuples and lists of them) as a JSON value."""
+    if isinstance(value, np.ndarray):
+        return {'array': value.tolist()}
+    if isinstance(value, tuple):
+        return {'tuple': [_encoded(item) for item in value]}
+    if isinstance(value, list):
+        return [_encoded(item) for item in value]
+    return float(value)
+
+
+def _decoded(value):
+    """The probe of :func:`_encoded`'s JSON value."""
+    if isinstance(value, dict):
+        if 'array' in value:
+            return np.array(value['array'], dtype=float)
+        return tuple(_decoded(item) for item in value['tuple'])
+    if isinstance(value, list):
+        return [_decoded(item) for item in value]
+    return float(value)
+
+
 def _rounded(values) -> bytes:
     """``values`` to 1e-9 (metres, radians, seconds) as a memo key.
 
@@ -161,8 +212,8 @@ def _shared_times(planned: Sequence[float], needed: Sequence[float]) -> tuple[fl
 
 
 def clamp_velocity(twist: Twist2D, params: GaitParameters, robot: RobotDescription,
-                   layout: FootLayout, cycle_of=None, fastest: dict | None = None
-                   ) -> tuple[Twist2D, list[str]]:
+                   layout: FootLayout, cycle_of=None, fastest: dict | None = None,
+                   kept: dict | None = None) -> tuple[Twist2D, list[str]]:
     """The twist the planner walks for a commanded ``twist``, and why it was reduced.
 
     Each component is clamped to its configured maximum; then the whole twist is scaled down so
@@ -181,6 +232,7 @@ def clamp_velocity(twist: Twist2D, params: GaitParameters, robot: RobotDescripti
         fastest: A dict kept between calls: the fastest feasible twist is searched along the
             command's direction (the twist scaled until a component reaches its maximum), so
             every command in that direction (a forward one, whatever its speed) reuses it.
+        kept: Searches kept on disk (:meth:`GaitPlanner.probes_to_keep`), found by name.
     """
     notes = []
     values = list(twist.as_tuple())
@@ -216,6 +268,9 @@ def clamp_velocity(twist: Twist2D, params: GaitParameters, robot: RobotDescripti
         # (Rounded: twists along one direction find its search, whatever their size.)
         direction = Twist2D(*(round(v, 12) for v in result.scaled(1.0 / size).as_tuple()))
         fastest = {} if fastest is None else fastest
+        kept = (kept or {}).get(_probe_name(('fastest', direction, params), None, None))
+        if (direction, params) not in fastest and isinstance(kept, float):
+            fastest[direction, params] = kept
         if (direction, params) not in fastest:
             if len(fastest) > 256:
                 fastest.clear()
@@ -413,6 +468,7 @@ class GaitPlanner:
         self._clamped: dict = {}
         self._fastest: dict = {}  # the fastest feasible twist by direction (clamp_velocity)
         self._probes: dict = {}  # a step's probes by its geometry (_probed)
+        self._kept_probes: dict[str, object] = {}  # probes kept on disk, by name (take_probes)
         self._requested = Twist2D()
         self._twist = Twist2D()
         pose = np.array(base_pose, dtype=float)
@@ -465,6 +521,7 @@ class GaitPlanner:
         self._timing = swing_timing
         # New caches, not emptied ones: a fork (see fork) shares them with the plan it came from.
         self._rhythms, self._clamped, self._fastest = {}, {}, {}
+        self._kept_probes = {}  # (another model's)
         self._twist, _ = self._clamp(self._requested, self._params)
         self._settings += 1
         self._replan(now_s)
@@ -484,7 +541,7 @@ class GaitPlanner:
                             swing_timing=self._timing, start=start, terrain=self._terrain)
         fresh._rhythms, fresh._sways = self._rhythms, self._sways
         fresh._clamped, fresh._fastest = self._clamped, self._fastest
-        fresh._probes = self._probes
+        fresh._probes, fresh._kept_probes = self._probes, self._kept_probes
         fresh._settings = self._settings
         return fresh
 
@@ -566,7 +623,7 @@ class GaitPlanner:
                 def cycle_of(candidate):
                     return self.rhythm(params, candidate).cycle_s
             self._clamped[key] = clamp_velocity(twist, params, self.robot, self.layout,
-                                                cycle_of, self._fastest)
+                                                cycle_of, self._fastest, self._kept_probes)
         return self._clamped[key]
 
     def set_parameters(self, params: GaitParameters, now_s: float,
@@ -585,6 +642,7 @@ class GaitPlanner:
         if swing_timing is not ... and swing_timing is not self._timing:
             self._timing = swing_timing
             self._rhythms, self._clamped, self._fastest = {}, {}, {}
+            self._kept_probes = {}  # (another model's)
         self._keep_out_m = keep_out_m
         twist, _ = self._clamp(self._requested, params)
         self._params, self._twist = params, twist
@@ -1012,13 +1070,50 @@ class GaitPlanner:
                       for slot in slots))
 
     def _probed(self, key: tuple, compute):
-        """``compute()``, once per ``key`` (see :meth:`_step_geometry`; shared by forks)."""
+        """``compute()``, once per ``key`` (see :meth:`_step_geometry`; shared by forks).
+
+        Or the probe kept on disk by that name (:meth:`take_probes`).
+        """
         known = self._probes.get(key)
         if known is None:
             if len(self._probes) > 256:
                 self._probes.clear()
-            known = self._probes[key] = compute()
+            kept = (self._kept_probes.get(_probe_name(key, self._timing, self._terrain))
+                    if self._kept_probes else None)
+            try:
+                known = None if kept is None else _decoded(kept)
+            except (TypeError, ValueError, KeyError):
+                known = None  # not a probe: computed
+            self._probes[key] = known = compute() if known is None else known
         return known
+
+    def probes_to_keep(self) -> dict[str, object]:
+        """The probes of the steps planned so far on flat ground, for :meth:`take_probes`.
+
+        And the fastest walks searched (:func:`clamp_velocity`).
+
+        By names another process finds them by (the probe's geometry, its swing timing model
+        aside: the caller keeps them per model), as JSON values (exactly: floats in full).
+        """
+        kept = {_probe_name(('fastest', *key), None, None): float(fraction)
+                for key, fraction in self._fastest.items()}
+        for key, value in self._probes.items():
+            name = _probe_name(key, self._timing, self._terrain)
+            if name is not None:
+                kept[name] = _encoded(value)
+        return kept
+
+    def take_probes(self, kept: dict[str, object]) -> None:
+        """Take the probes ``kept`` instead of computing them, for the steps they are of.
+
+        ``kept``: :meth:`probes_to_keep` of a plan with this swing timing model.
+
+        The main job plans its scenario's first walk before the graph starts and keeps its
+        probes on disk (:func:`gait_nodes.swing.still_body.keep_probes`); the footstep planner
+        then plans that walk, its rehearsal and its first change in a fraction of a second.
+        Forks and plans anew share them.
+        """
+        self._kept_probes = dict(kept)
 
     def check_joint_speeds(self, probe, from_s: float) -> None:
         """Raise unless the joints can walk every step from ``from_s`` on in its planned time.

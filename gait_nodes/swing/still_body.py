@@ -446,6 +446,50 @@ def _stored_times_path(timing) -> Path | None:
     return cache_dir() / f'still_{robot.name}_{digest.hexdigest()[:16]}.json'
 
 
+#: Most step probes kept on disk for one swing timing model (:func:`keep_probes`; the oldest
+#: go first). A first walk of 20 s keeps about 20.
+MAX_KEPT_PROBES = 400
+
+
+def _kept_probes_path(timing) -> Path | None:
+    times = _stored_times_path(timing)
+    return None if times is None else times.with_name(f'probes_{times.name}')
+
+
+def kept_probes(timing) -> dict[str, object]:
+    """The step probes kept on disk for ``timing``'s plans ({}: none, or an unreadable file).
+
+    See :meth:`gait_nodes.planning.footsteps.GaitPlanner.take_probes`; the file is named, like
+    the node times', by what the probes follow from (the package's source among it).
+    """
+    path = _kept_probes_path(timing)
+    if path is None:
+        return {}
+    try:
+        probes = json.loads(path.read_text())['probes']
+    except (OSError, ValueError, TypeError, KeyError):
+        return {}
+    return probes if isinstance(probes, dict) else {}
+
+
+def keep_probes(timing, probes: dict[str, object]) -> None:
+    """Add ``probes`` (:meth:`GaitPlanner.probes_to_keep`) to those kept for ``timing``."""
+    path = _kept_probes_path(timing)
+    if path is None:
+        return
+    kept = kept_probes(timing)
+    if probes.keys() <= kept.keys():
+        return
+    kept.update(probes)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        partial = path.with_name(f'{path.name}.{os.getpid()}.tmp')
+        partial.write_text(json.dumps({'probes': dict(list(kept.items())[-MAX_KEPT_PROBES:])}))
+        os.replace(partial, path)
+    except OSError:
+        pass  # a read-only cache: probed again next time
+
+
 def still_body_of(timing) -> StillBody:
     """The (cached) :class:`StillBody` view of a swing timing model."""
     view = _VIEWS.get(timing)
