@@ -430,3 +430,24 @@ def test_a_first_walks_probes_kept_on_disk_plan_it_alike_in_another_planner(tmp_
     assert '_still_body_zmp' in probes
     path.write_text('{"probes": {"')
     assert kept_probes(timing) == {}
+
+
+def test_the_first_static_step_from_standstill_takes_what_it_needs(still):
+    # Its swings go half a stride to the crawl's stance (less than the rhythm's): stretched to
+    # the rhythm's period, it would stand a second and a half longer; the path starts earlier.
+    from gait_nodes.planning.footsteps import START_SHIFT_S
+
+    model = robot()
+    params = GaitParameters.for_robot(model.description, gait='static_crawl',
+                                      timing='joint_limit', step_height_m=0.06)
+    planner = GaitPlanner(model.description, params, swing_timing=still.source)
+    planner.set_velocity(Twist2D(0.1), 0.0)
+    planner.advance(20.0)
+    first, second = [step for step in planner.steps if step.slots][:2]
+    rhythm = planner.rhythm()
+    assert first.end_s - first.start_s < 0.9 * (rhythm.step_period_s + START_SHIFT_S)
+    # Each of its swings as long as a probe of it needs (and the retiming allowance).
+    for slot in first.slots:
+        duration = slot.touch_down_s - slot.lift_off_s
+        assert duration < 0.9 * rhythm.swing_s
+    assert second.end_s - second.start_s > rhythm.step_period_s  # catching up: longer steps
