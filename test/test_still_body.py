@@ -137,13 +137,19 @@ def test_the_static_crawl_needs_closed_form_limb_ik():
         GaitParameters.for_robot(listed, gait='static_crawl').check_robot(listed)
 
 
+def static_walk(still, until_s: float) -> tuple[GaitPlanner, GaitParameters]:
+    """RoboSimian's static crawl (0.06 m lift) asked 0.1 m/s from standstill, planned ahead."""
+    params = GaitParameters.for_robot(robot().description, gait='static_crawl',
+                                      timing='joint_limit', step_height_m=0.06)
+    planner = GaitPlanner(robot().description, params, swing_timing=still.source)
+    planner.set_velocity(Twist2D(0.1), 0.0)
+    planner.advance(until_s)
+    return planner, params
+
+
 def test_a_static_crawl_plan_keeps_its_zmp_inside_and_its_body_still_between_moves(still):
     model = robot()
-    params = GaitParameters.for_robot(model.description, gait='static_crawl',
-                                      timing='joint_limit', step_height_m=0.06)
-    planner = GaitPlanner(model.description, params, swing_timing=still.source)
-    planner.set_velocity(Twist2D(0.1), 0.0)
-    planner.advance(25.0)
+    planner, params = static_walk(still, 25.0)
     walking = [step for step in planner.steps if step.slots]
     assert len(walking) >= 3
     for step in walking:
@@ -318,6 +324,20 @@ def test_the_node_times_are_kept_on_disk_and_found_by_the_next_planner(tmp_path,
     assert StillBody(PolynomialSwingTiming(robot(), 2, 1.0, 0.06)).stored
 
 
+def counted_probes(monkeypatch) -> list[str]:
+    """The names of the planner's step probes (the limb IK's) as they are called, from now."""
+    probes = []
+    for name in ('_still_bases', '_slot_needs', '_needed_transfer_s', '_still_body_zmp'):
+        original = getattr(GaitPlanner, name)
+
+        def counted(self, *args, _original=original, _name=name, **kwargs):
+            probes.append(_name)
+            return _original(self, *args, **kwargs)
+
+        monkeypatch.setattr(GaitPlanner, name, counted)
+    return probes
+
+
 def test_a_walk_planned_again_from_later_or_anew_takes_its_probes_from_the_first(still,
                                                                                   monkeypatch):
     # A change planned again from a later join, or by a planner that joined the graph where
@@ -331,15 +351,7 @@ def test_a_walk_planned_again_from_later_or_anew_takes_its_probes_from_the_first
     walk = first.fork()
     walk.set_velocity(Twist2D(0.1), 1.0)
     walk.advance(25.0)
-    probes = []
-    for name in ('_still_bases', '_slot_needs', '_needed_transfer_s', '_still_body_zmp'):
-        original = getattr(GaitPlanner, name)
-
-        def counted(self, *args, _original=original, _name=name, **kwargs):
-            probes.append(_name)
-            return _original(self, *args, **kwargs)
-
-        monkeypatch.setattr(GaitPlanner, name, counted)
+    probes = counted_probes(monkeypatch)
     anew = first.anew(np.zeros(3))
     anew.advance(30.0)
     for planner, at_s in ((first.fork(), 3.3), (anew, 4.1)):
@@ -393,15 +405,7 @@ def test_a_first_walks_probes_kept_on_disk_plan_it_alike_in_another_planner(tmp_
     keep_probes(timing, first.probes_to_keep())
     (path,) = (tmp_path / 'gait_nodes').glob('probes_still_robosimian_*.json')
     assert 4 <= len(kept_probes(timing)) <= MAX_KEPT_PROBES
-    probes = []
-    for name in ('_still_bases', '_slot_needs', '_needed_transfer_s', '_still_body_zmp'):
-        original = getattr(GaitPlanner, name)
-
-        def counted(self, *args, _original=original, _name=name, **kwargs):
-            probes.append(_name)
-            return _original(self, *args, **kwargs)
-
-        monkeypatch.setattr(GaitPlanner, name, counted)
+    probes = counted_probes(monkeypatch)
     rhythms = []
     rhythm = GaitPlanner.rhythm
     monkeypatch.setattr(GaitPlanner, 'rhythm',
@@ -437,12 +441,7 @@ def test_the_first_static_step_from_standstill_takes_what_it_needs(still):
     # the rhythm's period, it would stand a second and a half longer; the path starts earlier.
     from gait_nodes.planning.footsteps import START_SHIFT_S
 
-    model = robot()
-    params = GaitParameters.for_robot(model.description, gait='static_crawl',
-                                      timing='joint_limit', step_height_m=0.06)
-    planner = GaitPlanner(model.description, params, swing_timing=still.source)
-    planner.set_velocity(Twist2D(0.1), 0.0)
-    planner.advance(20.0)
+    planner, _ = static_walk(still, 20.0)
     first, second = [step for step in planner.steps if step.slots][:2]
     rhythm = planner.rhythm()
     assert first.end_s - first.start_s < 0.9 * (rhythm.step_period_s + START_SHIFT_S)
