@@ -451,3 +451,43 @@ def test_in_a_thread_a_new_directions_search_is_not_counted_as_planning_time():
     assert plans == 1
     assert SlowToWalk.searched == {Twist2D(0.1), Twist2D(0.0, 0.05)}
     assert joined_s >= 1.0 + 0.2 + online.LEAD_MARGIN_S  # after the search
+
+
+class SlowSteps(GaitPlanner):
+    """A planner on a loaded machine: every walking step it plans takes STEP_S (its probes)."""
+
+    def advance(self, until_s):
+        """As the planner's, STEP_S later for each walking step added."""
+        before = len(self.steps)
+        changed = super().advance(until_s)
+        time.sleep(STEP_S * sum(1 for step in self.steps[before:] if step.slots))
+        return changed
+
+
+STEP_S = 0.15
+
+
+def test_in_a_thread_a_change_counts_the_planning_of_its_new_steps_in_its_lead():
+    # The last change's planning time may be next to nothing (a first walk rehearsed); a
+    # command joins a later boundary and plans its steps anew, each as long as the walking
+    # steps planned ahead lately: its lead counts them, and it is planned once.
+    start = time.monotonic_ns()
+    planner = SlowSteps(QUADRUPED)
+    planner.set_velocity(Twist2D(0.1), 0.0)
+    worker = OnlinePlanner(planner, 0, lambda: time.monotonic_ns() - start, cover_s=6.0,
+                           lead_s=0.3, threaded=True)
+    worker.start()
+    tries = []
+    try:
+        time.sleep(1.5)  # walking, planned ahead
+
+        def counted(fork, at_s):
+            tries.append(at_s)
+            step_length(0.15)(fork, at_s)
+
+        worker.submit_command('longer', '{}', counted)
+        (decision, *_) = decisions_within(worker, 20.0)
+        assert decision.state == ACCEPTED
+        assert len(tries) == 1
+    finally:
+        worker.stop()

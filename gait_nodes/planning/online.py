@@ -65,6 +65,12 @@ REMEMBERED_IDS = 1000
 WORK_HEADROOM = 1.5
 #: :meth:`OnlinePlanner.delivered`'s delay of the plans out lately decays by this a plan.
 DELIVERY_DECAY = 0.9
+#: The planning time of a walking step planned ahead lately (``OnlinePlanner._step_s``) decays
+#: by this a step.
+STEP_DECAY = 0.9
+#: Steps a change plans anew until it is first measured (its join's and those checked after
+#: it, :data:`CHECK_CYCLES` cycles: a crawl's two a cycle).
+CHANGE_STEPS = 5
 #: A standing robot's plan is kept this far ahead [s] (:meth:`OnlinePlanner._extend`).
 STANDING_COVER_S = 30.0
 #: A stopping node waits this long for the job under way [s] (:meth:`OnlinePlanner.stop`).
@@ -252,6 +258,10 @@ class OnlinePlanner:
         self._pending: set[str] = set()  # ids submitted, not decided yet
         self._to_apply: list[Answer] = []  # accepted, not taken effect yet
         self._work_s = 0.0  # the last candidate's planning time [s]
+        # A walking step's planning time lately (each probed anew, as a change's steps are)
+        # [s], and how many steps the last change planned anew.
+        self._step_s = 0.0
+        self._change_steps = CHANGE_STEPS
         # The rehearsed walk (the twist walked) and its planning time from cold caches [s],
         # until the first change: one that walks another twist counts that time in its lead.
         self._rehearsed: tuple[Twist2D, float] | None = None
@@ -495,7 +505,11 @@ class OnlinePlanner:
         self._rehearsed = None
         least_s = self._least_lead_s()
         margin_s = LEAD_MARGIN_S + self._delivery_s
-        lead_s = least_s + margin_s + WORK_HEADROOM * self._work_s
+        # The last change's planning time, or, if longer, what planning as many new steps as
+        # it did takes lately: a change walked from a new boundary probes its steps anew (the
+        # last one may have found its probes made, a first walk rehearsed).
+        lead_s = least_s + margin_s + WORK_HEADROOM * max(
+            self._work_s, self._change_steps * self._step_s)
         for _ in range(MAX_ATTEMPTS):
             started = time.monotonic()
             at_s = self._now_s() + lead_s
@@ -526,8 +540,9 @@ class OnlinePlanner:
             # planning may have spent the rest of the lead, not that.
             if at_s - self._now_s() >= least_s + margin_s or not self._threaded:
                 self._ready_s = time.monotonic()
-                takes_effect_ns = self._origin_ns + int(round(
-                    fork.next_boundary_s(at_s) * NS_PER_S))
+                join_s = fork.next_boundary_s(at_s)
+                takes_effect_ns = self._origin_ns + int(round(join_s * NS_PER_S))
+                self._change_steps = sum(1 for step in fork.steps if step.start_s >= join_s)
                 self._live = fork
                 self._handed_over(job, result, takes_effect_ns)
                 return
@@ -709,6 +724,7 @@ class OnlinePlanner:
         # cover the horizon until that change is out; on a loaded machine a change took more
         # than cover_s); deterministic callers plan in no time.
         ahead_s = self.cover_s + WORK_HEADROOM * self._work_s
+        started, before = time.monotonic(), len(self._live.steps)
         try:
             added = self._live.advance(
                 now_s + (max(ahead_s, STANDING_COVER_S) if standing else ahead_s))
@@ -717,6 +733,9 @@ class OnlinePlanner:
             self._emit(Failure(exc, 'planning ahead'))
             added = True
         steps = len(self._live.steps)
+        if self._threaded and not standing and steps > before:
+            self._step_s = max((time.monotonic() - started) / (steps - before),
+                               STEP_DECAY * self._step_s)
         self._live.prune(now_s - 1.0)
         return added or len(self._live.steps) != steps
 
