@@ -236,7 +236,8 @@ def test_a_value_table_swing_probed_with_accelerations_keeps_them_as_the_ik_comm
     exceeds either (the probe's 2 % tracking margin aside). Probed on the swing shape's ~60
     samples, the time was 5 % short: the joints then asked 1.1 times the acceleration limit.
     The swing's time law takes the acceleration limit in (:mod:`gait_nodes.swing.time_law`):
-    it is 0.2 s longer than at 20 rad/s^2.
+    where it is timed (the static crawl's stance) the swing is over 0.1 s longer than at
+    20 rad/s^2.
     """
     from gait_nodes.robot.model import RobotModel
     from gait_nodes.swing.cache import load_or_build
@@ -250,7 +251,7 @@ def test_a_value_table_swing_probed_with_accelerations_keeps_them_as_the_ik_comm
     still = StillBody(timing)
     fast = StillBody(TableSwingTiming(SwingPolicy(table, robot()), robot()))
     base = np.array([0.0, 0.0, model.description.body_height_m])
-    feet = model.nominal_feet_in_world(base, 0.0)
+    feet = model.nominal_feet_in_world(base, 0.0, 'static_crawl')  # where its law is timed
     yaws = np.zeros(len(feet))
     for name in ('front_left', 'rear_right'):
         foot = model.foot_names.index(name)
@@ -450,3 +451,25 @@ def test_the_first_static_step_from_standstill_takes_what_it_needs(still):
         duration = slot.touch_down_s - slot.lift_off_s
         assert duration < 0.9 * rhythm.swing_s
     assert second.end_s - second.start_s > rhythm.step_period_s  # catching up: longer steps
+
+
+def test_the_rhythm_times_the_steady_walk_where_it_puts_the_feet(still):
+    # The steady steps walk the rhythm's period and the path's speed: the rhythm times each
+    # swing off its stance place by the path's advance between the slots (the fore foot lands
+    # further along than the hind one) and the body's move with one side half a stride ahead.
+    # Timed at the stance with the feet abreast, the steps needed 6 % more than the rhythm
+    # gave them and the path waited every step.
+    planner, _ = static_walk(still, 45.0)
+    rhythm, twist = planner.rhythm(), planner.twist
+    steady = [step for step in planner.steps if step.slots][-4:]
+    for step in steady:
+        assert step.end_s - step.start_s == pytest.approx(rhythm.step_period_s, rel=1e-9)
+        moved = step.bases[1][0] - step.bases[0][0]
+        assert moved / (step.end_s - step.start_s) == pytest.approx(twist.vx_m_s, rel=1e-3)
+    lag = np.array([0.05, 0.0])
+    shifts = still.steady_shifts(lag)
+    names = [foot.name for foot in robot().description.feet]
+    for side in ('left', 'right'):
+        fore, hind = names.index(f'front_{side}'), names.index(f'rear_{side}')
+        np.testing.assert_allclose(shifts[fore] - shifts[hind], lag)
+        np.testing.assert_allclose(shifts[fore] + shifts[hind], 0.0, atol=1e-15)

@@ -123,11 +123,27 @@ def cycle_displacements(layout: FootLayout, params: GaitParameters, twist, cycle
 
 
 def swing_time_s(timing, displacements: np.ndarray, turn_rad: float,
-                 feet: range | list[int] | None = None, combine=max) -> float:
-    """Longest (or ``combine``'s) least swing time [s] over ``feet`` (default all)."""
+                 feet: range | list[int] | None = None, combine=max,
+                 shifts: np.ndarray | None = None) -> float:
+    """Longest (or ``combine``'s) least swing time [s] over ``feet`` (default all).
+
+    ``shifts``: (F, 2) each swing's centre off its stance place [m] (a static crawl's,
+    :meth:`gait_nodes.swing.still_body.StillBody.steady_shifts`).
+    """
     feet = range(len(displacements)) if feet is None else feet
-    times = [timing.swing_s(f, displacements[f], turn_rad) for f in feet]
+    times = [timing.swing_s(f, displacements[f], turn_rad) if shifts is None
+             else timing.swing_s(f, displacements[f], turn_rad, shifts[f]) for f in feet]
     return float(combine(times)) if times else timing.lift_and_lower_s()
+
+
+def steady_lag(displacements: np.ndarray, rhythm: Rhythm) -> np.ndarray:
+    """(2,) the path's advance between a step's swing slots in steady walking [m], body frame.
+
+    A foothold is placed on the path at its touch-down, so a step's later slot lands what the
+    path moves in one swing further along (a static crawl's fore foot ahead of its hind one).
+    """
+    return np.asarray(displacements, dtype=float).mean(axis=0) * (rhythm.swing_s
+                                                                 / rhythm.cycle_s)
 
 
 def transfer_move(gait: str, layout: FootLayout, params: GaitParameters, twist,
@@ -179,14 +195,21 @@ def walking_rhythm(gait: str, layout: FootLayout, params: GaitParameters, twist,
     for _ in range(MAX_ITERATIONS):
         displacements, turn = cycle_displacements(layout, params, twist, rhythm.cycle_s, gait)
         try:
-            # A static crawl's swings each take their own time (the planner shares a step's
-            # period among them): its cycle holds their mean.
-            swing_s = swing_time_s(timing, displacements, turn,
-                                   combine=np.mean if gait == 'static_crawl' else max)
+            if gait == 'static_crawl':
+                # Its swings each take their own time (the planner shares a step's period
+                # among them): its cycle holds their mean. Each is timed, and the body's move,
+                # where the steady walk has the feet (a stride's stagger, the slots' lag).
+                lag = steady_lag(displacements, rhythm)
+                swing_s = swing_time_s(timing, displacements, turn, combine=np.mean,
+                                       shifts=timing.steady_shifts(lag))
+            else:
+                lag = None
+                swing_s = swing_time_s(timing, displacements, turn)
             following = rhythm_for_swing(gait, swing_s, in_place, timing.name, body_move_s)
             if abs(following.cycle_s - rhythm.cycle_s) < CYCLE_TOLERANCE_S:
-                needed = timing.steady_transfer_s(transfer_move(gait, layout, params, twist,
-                                                                following, memo))
+                move = transfer_move(gait, layout, params, twist, following, memo)
+                needed = (timing.steady_transfer_s(move) if lag is None
+                          else timing.steady_transfer_s(move, lag))
                 if abs(needed - body_move_s) < BODY_MOVE_TOLERANCE_S:
                     return following
                 body_move_s = needed

@@ -16,16 +16,21 @@ limb IK of its family:
   placed path; the other limbs do not move);
 - a body move with every foot down (:meth:`StillBody.transfer_s`: every limb's joints while the
   base runs along the segment in a minimum-jerk time law);
-- and, for the rhythm of steady walking (:mod:`gait_nodes.planning.rhythm`), the same at the
-  nominal stance (:meth:`StillBody.swing_s`, :meth:`StillBody.steady_transfer_s`), times
-  ``1 + STILL_MARGIN`` for the stance of a walk being a part of a stride off the nominal one
-  (the planner probes every planned step where it happens and re-times one timed short).
+- and, for the rhythm of steady walking (:mod:`gait_nodes.planning.rhythm`), the same where
+  the steady walk puts the feet (:meth:`StillBody.swing_s`, :meth:`StillBody.steady_transfer_s`,
+  :meth:`StillBody.steady_shifts`): each swing centred off its stance place by the path's
+  advance between the step's swing slots (the fore foot, swung a swing later than the hind
+  one, lands that much further ahead), the body moving with one side's feet half a stride
+  ahead of the other's. Times ``1 + STILL_MARGIN`` for what the model leaves out (the body's
+  place over the support triangles; the planner probes every planned step where it happens
+  and re-times one timed short).
 """
 
 from __future__ import annotations
 
 import functools
 import hashlib
+import itertools
 import json
 import math
 import os
@@ -35,6 +40,7 @@ from pathlib import Path
 import numpy as np
 
 from gait_nodes.errors import SwingPolicyError
+from gait_nodes.planning.layout import FootLayout
 from gait_nodes.robot.model import yaw_rotation
 from gait_nodes.swing.timing import (
     LATTICE,
@@ -45,9 +51,12 @@ from gait_nodes.swing.timing import (
 
 #: The gait this module times (its stance: ``gait_stances`` in the robot YAML, if given).
 GAIT = 'static_crawl'
-#: Relative extra time of the steady rhythm's swings and body moves over their probe at the
-#: nominal stance (the planner re-times a planned step that needs more).
-STILL_MARGIN = 0.05
+#: Relative extra time of the steady rhythm's swings and body moves over their probe where the
+#: steady walk puts the feet (the planner re-times a planned step that needs more).
+STILL_MARGIN = 0.015
+#: Spacing [m] of the lattice of foot shifts (a swing's centre off its stance place; the path's
+#: advance between swing slots) the steady rhythm's times are interpolated on.
+SHIFT_LATTICE_M = 0.01
 #: Relative extra time of a probed swing for the whole-body IK's tracking: it holds the full-model
 #: COM on the preview controller's COM, which is off the planned one by a millimetre or two, so
 #: the body is not quite still under the swing. Measured on RoboSimian's static crawl (0.06 m
@@ -63,11 +72,11 @@ GRAVITY_M_S2 = 9.81
 #: along a half cosine, cruises, and falls the same way (:func:`body_move`). Its speed peaks
 #: ``1 / (1 - RAMP_FRACTION)`` times above the mean, where a minimum-jerk move's peaks 1.875
 #: times: the move needs that much less time at the joint limit. Shorter ramps need less time
-#: at the velocity limit (RoboSimian's half-stride move: 0.499 s; 0.468 s at 0.2, where the
-#: acceleration limit meets it) but jerk the ZMP reference more: at 0.2 the preview controller
-#: starts the COM early enough to move the body 3.6 mm under the fore swing before each move
-#: (1.9 mm at 0.25), for 1 % of speed.
-RAMP_FRACTION = 0.25
+#: at the velocity limit (RoboSimian's steady 0.13 m move: 0.75 s at 0.25, 0.70 s at 0.2) but
+#: jerk the ZMP reference more, and the preview controller starts the COM earlier before each
+#: move: at 0.2 the body moves at most 2.4 mm under a swing of the default scenario (2.0 mm
+#: after the start; 1.5 mm in the gait switch's static crawl), at 0.15 4.4 mm (session 21).
+RAMP_FRACTION = 0.2
 #: Peak speed over mean speed of :func:`body_move`.
 BODY_MOVE_PEAK_FACTOR = 1.0 / (1.0 - RAMP_FRACTION)
 #: Peak acceleration of :func:`body_move` over a unit move in unit time.
@@ -96,7 +105,7 @@ class StillBody:
                        for foot in self.robot.description.feet]
         #: Lattice node and the swing's centre offset -> least swing time at the node [s].
         self._swing_s: dict[tuple, float] = {}
-        self._transfer_s: dict[tuple[int, int], float] = {}
+        self._transfer_s: dict[tuple[int, int, int, int], float] = {}
         self._q_posture = self.robot.joint_positions(
             self.robot.configuration(np.zeros(3), 0.0))
         height = float(self.robot.description.body_height_m)
@@ -110,6 +119,8 @@ class StillBody:
         centre = self.robot.description.feet[timing._reference].nominal_position_in_base[:2]
         self._offsets = [tuple(np.round(stance[k, :2] * mirror - centre, 6).tolist())
                          for k, mirror in enumerate(timing._mirror_floats)]
+        #: The gait's steps, each its swing slots in order (the hind foot, then the fore one).
+        self._groups = FootLayout.of(self.robot.description).swing_groups(GAIT)
         self._stored = _stored_times_path(timing)
         self._found_stored = False
         self._load_stored()
@@ -269,23 +280,51 @@ class StillBody:
 
     # --- the steady rhythm (gait_nodes.planning.rhythm) ----------------------------------------
 
-    def swing_s(self, foot: int, step_in_base: np.ndarray, turn_rad: float = 0.0) -> float:
-        """Least time [s] of foot ``foot``'s swing by ``step_in_base`` at the nominal stance.
+    def steady_shifts(self, lag_in_base) -> np.ndarray:
+        """(F, 2) each foot's swing centre off its stance place in steady walking [m].
 
+        The footholds are placed on the path at their touch-downs, so a step's later swing slot
+        lands the path's advance between the slots (``lag_in_base``, body frame) further along
+        than the earlier one: the slots' centres are spread around the stance place by it
+        (hind -lag/2, fore +lag/2 in a static crawl's step of two slots).
+        """
+        lag = np.asarray(lag_in_base, dtype=float)[:2]
+        shifts = np.zeros((len(self._limbs), 2))
+        for group in self._groups:
+            for j, slot in enumerate(group):
+                for foot in slot:
+                    shifts[foot] = (j - 0.5 * (len(group) - 1)) * lag
+        return shifts
+
+    def swing_s(self, foot: int, step_in_base: np.ndarray, turn_rad: float = 0.0,
+                shift_in_base=(0.0, 0.0)) -> float:
+        """Least time [s] of foot ``foot``'s swing by ``step_in_base``, centred off its place.
+
+        ``shift_in_base``: the swing's centre off the foot's stance place, body frame [m]
+        (:meth:`steady_shifts`).
         The front-right limb's mirrored step, its shape (:meth:`SwingTiming.shape`) timed
         through its own limb IK, times ``1 + STILL_MARGIN``; interpolated between the nodes of
-        :data:`LATTICE` (each timed once): continuous in the step, so that the rhythm's search
-        of the fastest velocity meets no steps, and a handful of limb IK runs serve it.
+        :data:`LATTICE` and of :data:`SHIFT_LATTICE_M` (each timed once): continuous in the
+        step and the shift, so that the rhythm's search of the fastest velocity meets no steps,
+        and a handful of limb IK runs serve it.
         """
         mirror = self.source._mirror_floats[foot]
         point = (float(step_in_base[0]) * mirror[0], float(step_in_base[1]) * mirror[1],
                  mirror[0] * mirror[1] * float(turn_rad))
-        return (1.0 + STILL_MARGIN) * self.factor * lattice_interpolated(
-            point, lambda node: self._node_swing_s(node, foot))
+        shift = (float(shift_in_base[0]) * mirror[0], float(shift_in_base[1]) * mirror[1])
+        return (1.0 + STILL_MARGIN) * (1.0 + TRACKING_MARGIN) * self.factor * _multilinear(
+            shift, (SHIFT_LATTICE_M,) * 2, lambda shift_node: lattice_interpolated(
+                point, lambda node: self._node_swing_s(node, foot, shift_node)))
 
-    def _node_swing_s(self, node: tuple[int, int, int], foot: int) -> float:
-        """Least swing time [s] of foot ``foot`` at lattice node ``node``, at its stance place."""
-        offset = self._offsets[foot]
+    def _node_swing_s(self, node: tuple[int, int, int], foot: int,
+                      shift_node: tuple[int, int] = (0, 0)) -> float:
+        """Least swing time [s] of foot ``foot`` at lattice node ``node``, shifted.
+
+        Its centre is off the foot's stance place by the shift lattice's node ``shift_node``
+        (in the limb's mirrored frame).
+        """
+        offset = tuple(round(value + SHIFT_LATTICE_M * k, 6)
+                       for value, k in zip(self._offsets[foot], shift_node, strict=True))
         key = (*node, *offset)  # mirrored feet (the same offset) share their times
         if key not in self._swing_s:
             if len(self._swing_s) > 4096:
@@ -307,21 +346,43 @@ class StillBody:
         """Swing time [s] of a step in place (the lift and the lowering)."""
         return self.swing_s(self.source._reference, np.zeros(2), 0.0)
 
-    def steady_transfer_s(self, move_in_base: np.ndarray) -> float:
+    def steady_transfer_s(self, move_in_base: np.ndarray, lag_in_base=(0.0, 0.0)) -> float:
         """Body-move time [s] of a steady walk whose body moves ``move_in_base`` (2,).
 
-        :meth:`transfer_s` at the nominal stance, centred on it, times ``1 + STILL_MARGIN``;
-        cached on :data:`LATTICE`'s resolution.
+        The feet stand where the steady walk has them when the body moves: each at its swing's
+        centre (:meth:`steady_shifts` of ``lag_in_base``, the path's advance between a step's
+        swing slots), the side that has just swung half a move ahead of it and the other side
+        half a move behind (it swung half a cycle earlier); the base moves from half a move
+        behind the stance's centre to half a move ahead. :meth:`transfer_s` of the slower of the
+        two steps, times ``1 + STILL_MARGIN``; interpolated between the nodes of ``LATTICE`` (the
+        move) and :data:`SHIFT_LATTICE_M` (the lag), each timed once.
         """
-        key = tuple(int(round(abs(float(v)) / step)) for v, step in
-                    zip(move_in_base[:2], LATTICE[:2], strict=True))
-        if key not in self._transfer_s:
-            half = 0.5 * np.array([key[0] * LATTICE[0], key[1] * LATTICE[1], 0.0])
-            self._transfer_s[key] = (1.0 + STILL_MARGIN) * self.transfer_s(
-                self._feet, np.zeros(len(self._feet)), 0.0, self._base - half,
-                self._base + half, True)
+        point = (float(move_in_base[0]), float(move_in_base[1]), float(lag_in_base[0]),
+                 float(lag_in_base[1]))
+        return (1.0 + STILL_MARGIN) * _multilinear(
+            point, (*LATTICE[:2], SHIFT_LATTICE_M, SHIFT_LATTICE_M), self._node_transfer_s)
+
+    def _node_transfer_s(self, node: tuple[int, int, int, int]) -> float:
+        """Body-move time [s] at a node of :meth:`steady_transfer_s`'s lattice.
+
+        ``node``: the move's x and y on ``LATTICE``, the lag's on :data:`SHIFT_LATTICE_M`.
+        """
+        if node not in self._transfer_s:
+            move = np.array([node[0] * LATTICE[0], node[1] * LATTICE[1], 0.0])
+            lag = np.array([node[2], node[3]], dtype=float) * SHIFT_LATTICE_M
+            centres = self._feet.copy()
+            centres[:, :2] += self.steady_shifts(lag)
+            times = []
+            for group in self._groups:
+                swung = np.zeros(len(centres), dtype=bool)
+                swung[[foot for slot in group for foot in slot]] = True
+                feet = centres + np.where(swung[:, None], 0.5, -0.5) * move
+                times.append(self.transfer_s(feet, np.zeros(len(feet)), 0.0,
+                                             self._base - 0.5 * move, self._base + 0.5 * move,
+                                             True))
+            self._transfer_s[node] = max(times)
             self._store()
-        return self._transfer_s[key]
+        return self._transfer_s[node]
 
     # --- the node times on disk ----------------------------------------------------------------
 
@@ -353,6 +414,25 @@ class StillBody:
             os.replace(partial, self._stored)
         except OSError:
             pass  # a read-only cache: the times are computed again next time
+
+
+def _multilinear(point, spacing, node_value) -> float:
+    """Multilinear interpolation of ``node_value`` at ``point`` on a lattice of ``spacing``.
+
+    ``node_value`` takes a node's integer key. The corners with a zero weight are never asked
+    (a straight walk has no sideways shift).
+    """
+    scaled = [value / step for value, step in zip(point, spacing, strict=True)]
+    low = [math.floor(value) for value in scaled]
+    weights = [((0, 1.0 - (value - corner)), (1, value - corner))
+               for value, corner in zip(scaled, low, strict=True)]
+    total = 0.0
+    for corner in itertools.product(*weights):
+        weight = math.prod(w for _, w in corner)
+        if weight != 0.0:
+            total += weight * node_value(tuple(base + k for base, (k, _) in
+                                               zip(low, corner, strict=True)))
+    return total
 
 
 class _Limb:

@@ -32,10 +32,10 @@ from gait_nodes.errors import SwingPolicyError
 # second, which a node must not spend in the callback of its first swing.
 logging.getLogger('toppra').setLevel(logging.WARNING)  # it logs every solve at INFO
 
-#: Grid points of the parameterization along the path (12 ms apart on a 1.2 s swing): the
+#: Grid points of the parameterization along the path (8 ms apart on a 1.2 s swing): the
 #: limits hold at them, and between them to about 1 % (velocity) and 5 % (acceleration); the
 #: callers keep a share of the acceleration limit for that.
-GRID_POINTS = 100
+GRID_POINTS = 150
 
 
 def fastest_times(u: np.ndarray, joints: np.ndarray, velocity_limits: np.ndarray,
