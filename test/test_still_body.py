@@ -473,3 +473,31 @@ def test_the_rhythm_times_the_steady_walk_where_it_puts_the_feet(still):
         fore, hind = names.index(f'front_{side}'), names.index(f'rear_{side}')
         np.testing.assert_allclose(shifts[fore] - shifts[hind], lag)
         np.testing.assert_allclose(shifts[fore] + shifts[hind], 0.0, atol=1e-15)
+
+
+def test_a_fork_taking_another_model_finds_what_a_fork_searched_with_it(still, monkeypatch):
+    # A gait command planned on a fork that missed its join leaves the new model's fastest-walk
+    # search to the fork its next try plans on (it searched again: seconds, a busy machine's
+    # switch to the ZMP crawl 4 s); switching back finds the first model's.
+    from gait_nodes.planning import rhythm as rhythm_module
+
+    planner, params = static_walk(still, 10.0)
+    crawl = params.replace(gait='crawl')
+    other = PolynomialSwingTiming(robot(), 2, 1.0, 0.06)
+    searched = []
+    real = rhythm_module.walking_rhythm
+
+    def counted(gait, *args, **kwargs):
+        searched.append(gait)
+        return real(gait, *args, **kwargs)
+
+    monkeypatch.setattr(rhythm_module, 'walking_rhythm', counted)
+    planner.fork().set_parameters(crawl, 8.0, swing_timing=other)
+    assert searched and set(searched) == {'crawl'}
+    searched.clear()
+    again = planner.fork()
+    again.set_parameters(crawl, 8.0, swing_timing=other)
+    assert searched == []  # the first fork's search
+    again.set_parameters(params, 9.0, swing_timing=still.source)
+    assert searched == []  # the static crawl's, from before the switch
+    assert again.twist == planner.twist

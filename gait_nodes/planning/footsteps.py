@@ -52,6 +52,8 @@ START_SHIFT_S = 1.0
 #: Part of that weight shift during which the ZMP reference holds still (the COM controller's
 #: preview of the shift).
 START_HOLD_FRACTION = 0.5
+#: Swing timing models whose rhythm and velocity caches a plan and its forks keep.
+MODELS_CACHED = 8
 #: A step re-timed for swings longer than its rhythm's gets this much more than they need (for
 #: the COM's drift over the longer swing); at most MAX_RETIMING times.
 RETIMING_ALLOWANCE = 0.02
@@ -471,6 +473,10 @@ class GaitPlanner:
         self._sways: dict = {}  # the steady crawl's sway (rhythm.transfer_move)
         self._clamped: dict = {}
         self._fastest: dict = {}  # the fastest feasible twist by direction (clamp_velocity)
+        #: Swing timing model -> its (rhythms, clamped, fastest) caches, shared by the forks: a
+        #: change planned again (or after a trial on another fork) with a model the plans have
+        #: timed before finds its searches made.
+        self._by_model: dict = {swing_timing: (self._rhythms, self._clamped, self._fastest)}
         self._probes: dict = {}  # a step's probes by its geometry (_probed)
         self._kept_probes: dict[str, object] = {}  # probes kept on disk, by name (take_probes)
         self._requested = Twist2D()
@@ -522,13 +528,24 @@ class GaitPlanner:
 
     def set_swing_timing(self, swing_timing, now_s: float) -> None:
         """Time the steps from the next step boundary after ``now_s`` with ``swing_timing``."""
-        self._timing = swing_timing
-        # New caches, not emptied ones: a fork (see fork) shares them with the plan it came from.
-        self._rhythms, self._clamped, self._fastest = {}, {}, {}
-        self._kept_probes = {}  # (another model's)
+        self._use_timing(swing_timing)
         self._twist, _ = self._clamp(self._requested, self._params)
         self._settings += 1
         self._replan(now_s)
+
+    def _use_timing(self, swing_timing) -> None:
+        """Time with ``swing_timing`` and its caches (:attr:`_by_model`; new ones the first time).
+
+        Other caches, not emptied ones: a fork (see :meth:`fork`) shares them with the plan it
+        came from.
+        """
+        self._timing = swing_timing
+        if swing_timing not in self._by_model:
+            if len(self._by_model) >= MODELS_CACHED:
+                self._by_model.pop(next(iter(self._by_model)))
+            self._by_model[swing_timing] = ({}, {}, {})
+        self._rhythms, self._clamped, self._fastest = self._by_model[swing_timing]
+        self._kept_probes = {}  # (another model's)
 
     def anew(self, base_pose: Sequence[float], start: MeasuredStart | None = None
              ) -> GaitPlanner:
@@ -545,6 +562,7 @@ class GaitPlanner:
                             swing_timing=self._timing, start=start, terrain=self._terrain)
         fresh._rhythms, fresh._sways = self._rhythms, self._sways
         fresh._clamped, fresh._fastest = self._clamped, self._fastest
+        fresh._by_model = self._by_model
         fresh._probes, fresh._kept_probes = self._probes, self._kept_probes
         fresh._settings = self._settings
         return fresh
@@ -573,9 +591,9 @@ class GaitPlanner:
         """A copy to plan a change on, or to read while this one plans on.
 
         The steps are immutable and shared; the copy has its own list of them and its own
-        memoized outputs. The rhythm and velocity caches are shared while both keep the same
-        swing timing model (they hold what follows from the robot, the parameters and the
-        model alone).
+        memoized outputs. The rhythm and velocity caches of each swing timing model are shared
+        (they hold what follows from the robot, the parameters and the model alone): a fork
+        that takes another model finds what any fork searched with it.
         """
         twin = copy.copy(self)
         twin._steps = list(self._steps)
@@ -644,9 +662,7 @@ class GaitPlanner:
         params.check_robot(self.robot)
         keep_out_m = check_walkable(self._terrain, self.robot, params)
         if swing_timing is not ... and swing_timing is not self._timing:
-            self._timing = swing_timing
-            self._rhythms, self._clamped, self._fastest = {}, {}, {}
-            self._kept_probes = {}  # (another model's)
+            self._use_timing(swing_timing)
         self._keep_out_m = keep_out_m
         twist, _ = self._clamp(self._requested, params)
         self._params, self._twist = params, twist
