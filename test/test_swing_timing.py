@@ -8,6 +8,7 @@ the time its own displacement needs.
 """
 
 import functools
+import json
 
 import numpy as np
 import pinocchio as pin
@@ -372,7 +373,7 @@ def _lattice_s_numpy(timing, step_in_base, turn_rad):
 def test_lattice_interpolation_in_floats_is_the_numpy_form_to_the_bit():
     timing = object.__new__(PolynomialSwingTiming)
     rng = np.random.default_rng(5)
-    timing._cache = {}
+    timing._cache, timing._stored_path = {}, None  # a made-up model: nothing on disk
 
     def raw_s(node, turn):  # a made-up smooth time law: only the interpolation is checked
         return 0.5 + float(np.hypot(*node)) + 0.3 * abs(turn) + 1e-3 * rng.random()
@@ -392,7 +393,7 @@ def test_swing_s_in_floats_and_looked_up_is_the_numpy_form_to_the_bit():
 
     timing = object.__new__(PolynomialSwingTiming)
     rng = np.random.default_rng(7)
-    timing._cache, timing._swing_s = {}, {}
+    timing._cache, timing._swing_s, timing._stored_path = {}, {}, None  # nothing on disk
     timing.raw_s = lambda node, turn: 0.5 + float(np.hypot(*node)) + 0.3 * abs(turn)
     timing._mirrors = [np.array(m, dtype=float) for m in
                        ([1, 1, 1], [1, -1, 1], [-1, 1, 1], [-1, -1, 1])]
@@ -425,3 +426,39 @@ def test_ik_probes_solve_checked_targets_as_solve_does(monkeypatch):
         assert timing.raw_s(np.array([0.15, 0.03]), 0.1) == fast
     with pytest.raises(ValueError, match='NaN'):
         timing.raw_s(np.array([np.nan, 0.0]), 0.0)
+
+
+def test_the_models_node_times_are_kept_on_disk_and_found_by_the_next_model(tmp_path,
+                                                                            monkeypatch):
+    # The ZMP crawl's fastest walk, searched at every start of it and switch to it, timed its
+    # lattice nodes through the whole-body IK each time (1.2 s of 2.5 s on RoboSimian). A
+    # second model of the same robot and swings takes the stored times, the same to the bit,
+    # and computes none; a model with other limits has its own; an unreadable file is computed
+    # anew and written again.
+    import dataclasses
+
+    from gait_nodes.robot.model import RobotModel
+    from gait_nodes.swing import timing as timing_module
+
+    monkeypatch.setenv('XDG_CACHE_HOME', str(tmp_path))
+    first = PolynomialSwingTiming(robot(), FAMILY, 1.0, 0.06)
+    swing_s = first.swing_s(0, np.array([0.13, 0.02]))
+    transfer_s = first.steady_transfer_s(np.array([0.05, 0.0]))
+    (stored,) = (tmp_path / 'gait_nodes').glob('timing_robosimian_*.json')
+
+    def no_ik(*args, **kwargs):
+        raise AssertionError('a stored node time was computed again')
+
+    with monkeypatch.context() as patched:
+        patched.setattr(timing_module.SwingTiming, '_time_through_ik', no_ik)
+        second = PolynomialSwingTiming(robot(), FAMILY, 1.0, 0.06)
+        assert second.swing_s(0, np.array([0.13, 0.02])) == swing_s
+        assert second.steady_transfer_s(np.array([0.05, 0.0])) == transfer_s
+        slower = RobotModel(dataclasses.replace(robot().description,
+                                                joint_velocity_limit_rad_s=0.5))
+        with pytest.raises(AssertionError, match='computed again'):
+            PolynomialSwingTiming(slower, FAMILY, 0.5, 0.06).swing_s(0, np.array([0.13, 0.02]))
+    stored.write_text('{"swing_s": [[1, 2')
+    third = PolynomialSwingTiming(robot(), FAMILY, 1.0, 0.06)
+    assert third.swing_s(0, np.array([0.13, 0.02])) == swing_s
+    assert len(json.loads(stored.read_text())['swing_s']) > 0

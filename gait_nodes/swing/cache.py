@@ -11,11 +11,14 @@ the default grid.
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 import os
 from collections.abc import Callable
 from pathlib import Path
+
+import numpy as np
 
 from gait_nodes.robot.limb_ik import FAMILY_NUMBERING
 from gait_nodes.swing.table import ValueTable, load_table
@@ -169,3 +172,88 @@ def cached_one_step_costs(robot, family: int, joint_velocity_limit_rad_s: float,
     np.savez(partial, costs=costs, feasible=feasible)
     partial.replace(path)
     return costs, feasible
+
+
+@functools.lru_cache(maxsize=1)
+def source_digest() -> str:
+    """SHA-256 of this package's Python source (node times follow from its code)."""
+    root = Path(__file__).resolve().parents[1]
+    digest = hashlib.sha256()
+    for path in sorted(root.rglob('*.py')):
+        digest.update(str(path.relative_to(root)).encode())
+        digest.update(path.read_bytes())
+    return digest.hexdigest()
+
+
+def node_times_path(timing, kind: str) -> Path | None:
+    """The file of a swing timing model's node times (None: a model it cannot name).
+
+    ``kind``: ``'still'`` for the static crawl's body-still times
+    (:class:`gait_nodes.swing.still_body.StillBody`), ``'timing'`` for the model's own
+    (:class:`gait_nodes.swing.timing.SwingTiming`: the swings and body moves of the gaits whose
+    body compensates the swinging limb). Named by what the times follow from: the package's
+    code, the time law's solver, the robot's files and limits, the model and its table.
+    """
+    from importlib.metadata import version
+
+    from gait_nodes.swing.still_body import GAIT
+    from gait_nodes.swing.timing import PolynomialSwingTiming, TableSwingTiming
+
+    robot = timing.robot
+    description = robot.description
+    digest = hashlib.sha256(source_digest().encode())
+    digest.update(version('toppra').encode())  # the time law's solver
+    digest.update(Path(description.urdf_path).read_bytes())
+    digest.update(Path(description.path).read_bytes())
+    # What the times follow from of a description that may differ from its file (a copy with
+    # other limits, say).
+    for values in (robot.velocity_limits_rad_s, robot.acceleration_limits_rad_s2,
+                   description.nominal_stance_in_base(GAIT),
+                   [foot.nominal_position_in_base for foot in description.feet],
+                   [description.body_height_m]):
+        digest.update(np.ascontiguousarray(values, dtype=float).tobytes())
+    digest.update(repr((type(timing).__name__, timing.family, timing.factor)).encode())
+    if isinstance(timing, TableSwingTiming):
+        table = timing.policy.table
+        digest.update(repr((table.joint_velocity_limit_rad_s, table.step_height_m,
+                            table.ground_z_m, table.goal.tolist())).encode())
+        digest.update(np.ascontiguousarray(table.values_s).tobytes())
+        digest.update(np.ascontiguousarray(table.grid.points()).tobytes())
+    elif isinstance(timing, PolynomialSwingTiming):
+        digest.update(repr(timing.step_height_m).encode())
+    else:
+        return None
+    return cache_dir() / f'{kind}_{robot.name}_{digest.hexdigest()[:16]}.json'
+
+
+def read_node_times(path: Path | None, names: tuple[str, ...]) -> dict[str, dict] | None:
+    """The node times stored at ``path``: ``name -> {key tuple: time}``.
+
+    None: none, or unreadable (they are computed again and stored anew).
+    """
+    if path is None:
+        return None
+    try:
+        content = json.loads(path.read_text())
+        return {name: {tuple(key): float(value) for key, value in content[name]}
+                for name in names}
+    except (OSError, ValueError, TypeError, KeyError):
+        return None
+
+
+def write_node_times(path: Path | None, times: dict[str, dict]) -> None:
+    """Store node times (``name -> {key tuple: time}``) at ``path``.
+
+    Atomically: planners of other processes may read them. A read-only cache keeps nothing.
+    """
+    if path is None:
+        return
+    content = {name: [[list(key), value] for key, value in values.items()]
+               for name, values in times.items()}
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        partial = path.with_name(f'{path.name}.{os.getpid()}.tmp')
+        partial.write_text(json.dumps(content))
+        os.replace(partial, path)
+    except OSError:
+        pass

@@ -28,8 +28,6 @@ limb IK of its family:
 
 from __future__ import annotations
 
-import functools
-import hashlib
 import itertools
 import json
 import math
@@ -42,6 +40,7 @@ import numpy as np
 from gait_nodes.errors import SwingPolicyError
 from gait_nodes.planning.layout import FootLayout
 from gait_nodes.robot.model import yaw_rotation
+from gait_nodes.swing.cache import node_times_path, read_node_times, write_node_times
 from gait_nodes.swing.timing import (
     LATTICE,
     TRANSFER_PROBE_SAMPLES,
@@ -121,7 +120,7 @@ class StillBody:
                          for k, mirror in enumerate(timing._mirror_floats)]
         #: The gait's steps, each its swing slots in order (the hind foot, then the fore one).
         self._groups = FootLayout.of(self.robot.description).swing_groups(GAIT)
-        self._stored = _stored_times_path(timing)
+        self._stored = node_times_path(timing, 'still')
         self._found_stored = False
         self._load_stored()
 
@@ -388,32 +387,17 @@ class StillBody:
 
     def _load_stored(self) -> None:
         """Take the node times stored for this robot, model and code, if there are any."""
-        if self._stored is None:
+        stored = read_node_times(self._stored, ('swing_s', 'transfer_s'))
+        if stored is None:
             return
-        try:
-            content = json.loads(self._stored.read_text())
-            swings = {tuple(key): float(value) for key, value in content['swing_s']}
-            transfers = {tuple(key): float(value) for key, value in content['transfer_s']}
-        except (OSError, ValueError, TypeError, KeyError):
-            return  # none yet, or unreadable: computed again and stored anew
-        self._swing_s.update(swings)
-        self._transfer_s.update(transfers)
-        self._found_stored = bool(swings)
+        self._swing_s.update(stored['swing_s'])
+        self._transfer_s.update(stored['transfer_s'])
+        self._found_stored = bool(stored['swing_s'])
 
     def _store(self) -> None:
-        """Write the node times (atomically: planners of other processes may read them)."""
-        if self._stored is None:
-            return
-        content = {'swing_s': [[list(key), value] for key, value in self._swing_s.items()],
-                   'transfer_s': [[list(key), value] for key, value in
-                                  self._transfer_s.items()]}
-        try:
-            self._stored.parent.mkdir(parents=True, exist_ok=True)
-            partial = self._stored.with_name(f'{self._stored.name}.{os.getpid()}.tmp')
-            partial.write_text(json.dumps(content))
-            os.replace(partial, self._stored)
-        except OSError:
-            pass  # a read-only cache: the times are computed again next time
+        """Write the node times (see :func:`gait_nodes.swing.cache.write_node_times`)."""
+        write_node_times(self._stored, {'swing_s': self._swing_s,
+                                        'transfer_s': self._transfer_s})
 
 
 def _multilinear(point, spacing, node_value) -> float:
@@ -481,58 +465,13 @@ def body_move(u: np.ndarray) -> np.ndarray:
 _VIEWS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
 
-@functools.lru_cache(maxsize=1)
-def _source_digest() -> str:
-    """SHA-256 of this package's Python source (the node times follow from its code)."""
-    root = Path(__file__).resolve().parents[1]
-    digest = hashlib.sha256()
-    for path in sorted(root.rglob('*.py')):
-        digest.update(str(path.relative_to(root)).encode())
-        digest.update(path.read_bytes())
-    return digest.hexdigest()
-
-
-def _stored_times_path(timing) -> Path | None:
-    """The file of ``timing``'s still-body node times (None: a model it cannot name)."""
-    from importlib.metadata import version
-
-    from gait_nodes.swing.cache import cache_dir
-    from gait_nodes.swing.timing import PolynomialSwingTiming, TableSwingTiming
-
-    robot = timing.robot
-    description = robot.description
-    digest = hashlib.sha256(_source_digest().encode())
-    digest.update(version('toppra').encode())  # the time law's solver
-    digest.update(Path(description.urdf_path).read_bytes())
-    digest.update(Path(description.path).read_bytes())
-    # What the times follow from of a description that may differ from its file (a copy with
-    # other limits, say).
-    for values in (robot.velocity_limits_rad_s, robot.acceleration_limits_rad_s2,
-                   description.nominal_stance_in_base(GAIT),
-                   [foot.nominal_position_in_base for foot in description.feet],
-                   [description.body_height_m]):
-        digest.update(np.ascontiguousarray(values, dtype=float).tobytes())
-    digest.update(repr((type(timing).__name__, timing.family, timing.factor)).encode())
-    if isinstance(timing, TableSwingTiming):
-        table = timing.policy.table
-        digest.update(repr((table.joint_velocity_limit_rad_s, table.step_height_m,
-                            table.ground_z_m, table.goal.tolist())).encode())
-        digest.update(np.ascontiguousarray(table.values_s).tobytes())
-        digest.update(np.ascontiguousarray(table.grid.points()).tobytes())
-    elif isinstance(timing, PolynomialSwingTiming):
-        digest.update(repr(timing.step_height_m).encode())
-    else:
-        return None
-    return cache_dir() / f'still_{robot.name}_{digest.hexdigest()[:16]}.json'
-
-
 #: Most step probes kept on disk for one swing timing model (:func:`keep_probes`; the oldest
 #: go first). A first walk of 20 s keeps about 20.
 MAX_KEPT_PROBES = 400
 
 
 def _kept_probes_path(timing) -> Path | None:
-    times = _stored_times_path(timing)
+    times = node_times_path(timing, 'still')
     return None if times is None else times.with_name(f'probes_{times.name}')
 
 

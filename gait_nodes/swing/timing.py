@@ -217,6 +217,7 @@ class SwingTiming:
         self._feet = robot.nominal_feet_in_world(self._q_nominal[:3], 0.0)
         self._cache: dict[tuple[int, int, int], float] = {}
         self._transfer_cache: dict[tuple[int, int], float] = {}  # see steady_transfer_s
+        self._stored_path = ...  # the node times' file, looked up at the first node (_stored)
 
     def shape(self, step_in_base: np.ndarray, turn_rad: float, fine: bool = False,
               foot: str | None = None) -> tuple[np.ndarray, np.ndarray]:
@@ -379,11 +380,38 @@ class SwingTiming:
         return lattice_interpolated(point, self._node_s)
 
     def _node_s(self, key: tuple[int, int, int]) -> float:
-        """:meth:`raw_s` at lattice node ``key`` (cached)."""
-        if key not in self._cache:
+        """:meth:`raw_s` at lattice node ``key`` (cached, and kept on disk: :meth:`_stored`)."""
+        if key not in self._cache and key not in self._stored():
             node = np.array(key, dtype=float) * LATTICE
             self._cache[key] = self.raw_s(node[:2], float(node[2]))
+            self._store()
         return self._cache[key]
+
+    def _stored(self) -> dict:
+        """The lattice's node times, with those stored for this robot, model and code.
+
+        The node times of the rhythm's swings and body moves take a limb IK run each (the ZMP
+        crawl's fastest walk, searched at the start of every walk and switch to it, computed
+        26 of them: 1.2 s of 2.5 s). They are kept in the cache directory
+        (:func:`gait_nodes.swing.cache.node_times_path`), read at the first node asked (a
+        subclass's table is known by then) and written as nodes are added.
+        """
+        if self._stored_path is ...:
+            from gait_nodes.swing.cache import node_times_path, read_node_times
+
+            self._stored_path = node_times_path(self, 'timing')
+            stored = read_node_times(self._stored_path, ('swing_s', 'transfer_s'))
+            if stored is not None:
+                self._cache.update(stored['swing_s'])
+                self._transfer_cache.update(stored['transfer_s'])
+        return self._cache
+
+    def _store(self) -> None:
+        from gait_nodes.swing.cache import write_node_times
+
+        if self._stored_path is not ... and self._stored_path is not None:
+            write_node_times(self._stored_path, {'swing_s': self._cache,
+                                                 'transfer_s': self._transfer_cache})
 
     def swing_s(self, foot: int, step_in_base: np.ndarray, turn_rad: float = 0.0) -> float:
         """Least time [s] of foot ``foot``'s swing by ``step_in_base`` (its own base frame).
@@ -424,10 +452,13 @@ class SwingTiming:
                     continue
                 key = (low[0] + i, low[1] + j)
                 if key not in self._transfer_cache:
+                    self._stored()
+                if key not in self._transfer_cache:
                     half = 0.5 * np.array([key[0] * LATTICE[0], key[1] * LATTICE[1], 0.0])
                     self._transfer_cache[key] = (0.0 if not half.any() else self.transfer_s(
                         self._feet, np.zeros(len(self._feet)), 0.0, self._com - half,
                         self._com + half))
+                    self._store()
                 total += w * self._transfer_cache[key]
         return (1.0 + TRANSFER_MARGIN) * total
 
