@@ -309,10 +309,16 @@ def test_the_launch_file_starts_the_graph_and_stops_it_cleanly(tmp_path):
         pytest.skip('gait_nodes is not in the ament index: colcon build it and source the '
                     'workspace to run `ros2 launch gait_nodes gait.launch.py`')
     bag = tmp_path / 'launched'
-    launch = subprocess.Popen(['ros2', 'launch', 'gait_nodes', 'gait.launch.py',
-                               f'record:={bag}', 'robot:=robosimian', 'gait:=crawl'],
-                              env=ros_env(), cwd=tmp_path, stdout=subprocess.PIPE,
-                              stderr=subprocess.STDOUT, text=True)
+    # The log goes to a file (a pipe read only at the end would block the launch once full),
+    # and the launch runs in its own process group: if it does not stop on Ctrl-C, the group
+    # is killed, nodes included (once, the launch did not stop within a minute, and its nodes,
+    # left running, disturbed the next graph on the domain).
+    log_path = tmp_path / 'launch.log'
+    with log_path.open('w') as log_file:
+        launch = subprocess.Popen(['ros2', 'launch', 'gait_nodes', 'gait.launch.py',
+                                   f'record:={bag}', 'robot:=robosimian', 'gait:=crawl'],
+                                  env=ros_env(), cwd=tmp_path, stdout=log_file,
+                                  stderr=subprocess.STDOUT, text=True, start_new_session=True)
     try:
         time.sleep(25.0)
         velocity = subprocess.run(
@@ -321,11 +327,14 @@ def test_the_launch_file_starts_the_graph_and_stops_it_cleanly(tmp_path):
         assert velocity.returncode == 0, velocity.stderr
         time.sleep(10.0)
         launch.send_signal(signal.SIGINT)  # Ctrl-C
-        log, _ = launch.communicate(timeout=60)
+        launch.wait(timeout=60)
     finally:
-        if launch.poll() is None:
-            launch.kill()
-            launch.communicate()
+        try:  # nothing of the graph left running, whatever happened
+            os.killpg(launch.pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+        launch.wait()
+    log = log_path.read_text()
     assert launch.returncode == 0, log[-3000:]
     for name in (*NODES, 'recorder'):
         assert f'[{name}-' in log and 'process has died' not in log, log[-3000:]
