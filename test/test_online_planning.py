@@ -491,3 +491,30 @@ def test_in_a_thread_a_change_counts_the_planning_of_its_new_steps_in_its_lead()
         assert len(tries) == 1
     finally:
         worker.stop()
+
+
+def test_a_change_whose_lead_reaches_past_the_plan_joins_after_it_as_announced():
+    # A loaded machine's lead can reach past the plan ahead: the change joins at the first
+    # boundary after its lead, as its answer says, with the steps up to there planned as they
+    # were (before, it was walked from the plan's end, and rescheduled there at once).
+    clock = FakeClock()
+    worker = walking(clock, lead_s=9.0)  # the plan reaches 6 s ahead (cover_s)
+    clock.advance(3.3)
+    worker.run_pending()
+    assert worker.snapshot.planner.steps[-1].end_s < 3.3 + 9.0
+    worker.submit_command('far', '{}', step_length(0.15))
+    worker.run_pending()
+    (decision,) = answers(worker)
+    assert decision.state == ACCEPTED
+    join_s = decision.takes_effect_ns / NS
+    assert join_s >= 3.3 + 9.0 + online.LEAD_MARGIN_S
+    plan = worker.snapshot.planner
+    first_new = next(step for step in plan.steps if step.params.step_length_m == 0.15)
+    assert first_new.start_s == pytest.approx(join_s, abs=1e-9)
+    clock.advance(join_s - 3.3 - 0.01)
+    worker.run_pending()
+    assert answers(worker) == []  # not rescheduled, not applied yet
+    clock.advance(0.02)
+    worker.run_pending()
+    (applied,) = answers(worker)
+    assert applied.state == APPLIED and applied.takes_effect_ns == decision.takes_effect_ns

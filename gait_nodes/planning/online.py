@@ -592,7 +592,15 @@ class OnlinePlanner:
             return None
 
     def _candidate(self, job: _Job, fork: GaitPlanner, at_s: float):
-        """``job`` applied to ``fork`` from ``at_s``, planned and checked past its join."""
+        """``job`` applied to ``fork`` from ``at_s``, planned and checked past its join.
+
+        The plan is first made to reach ``at_s`` as it is: a lead longer than the plan ahead
+        (a loaded machine's) would otherwise have the change walked from the plan's end,
+        before ``at_s``, where nothing was checked against the lead, and announced at the next
+        boundary after it (then rescheduled at once to the plan's end: RoboSimian's switch to
+        the ZMP crawl beside a busy process was announced 5 s later than it was walked).
+        """
+        fork.advance(at_s)
         result = self._apply(job, fork, at_s)
         if result is UNCHANGED and job.kind != 'command':
             return UNCHANGED
