@@ -36,6 +36,11 @@ PROG = 'python -m gait_nodes.command'
 RESEND_S = 2.0
 #: Seconds between re-publications of a twist while no report of it has come.
 REPUBLISH_S = 0.5
+#: Default seconds to wait for an answer. The decision comes once the change is planned, and a
+#: switch to a gait not walked before searches its fastest walk first: RoboSimian's switch to
+#: the ZMP crawl was answered 2.7-5.7 s after it was sent beside a busy process (the tool
+#: returns as soon as the answer comes; 5 s printed "no answer" for commands then applied).
+DEFAULT_TIMEOUT_S = 15.0
 #: States of a decision on a command (the first answer); 'applied' comes after 'accepted'.
 DECISIONS = ('accepted', 'rejected', 'superseded')
 PLANNER_STATUS_PREFIX = 'footstep_planner: '
@@ -199,8 +204,8 @@ def main(args: list[str] | None = None) -> int:
                         help='gait parameters, e.g. step_length_m=0.3 gait=trot')
     parser.add_argument('--vel', nargs=3, type=float, metavar=('VX', 'VY', 'WZ'),
                         help='also publish this twist on /cmd_vel [m/s, m/s, rad/s]')
-    parser.add_argument('--timeout', type=float, default=5.0,
-                        help='seconds to wait for the answer (default 5)')
+    parser.add_argument('--timeout', type=float, default=DEFAULT_TIMEOUT_S,
+                        help=f'seconds to wait for the answer (default {DEFAULT_TIMEOUT_S:g})')
     parser.add_argument('--applied', action='store_true',
                         help='also wait for the answer that the accepted command took effect')
     options = parser.parse_args(user)
