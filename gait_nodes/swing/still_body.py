@@ -301,8 +301,10 @@ class StillBody:
 
         ``shift_in_base``: the swing's centre off the foot's stance place, body frame [m]
         (:meth:`steady_shifts`).
+
         The front-right limb's mirrored step, its shape (:meth:`SwingTiming.shape`) timed
-        through its own limb IK, times ``1 + STILL_MARGIN``; interpolated between the nodes of
+        through its own limb IK, times ``1 + STILL_MARGIN`` and ``1 + TRACKING_MARGIN`` (what a
+        probe of the planned swing counts); interpolated between the nodes of
         :data:`LATTICE` and of :data:`SHIFT_LATTICE_M` (each timed once): continuous in the
         step and the shift, so that the rhythm's search of the fastest velocity meets no steps,
         and a handful of limb IK runs serve it.
