@@ -217,7 +217,7 @@ class SwingTiming:
         self._feet = robot.nominal_feet_in_world(self._q_nominal[:3], 0.0)
         self._cache: dict[tuple[int, int, int], float] = {}
         self._transfer_cache: dict[tuple[int, int], float] = {}  # see steady_transfer_s
-        self._stored_path = ...  # the node times' file, looked up at the first node (_stored)
+        self._stored_path = ...  # the node times' file, looked up at the first node (_load_stored)
 
     def shape(self, step_in_base: np.ndarray, turn_rad: float, fine: bool = False,
               foot: str | None = None) -> tuple[np.ndarray, np.ndarray]:
@@ -380,15 +380,17 @@ class SwingTiming:
         return lattice_interpolated(point, self._node_s)
 
     def _node_s(self, key: tuple[int, int, int]) -> float:
-        """:meth:`raw_s` at lattice node ``key`` (cached, and kept on disk: :meth:`_stored`)."""
-        if key not in self._cache and key not in self._stored():
+        """:meth:`raw_s` at lattice node ``key`` (cached; kept on disk, :meth:`_load_stored`)."""
+        if key not in self._cache:
+            self._load_stored()
+        if key not in self._cache:
             node = np.array(key, dtype=float) * LATTICE
             self._cache[key] = self.raw_s(node[:2], float(node[2]))
             self._store()
         return self._cache[key]
 
-    def _stored(self) -> dict:
-        """The lattice's node times, with those stored for this robot, model and code.
+    def _load_stored(self) -> None:
+        """Add the node times stored for this robot, model and code (the first time only).
 
         The node times of the rhythm's swings and body moves take a limb IK run each (the ZMP
         crawl's fastest walk, searched at the start of every walk and switch to it, computed
@@ -404,7 +406,6 @@ class SwingTiming:
             if stored is not None:
                 self._cache.update(stored['swing_s'])
                 self._transfer_cache.update(stored['transfer_s'])
-        return self._cache
 
     def _store(self) -> None:
         from gait_nodes.swing.cache import write_node_times
@@ -452,7 +453,7 @@ class SwingTiming:
                     continue
                 key = (low[0] + i, low[1] + j)
                 if key not in self._transfer_cache:
-                    self._stored()
+                    self._load_stored()
                 if key not in self._transfer_cache:
                     half = 0.5 * np.array([key[0] * LATTICE[0], key[1] * LATTICE[1], 0.0])
                     self._transfer_cache[key] = (0.0 if not half.any() else self.transfer_s(
