@@ -1,26 +1,26 @@
 """whole_body_ik node: COM reference, footsteps and swing trajectories in, a joint trajectory out.
 
 ``python -m gait_nodes.whole_body_ik [--ros-args -p robot:=go2 ...]``. The node solves the
-whole-body IK (:mod:`gait_nodes.robot.whole_body_ik`) at knots ``sample_period_s`` apart on a
-fixed time grid, each for the instant it is for: the COM reference and body yaw at that instant
+whole-body IK (:mod:`gait_nodes.robot.whole_body_ik`) at knots ``sample_period_s`` apart on a fixed
+time grid, each for the instant it is for: the COM reference and body yaw at that instant
 (/gait/com_reference, a stamped horizon), the stance feet where the footstep plan puts them
-(/gait/footsteps), each swing foot on its swing trajectory (/gait/swing_trajectory); the body
-moves so that the full-model COM is on the reference. Every ``1 / rate_hz`` it solves the knots
-from its last solved one up to ``horizon_s`` ahead of the clock, never past the end of the COM
-reference it holds, each knot once (warm-started from the knots before it) and reached from the
-one before within the joint velocity limits (the step scaled down, as the thesis times its
-swings). A knot whose references change before its instant comes (a COM window that revises
-the states ahead, after a new ZMP reference; a new footstep plan; a swing trajectory covering
-it) is solved again, with every later one; knots whose instant has come never change. Then it
-publishes /joint_commands, a trajectory_msgs/JointTrajectory as a ros2_control
-joint_trajectory_controller takes it: every joint of the URDF in the robot's order, the knots
-from the latest one at or before now to the last one solved (header.stamp is the first point's
-time, ``time_from_start`` strictly increasing from 0), positions and velocities (the
-trajectory's derivative at the knots: central differences, never above the limits; the last
-knot at rest, so that a consumer that hears nothing more stops there, and so that a Jazzy
+(/gait/footsteps), each swing foot on its swing trajectory (/gait/swing_trajectory); the body moves
+so that the full-model COM is on the reference. Every ``1 / rate_hz`` it solves the knots from its
+last solved one up to ``horizon_s`` ahead of the clock, never past the end of the COM reference it
+holds, each knot once (warm-started from the knots before it) and reached from the one before
+within the joint velocity limits (the step scaled down, as the thesis times its swings; kept within
+``KNOT_SPEED_SHARE`` of them, see there). A knot whose references change before its instant comes
+(a COM window that revises the states ahead, after a new ZMP reference; a new footstep plan; a
+swing trajectory covering it) is solved again, with every later one; knots whose instant has come
+never change. Then it publishes /joint_commands, a trajectory_msgs/JointTrajectory as a
+ros2_control joint_trajectory_controller takes it: every joint of the URDF in the robot's order,
+the knots from the latest one at or before now to the last one solved (header.stamp is the first
+point's time, ``time_from_start`` strictly increasing from 0), positions and velocities (the
+trajectory's derivative at the knots: central differences, never above the limits; the last knot at
+rest, so that a consumer that hears nothing more stops there, and so that a Jazzy
 joint_trajectory_controller takes it with allow_nonzero_velocity_at_trajectory_end false), no
-accelerations or efforts. A consumer follows it by its stamps on its own clock, so a late
-message is no jump: the previous one still covers ``horizon_s`` ahead.
+accelerations or efforts. A consumer follows it by its stamps on its own clock, so a late message
+is no jump: the previous one still covers ``horizon_s`` ahead.
 
 * Before the first COM reference and footstep plan have arrived, the current posture is held
   (a one-point trajectory at the present instant, at rest): the robot's /joint_states (and /tf
@@ -109,6 +109,14 @@ COM_ERROR_WARN_M = 1e-3
 #: micrometre: below any mechanical meaning, above the interpolation of equal windows sampled
 #: at other instants) changed it [m, m/s, rad].
 COM_CHANGE_M = 1e-6
+#: Share of the joint velocity limits a step from knot to knot may use. A knot ahead is solved
+#: again when its references change (a new COM window, footstep plan or swing): by up to
+#: 0.02 mrad on RoboSimian's crawl, 0.002 rad/s over a 10 ms step. A consumer that switches to
+#: the new trajectory a tick late (a message that came after its tick) steps from the old knot
+#: to the new one: with knots at the full limit, that step was over it by that much (measured
+#: over DDS and rclpy: 1.000-1.001x in 3 of 7 runs). The plan keeps 2 % for tracking, so the
+#: share slows only knots the plan's sampling puts within half a percent of the limit.
+KNOT_SPEED_SHARE = 0.995
 #: The inputs that one node only may publish (gait_nodes.single_source).
 REFERENCES = ('/gait/com_reference', '/gait/footsteps', '/gait/swing_trajectory')
 
@@ -182,6 +190,7 @@ class _Window:
     def __init__(self):
         self.ticks = 0
         self.saturated_ticks = 0
+        self.scaled_ticks = 0  # saturated, or slowed to KNOT_SPEED_SHARE within the limits
         self.max_ratio = 0.0
         self.saturated_joints: dict[str, float] = {}
         self.max_foot_error_m = 0.0
@@ -552,10 +561,12 @@ class WholeBodyIk(GuardedNode):
         if result.joints_at_limit:
             window.joints_at_limit.update(result.joints_at_limit)
         q, joints, velocities, saturation = limit_joint_step(
-            self.robot, self._q_command, self._joints_command, result.q, dt_s)
+            self.robot, self._q_command, self._joints_command, result.q, dt_s,
+            KNOT_SPEED_SHARE)
         self._q_command, self._joints_command = q, joints
         self._knots.append(stamp_ns, joints, velocities,
                            (self._q_command, joints, self._q_solution))
+        window.scaled_ticks += saturation.scaled
         if saturation.saturated:
             window.saturated_ticks += 1
             window.max_ratio = max(window.max_ratio, saturation.ratio)
@@ -592,6 +603,7 @@ class WholeBodyIk(GuardedNode):
              f'{window.max_ratio:.4g}x the limit: {", ".join(joints)}')
             if window.saturated_ticks else 'joint velocities within limits',
             {'saturated_ticks': window.saturated_ticks, 'ticks': window.ticks,
+             'slowed_ticks': window.scaled_ticks, 'knot_speed_share': KNOT_SPEED_SHARE,
              'saturated_fraction': window.saturated_ticks / ticks,
              'max_demanded_over_limit': window.max_ratio,
              'joints': ','.join(joints),

@@ -23,6 +23,7 @@ from gait_nodes.diagnostics import ERROR, WARN, level_value
 from gait_nodes.interfaces import deserialize_message, get_message
 from gait_nodes.kinematic_simulator import node_defaults as simulator_defaults
 from gait_nodes.robot.description import load_robot_description
+from gait_nodes.whole_body_ik import KNOT_SPEED_SHARE
 
 #: Simulated seconds per scenario: two crawl cycles (about 17 s each) after the first swing; the
 #: online scenario changes its walk until 28 s (each change joins beyond the published horizon).
@@ -115,6 +116,25 @@ def test_zmp_inside_the_support_polygon_and_no_error_or_saturation(bags, name):
     # Every joint within its limit in what the IK commanded and what the simulator did.
     for topic in ('/joint_commands', '/joint_states'):
         assert gait['joint_velocity'][topic]['peak_ratio_to_limit'] <= 1.0 + 1e-9
+    # Knot to knot within the IK's share of the limits: the headroom a consumer that takes a
+    # revised trajectory a tick late steps through.
+    assert _knot_speed_ratio(path) <= KNOT_SPEED_SHARE * (1 + 1e-9)
+
+
+def _knot_speed_ratio(path) -> float:
+    """The largest joint speed between neighbouring knots of a /joint_commands message."""
+    description = load_robot_description('robosimian')
+    worst = 0.0
+    for _, msg in _messages(path, '/joint_commands', 'trajectory_msgs/msg/JointTrajectory'):
+        if len(msg.points) < 2:
+            continue
+        limits = np.array([description.velocity_limit_rad_s(j) for j in msg.joint_names])
+        times = np.array([p.time_from_start.sec + 1e-9 * p.time_from_start.nanosec
+                          for p in msg.points])
+        positions = np.array([list(p.positions) for p in msg.points])
+        speeds = np.abs(np.diff(positions, axis=0)) / np.diff(times)[:, None]
+        worst = max(worst, float((speeds / limits).max()))
+    return worst
 
 
 def _applied_speed(diagnostics) -> float:

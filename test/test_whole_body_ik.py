@@ -1140,3 +1140,29 @@ def test_bag_analysis_reads_joint_commands_as_the_trajectory_followed():
     # The replaced point's 4 rad/s was never followed.
     metrics = joint_metrics(collector.series, lambda joint: 1.0)['/joint_commands']
     assert metrics['peak_rad_s'] == 0.5 and metrics['samples'] == 4
+
+
+def test_a_step_is_kept_within_a_share_of_the_limits_and_saturates_only_above_them():
+    robot = load_robot_model('robosimian')
+    q0 = robot.configuration([0, 0, 0.65], 0.0, np.zeros(28))
+    dt = 0.01
+    limit = robot.velocity_limits_rad_s[0]
+    for demanded, saturated in ((0.998, False), (1.2, True)):
+        joints = np.zeros(28)
+        joints[0] = demanded * limit * dt
+        q1 = robot.configuration([0.001, 0, 0.65], 0.0, joints)
+        q, velocities, saturation = limit_joint_velocity(robot, q0, q1, dt, share=0.995)
+        assert saturation.ratio == pytest.approx(demanded)
+        assert saturation.scaled and saturation.saturated is saturated
+        assert saturation.joints == ((robot.joint_names[0],) if saturated else ())
+        assert abs(velocities[0]) / limit == pytest.approx(0.995)
+        # The whole step scaled alike, the base too.
+        assert q[0] == pytest.approx(0.001 * 0.995 / demanded)
+    # Within the share: untouched.
+    joints = np.zeros(28)
+    joints[0] = 0.99 * limit * dt
+    q1 = robot.configuration([0.001, 0, 0.65], 0.0, joints)
+    q, velocities, saturation = limit_joint_velocity(robot, q0, q1, dt, share=0.995)
+    assert not saturation.scaled and np.array_equal(q, q1)
+    with pytest.raises(ValueError, match='share'):
+        limit_joint_velocity(robot, q0, q1, dt, share=1.5)

@@ -14,9 +14,10 @@ joints are projected onto their URDF limits after every step. Warm-started from 
 tick it needs one to three iterations.
 
 Joint velocity limits are applied afterwards by :func:`limit_joint_velocity`: when the step
-demands more than a joint's limit, the whole step is scaled down (the fastest joint saturated,
-as the thesis times its swing motions), which keeps every joint on the straight line to the
-solution and reports which joints asked for too much and by how much.
+demands more than a joint's limit (or a share of it, ``share``), the whole step is scaled down
+(the fastest joint saturated, as the thesis times its swing motions), which keeps every joint on
+the straight line to the solution and reports which joints asked for more than their limit and
+by how much.
 
 The module also turns the public references into targets at one instant: COM state
 (:func:`com_state_at`), swing waypoints (:func:`swing_pose_at`) and the fallback swing used when
@@ -597,20 +598,30 @@ class VelocitySaturation:
         ratio: Largest demanded velocity over its limit (<= 1: no saturation).
         joints: Joints whose demanded velocity exceeded their limit.
         demanded_over_limit: Demanded/limit ratio of each of ``joints``.
+        share: The share of the limits the step was kept within (a step that asked for more
+            than that share but within the limits was scaled down to it, and is not
+            saturated).
     """
 
     ratio: float
     joints: tuple[str, ...] = ()
     demanded_over_limit: tuple[float, ...] = ()
+    share: float = 1.0
 
     @property
     def saturated(self) -> bool:
-        """Whether the step was scaled down."""
+        """Whether the step asked for more than the limits (and was scaled down)."""
         return self.ratio > 1.0
+
+    @property
+    def scaled(self) -> bool:
+        """Whether the step was scaled down (saturated, or above ``share`` of the limits)."""
+        return self.ratio > self.share
 
 
 def limit_joint_velocity(robot: RobotModel, q_previous: np.ndarray, q_target: np.ndarray,
-                         dt_s: float) -> tuple[np.ndarray, np.ndarray, VelocitySaturation]:
+                         dt_s: float, share: float = 1.0
+                         ) -> tuple[np.ndarray, np.ndarray, VelocitySaturation]:
     """Move from ``q_previous`` towards ``q_target`` within the joint velocity limits.
 
     Args:
@@ -618,19 +629,21 @@ def limit_joint_velocity(robot: RobotModel, q_previous: np.ndarray, q_target: np
         q_previous: Configuration commanded at the previous tick.
         q_target: Configuration the IK asks for now.
         dt_s: Time since the previous tick [s].
+        share: Share of the limits, in (0, 1], the step is kept within.
 
     Returns:
         ``(q, joint_velocities, saturation)``: the configuration to command (the whole step,
-        base included, scaled by the largest demanded/limit ratio when above 1), the joint
-        vector velocities [rad/s] (never above the limits) and the saturation report.
+        base included, scaled down when some joint asks for more than ``share`` of its limit),
+        the joint vector velocities [rad/s] (never above ``share`` of the limits) and the
+        saturation report.
     """
     q, _, velocities, saturation = limit_joint_step(
-        robot, q_previous, robot.joint_positions(q_previous), q_target, dt_s)
+        robot, q_previous, robot.joint_positions(q_previous), q_target, dt_s, share)
     return q, velocities, saturation
 
 
 def limit_joint_step(robot: RobotModel, q_previous: np.ndarray, previous_joints: np.ndarray,
-                     q_target: np.ndarray, dt_s: float
+                     q_target: np.ndarray, dt_s: float, share: float = 1.0
                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray, VelocitySaturation]:
     """:func:`limit_joint_velocity` for a caller that keeps its last command's joint vector.
 
@@ -640,6 +653,7 @@ def limit_joint_step(robot: RobotModel, q_previous: np.ndarray, previous_joints:
         previous_joints: ``robot.joint_positions(q_previous)`` [rad].
         q_target: Configuration the IK asks for now.
         dt_s: Time since the previous tick [s].
+        share: Share of the limits, in (0, 1], the step is kept within.
 
     Returns:
         ``(q, joints, joint_velocities, saturation)`` as :func:`limit_joint_velocity`, with
@@ -647,15 +661,18 @@ def limit_joint_step(robot: RobotModel, q_previous: np.ndarray, previous_joints:
     """
     if not dt_s > 0:
         raise ValueError(f'dt_s must be > 0, got {dt_s}')
+    if not 0.0 < share <= 1.0:
+        raise ValueError(f'share must be in (0, 1], got {share}')
     target = robot.joint_positions(q_target)
     step = target - previous_joints
     limits = robot.velocity_limits_rad_s
     demanded = np.abs(step) / (limits * dt_s)
     ratio = max(demanded.tolist(), default=0.0)
-    if ratio <= 1.0:
-        return np.array(q_target, dtype=float), target, step / dt_s, VelocitySaturation(ratio)
-    # Scale a hair more than needed so that rounding never leaves a joint above its limit.
-    scale = (1.0 - 1e-12) / ratio
+    if ratio <= share:
+        return (np.array(q_target, dtype=float), target, step / dt_s,
+                VelocitySaturation(ratio, share=share))
+    # Scale a hair more than needed so that rounding never leaves a joint above its share.
+    scale = share * (1.0 - 1e-12) / ratio
     q = np.array(q_previous, dtype=float)
     q[:3] += scale * (q_target[:3] - q_previous[:3])
     q[3:7] = q_target[3:7]
@@ -664,7 +681,7 @@ def limit_joint_step(robot: RobotModel, q_previous: np.ndarray, previous_joints:
     over = np.flatnonzero(demanded > 1.0)
     order = over[np.argsort(-demanded[over])]
     report = VelocitySaturation(ratio, tuple(robot.joint_names[k] for k in order),
-                                tuple(float(demanded[k]) for k in order))
+                                tuple(float(demanded[k]) for k in order), share)
     return q, robot.joint_positions(q), scale * step / dt_s, report
 
 
