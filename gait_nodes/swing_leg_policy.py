@@ -23,13 +23,20 @@ linearly, so at its own tick period the foot's velocity changes smoothly). With 
 sends, its path goes to /gait/markers for RViz and Foxglove (namespace ``swing_paths``,
 :mod:`gait_nodes.markers`; ``publish_markers: false`` turns them off).
 
+The time law of a value-table swing is the one of the gait it is walked in
+(:func:`gait_nodes.swing.policy.law_placements`: the static crawl's, or the one of the gaits
+whose body moves under a swing), as the footstep planner times it: ``gait`` is the planner's
+gait at start (``auto`` resolved as the planner resolves it, at the joint limit), then the
+gait of its accepted commands (their ``resolved_gait``).
+
 The swing follows the footstep planner's gait commands: an accepted one on
-/gait/command_status that changes ``swing`` or ``step_height_m`` is walked by the swings that
-lift off from the step boundary it takes effect at (``takes_effect_ns``; a ``rescheduled`` answer
-moves it, when a later stop or velocity re-planned the steps before it). A value table for a new
-step height is loaded, or built in a background thread (the walk goes on); until it is there the
-polynomial swing at that height stands in, as the footstep planner times it (the polynomial
-swing's longer times stand in there too until the table's file appears).
+/gait/command_status that changes ``swing``, ``step_height_m`` or ``gait`` is walked by the
+swings that lift off from the step boundary it takes effect at (``takes_effect_ns``; a
+``rescheduled`` answer moves it, when a later stop or velocity re-planned the steps before it).
+A value table for a new step height is loaded, or built in a background thread (the walk goes
+on); until it is there the polynomial swing at that height stands in, as the footstep planner
+times it (the polynomial swing's longer times stand in there too until the table's file
+appears).
 
 Restarted mid-walk, the node does not send a swing that has been under way for more than
 ``LATE_SWING_S`` without a trajectory: the whole-body IK follows its fallback swing for it, and a
@@ -54,6 +61,7 @@ from gait_nodes.graph import node_topic_name
 from gait_nodes.interfaces import get_message
 from gait_nodes.markers import swing_path_markers
 from gait_nodes.paths import node_defaults
+from gait_nodes.planning.gait_params import auto_gait
 from gait_nodes.robot.model import load_robot_model
 from gait_nodes.runtime import Parameter, SetParametersResult, qos_profile_latched
 from gait_nodes.swing.cache import load_or_build
@@ -100,6 +108,8 @@ def check_values(values: dict) -> None:
                              f'{values["publish_markers"]!r}')
     if not isinstance(values['table'], str):
         raise ParameterError(f'table must be a path string, got {values["table"]!r}')
+    if not isinstance(values['gait'], str) or not values['gait']:
+        raise ParameterError(f'gait must be a gait name or auto, got {values["gait"]!r}')
     number('step_height_m', 0.0, 1.0, low_open=True)
     number('joint_velocity_limit_rad_s', 0.0, 100.0)
     number('lead_time_s', 0.0, 10.0)
@@ -141,9 +151,10 @@ class SwingLegPolicy(GuardedNode):
             self.diagnostics.report('swing', WARN, reason)
         self.faults = FaultGuard(self, self.diagnostics)
         self._values = values
+        self._gait = self._law_gait(values)  # the gait of the swings' time law at start
         self._policy, self._table_path = self._load_policy(values)
-        # The planner's swing settings by the time they take effect: [(ns, swing, height)].
-        self._followed: list[tuple[int, str, float]] = []
+        # The planner's swing settings by the time they take effect: [(ns, swing, height, gait)].
+        self._followed: list[tuple[int, str, float, str]] = []
         self._tables: dict[float, object] = {}  # step height -> SwingPolicy, or an exception
         self._building: set[float] = set()
         if self._policy is not None:
@@ -178,6 +189,25 @@ class SwingLegPolicy(GuardedNode):
         setting = self.robot.description.extra.get('limb_ik') or {}
         return int(setting.get('family', 2)) if isinstance(setting, dict) else 2
 
+    def _law_gait(self, values: dict) -> str:
+        """The gait ``values['gait']`` walks, whose time law the value-table swings take.
+
+        Raises:
+            ParameterError: Not ``auto`` nor a gait of the robot.
+        """
+        description = self.robot.description
+        gait = values['gait']
+        if gait == 'auto':
+            if values['swing'] != 'value_table':
+                return description.gaits[0]  # no time law to choose
+            # As the footstep planner resolves it at the joint limit (seconds, once per robot
+            # and process: gait_nodes.planning.gait_choice).
+            return auto_gait(description)
+        if gait not in description.gaits:
+            raise ParameterError(f'gait must be auto or one of {list(description.gaits)} '
+                                 f'({description.name}), got {gait!r}')
+        return gait
+
     def _load_policy(self, values: dict):
         """(SwingPolicy, path) for value_table, (None, None) for polynomial; raises if refused."""
         if values['swing'] != 'value_table':
@@ -208,6 +238,8 @@ class SwingLegPolicy(GuardedNode):
                                        reason='robot is fixed at start; restart the node')
         try:
             check_values(values)
+            gait = self._law_gait(values) if values['gait'] != self._values['gait'] \
+                else self._gait
             reload = any(values[k] != self._values[k] for k in
                          ('swing', 'table', 'family', 'step_height_m',
                           'joint_velocity_limit_rad_s'))
@@ -219,9 +251,10 @@ class SwingLegPolicy(GuardedNode):
             self.destroy_timer(self._timer)
             self._timer = self.create_timer(1.0 / values['rate_hz'], self._tick)
         self._values, self._policy, self._table_path = values, policy, path
-        if reload:
+        if reload or gait != self._gait:
             # The node's own settings, set explicitly, replace what it followed.
             self._followed = []
+            self._gait = gait
             if policy is not None:
                 self._tables[float(values['step_height_m'])] = policy
         self.diagnostics.report('settings', OK, self._describe())
@@ -243,21 +276,24 @@ class SwingLegPolicy(GuardedNode):
         self._tick()
 
     def _on_command_status(self, msg) -> None:
-        """Follow an accepted gait command's swing and step height from when it takes effect."""
+        """Follow an accepted gait command's swing, step height and gait from its boundary."""
         try:
             status = json.loads(msg.data)
             if status.get('state') not in ('accepted', 'rescheduled'):
                 return
             params, takes_effect_ns = status['params'], int(status['takes_effect_ns'])
             swing, height = str(params['swing']), float(params['step_height_m'])
+            gait = str(status.get('resolved_gait', params.get('gait')))
         except (ValueError, TypeError, KeyError, AttributeError):
             return  # not an answer this node can follow (the footstep planner checks commands)
         if swing not in SWING_METHODS or not 0.0 < height <= 1.0:
             return
+        if gait not in self.robot.description.gaits:
+            gait = self._gait  # 'auto' unresolved (an older planner): the gait it walked
         if self.robot.description.extra.get('limb_ik') is None:
             swing = 'polynomial'
         self._followed = [f for f in self._followed if f[0] < takes_effect_ns]
-        self._followed.append((takes_effect_ns, swing, height))
+        self._followed.append((takes_effect_ns, swing, height, gait))
         if swing == 'value_table':
             self._table_for(height)  # start loading (or building) it now
 
@@ -284,12 +320,12 @@ class SwingLegPolicy(GuardedNode):
         self._tables[height] = policy
         self._building.discard(height)
 
-    def _swing_settings(self, lift_ns: int) -> tuple[str, float]:
-        """(swing method, step height [m]) of a swing lifting off at ``lift_ns``."""
-        settings = (self._values['swing'], float(self._values['step_height_m']))
-        for takes_effect_ns, swing, height in self._followed:
+    def _swing_settings(self, lift_ns: int) -> tuple[str, float, str]:
+        """(swing method, step height [m], gait) of a swing lifting off at ``lift_ns``."""
+        settings = (self._values['swing'], float(self._values['step_height_m']), self._gait)
+        for takes_effect_ns, *followed in self._followed:
             if takes_effect_ns <= lift_ns:
-                settings = (swing, height)
+                settings = tuple(followed)
         return settings
 
     # --- output -------------------------------------------------------------------------------
@@ -340,7 +376,7 @@ class SwingLegPolicy(GuardedNode):
         values = self._values
         trajectory = None
         climb = float(swing.end_in_world[2] - swing.start_in_world[2])
-        method, height = self._swing_settings(lift_ns)
+        method, height, gait = self._swing_settings(lift_ns)
         policy = None
         if method == 'value_table':
             policy = self._table_for(height)
@@ -357,7 +393,7 @@ class SwingLegPolicy(GuardedNode):
                                     f'the air): sending the polynomial swing')
         elif policy is not None:
             try:
-                trajectory = self._value_table_swing(policy, plan, swing, lift_ns)
+                trajectory = self._value_table_swing(policy, plan, swing, lift_ns, gait)
             except GaitNodesError as exc:
                 self.diagnostics.report('swing', ERROR, f'{swing.foot} at {swing.lift_off_s:.3f}'
                                         f' s: {exc}; sending the polynomial swing instead')
@@ -372,7 +408,8 @@ class SwingLegPolicy(GuardedNode):
                 trajectory, self.robot.foot_names.index(swing.foot),
                 self.get_clock().now().nanoseconds))
 
-    def _value_table_swing(self, policy, plan, swing, lift_ns: int) -> contract.SwingTrajectory:
+    def _value_table_swing(self, policy, plan, swing, lift_ns: int,
+                           gait: str) -> contract.SwingTrajectory:
         climb = float(swing.end_in_world[2] - swing.start_in_world[2])
         if abs(climb) > 1e-9:  # the footstep planner refuses stairs with this swing
             raise SwingPolicyError(f'the value-table swing is built for flat ground; this '
@@ -383,7 +420,7 @@ class SwingLegPolicy(GuardedNode):
         mirror = ik.mirrors[ik.foot_index[swing.foot]]
         yaw = body_yaw(plan, swing.lift_off_s)
         step_fr, turn = limb_step(swing, mirror, yaw)
-        path, clamped = policy.fastest_swing(step_fr, turn, swing.foot)
+        path, clamped = policy.fastest_swing(step_fr, turn, swing.foot, gait)
         polyline, needed = place_swing(path, swing, lift_ns, mirror, yaw, table.ground_z_m,
                                        swing.duration_s)
         trajectory = evenly_resampled(polyline, self._values['sample_period_s'])

@@ -89,7 +89,8 @@ def generate_launch_description():
         DeclareLaunchArgument(
             'gait',
             default_value='crawl',
-            description='Initial gait of the footstep planner (crawl, trot, ...).',
+            description='Initial gait of the footstep planner (crawl, trot, ...), and of the '
+                        'swing-leg policy\'s time law.',
         ),
         DeclareLaunchArgument(
             'swing',
@@ -134,8 +135,8 @@ def generate_launch_description():
     simulator_of = {node: kind for kind, node in SIMULATOR_NODES.items()}
     for node_name in dict.fromkeys((*GAIT_NODES, *SIMULATOR_NODES.values())):
         overrides = {'use_sim_time': use_sim_time, 'robot': robot}
-        if node_name == 'footstep_planner':
-            overrides['gait'] = gait
+        if node_name in ('footstep_planner', 'swing_leg_policy'):
+            overrides['gait'] = gait  # the policy times the gait's swings in its time law
         if node_name in ('footstep_planner', 'swing_leg_policy'):
             overrides['swing'] = swing
         condition = None

@@ -247,9 +247,9 @@ def test_a_value_table_swing_probed_with_accelerations_keeps_them_as_the_ik_comm
     model = RobotModel(dataclasses.replace(robot().description,
                                            joint_acceleration_limit_rad_s2=10.0))
     table, _ = load_or_build(model, 2, 0.06, 1.0)
-    timing = TableSwingTiming(SwingPolicy(table, model), model)
+    timing = TableSwingTiming(SwingPolicy(table, model), model, 'static_crawl')
     still = StillBody(timing)
-    fast = StillBody(TableSwingTiming(SwingPolicy(table, robot()), robot()))
+    fast = StillBody(TableSwingTiming(SwingPolicy(table, robot()), robot(), 'static_crawl'))
     base = np.array([0.0, 0.0, model.description.body_height_m])
     feet = model.nominal_feet_in_world(base, 0.0, 'static_crawl')  # where its law is timed
     yaws = np.zeros(len(feet))
@@ -264,7 +264,8 @@ def test_a_value_table_swing_probed_with_accelerations_keeps_them_as_the_ik_comm
         assert duration_s > at_20_s + 0.1
         # The swing as swing_leg_policy publishes it for that duration, through the limb IK.
         mirror = timing.timing.ik.mirrors[timing.timing.ik.foot_index[name]]
-        path, _ = timing.policy.fastest_swing(*limb_step(swing, mirror, 0.0), name)
+        path, _ = timing.policy.fastest_swing(*limb_step(swing, mirror, 0.0), name,
+                                              'static_crawl')
         polyline, _ = place_swing(path, swing, 0, mirror, 0.0, table.ground_z_m, duration_s)
         published = evenly_resampled(polyline, 0.005)
         count = len(published.times_s)

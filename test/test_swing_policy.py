@@ -480,13 +480,16 @@ def test_node_follows_a_commands_boundary_where_the_planner_says_and_where_it_mo
     """An accepted command's swing settings from its boundary; a 'rescheduled' answer moves it.
 
     (A stop joining before the boundary re-plans the steps from there with the new settings:
-    swings lifting off from the new boundary must be the command's.)
+    swings lifting off from the new boundary must be the command's.) The gait too: a
+    value-table swing is timed in the law of the gait it is walked in, 'auto' as the planner
+    resolved it.
     """
     import json
 
     from gait_nodes.swing_leg_policy import SwingLegPolicy
 
-    start('-p', 'robot:=biped', '-p', 'swing:=polynomial', '-p', 'step_height_m:=0.1')
+    start('-p', 'robot:=robosimian', '-p', 'swing:=polynomial', '-p', 'step_height_m:=0.1',
+          '-p', 'gait:=crawl')
     talker = runtime.Node('talker', use_global_arguments=False)
     status = talker.create_publisher(get_message('std_msgs/msg/String'), '/gait/command_status',
                                      QoSProfile(depth=10))
@@ -494,11 +497,22 @@ def test_node_follows_a_commands_boundary_where_the_planner_says_and_where_it_mo
     executor = runtime.SingleThreadedExecutor()
     executor.add_node(talker)
     executor.add_node(node)
-    params = {'swing': 'polynomial', 'step_height_m': 0.08}
+    params = {'swing': 'polynomial', 'step_height_m': 0.08, 'gait': 'auto'}
     for state, at_ns in (('accepted', 30 * 10**9), ('rescheduled', 20 * 10**9)):
         status.publish(get_message('std_msgs/msg/String')(data=json.dumps(
             {'id': 'c', 'state': state, 'accepted': True, 'params': params,
-             'takes_effect_ns': at_ns})))
+             'resolved_gait': 'static_crawl', 'takes_effect_ns': at_ns})))
         executor.spin_for(0.05)
-        assert node._swing_settings(at_ns - 1) == ('polynomial', 0.1)
-        assert node._swing_settings(at_ns) == ('polynomial', 0.08)
+        assert node._swing_settings(at_ns - 1) == ('polynomial', 0.1, 'crawl')
+        assert node._swing_settings(at_ns) == ('polynomial', 0.08, 'static_crawl')
+    # Without a resolved gait (an older planner) 'auto' keeps the gait the node walks; a gait
+    # the robot does not have is not followed either.
+    for gait in ('auto', 'biped'):
+        status.publish(get_message('std_msgs/msg/String')(data=json.dumps(
+            {'id': 'd', 'state': 'accepted', 'accepted': True,
+             'params': {**params, 'gait': gait}, 'takes_effect_ns': 40 * 10**9})))
+        executor.spin_for(0.05)
+        assert node._swing_settings(40 * 10**9) == ('polynomial', 0.08, 'crawl')
+    # The node's own gait must be one of the robot's (or auto).
+    result = node.set_parameters([Parameter('gait', value='biped')])[0]
+    assert not result.successful and "['crawl', 'static_crawl', 'trot']" in result.reason

@@ -125,8 +125,8 @@ def _whole_body_peak(timing, step, duration_s) -> float:
     return float((rates / model.velocity_limits_rad_s).max())
 
 
-@pytest.mark.parametrize('make', [polynomial_timing, lambda: TableSwingTiming(policy(),
-                                                                               robot())])
+@pytest.mark.parametrize('make', [polynomial_timing, lambda: TableSwingTiming(
+    policy(), robot(), 'static_crawl')])
 def test_model_time_puts_the_fastest_joint_at_the_limit(make):
     timing = make()
     for step in (0.04, 0.2):  # lattice nodes: swing_s interpolates between them
@@ -340,14 +340,14 @@ def test_without_a_built_table_the_slower_polynomial_times_stand_in(tmp_path, mo
     from gait_nodes.swing.timing import STAND_IN_FACTOR, swing_timing
 
     monkeypatch.setenv('XDG_CACHE_HOME', str(tmp_path))
-    model, reason = swing_timing(robot(), 'value_table', STEP_HEIGHT_M)
+    model, reason = swing_timing(robot(), 'value_table', STEP_HEIGHT_M, 'static_crawl')
     assert isinstance(model, PolynomialSwingTiming) and 'not built yet' in reason
     assert model.swing_s(1, np.array([0.1, 0.0])) == pytest.approx(
         STAND_IN_FACTOR * polynomial_timing().swing_s(1, np.array([0.1, 0.0])))
     # A robot without closed-form limb IK has no model: its gait keeps fixed timing.
     from gait_nodes.robot.model import load_robot_model
 
-    assert swing_timing(load_robot_model('biped'), 'polynomial', STEP_HEIGHT_M)[0] is None
+    assert swing_timing(load_robot_model('biped'), 'polynomial', STEP_HEIGHT_M, 'biped')[0] is None
 
 
 def _lattice_s_numpy(timing, step_in_base, turn_rad):
@@ -462,3 +462,36 @@ def test_the_models_node_times_are_kept_on_disk_and_found_by_the_next_model(tmp_
     third = PolynomialSwingTiming(robot(), FAMILY, 1.0, 0.06)
     assert third.swing_s(0, np.array([0.13, 0.02])) == swing_s
     assert len(json.loads(stored.read_text())['swing_s']) > 0
+
+
+def test_a_value_table_swing_is_timed_in_the_law_of_the_gait_it_is_walked_in(tmp_path,
+                                                                              monkeypatch):
+    # The static crawl's swings happen outwards of its stance (the body still), the ZMP gaits'
+    # inwards too (the body moving under them): each gait's swings are timed at its own places,
+    # by the swing-leg policy and by the planner's model alike, and each model keeps its own
+    # node times.
+    from gait_nodes.swing.cache import node_times_path
+    from gait_nodes.swing.policy import (
+        LAW_PLACEMENTS_M,
+        MOVING_BODY_LAW_PLACEMENTS_M,
+        law_placements,
+    )
+
+    monkeypatch.setenv('XDG_CACHE_HOME', str(tmp_path))
+    assert law_placements('static_crawl') == LAW_PLACEMENTS_M
+    assert law_placements('crawl') == law_placements('trot') == MOVING_BODY_LAW_PLACEMENTS_M
+    assert min(MOVING_BODY_LAW_PLACEMENTS_M) < 0.0 <= min(LAW_PLACEMENTS_M)
+    step = np.array([0.2, 0.0])
+    still, _ = policy().fastest_swing(step, 0.0, 'front_left', 'static_crawl')
+    moving, _ = policy().fastest_swing(step, 0.0, 'front_left', 'crawl')
+    assert still.duration_s != moving.duration_s
+    models = {gait: TableSwingTiming(policy(), robot(), gait)
+              for gait in ('static_crawl', 'crawl', 'trot')}
+    # The planner's probes take the same swing in the same time law as the policy sends.
+    shapes = {gait: model.shape(step, 0.0, foot='front_left')[1]
+              for gait, model in models.items()}
+    assert np.array_equal(shapes['crawl'], shapes['trot'])
+    assert shapes['crawl'].shape != shapes['static_crawl'].shape or \
+        not np.allclose(shapes['crawl'], shapes['static_crawl'])
+    paths = {gait: node_times_path(model, 'timing') for gait, model in models.items()}
+    assert paths['crawl'] == paths['trot'] != paths['static_crawl']

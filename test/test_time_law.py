@@ -16,7 +16,7 @@ from swing_helpers import robot, tiny_table
 
 from gait_nodes.contract import SwingTrajectory
 from gait_nodes.errors import SwingPolicyError
-from gait_nodes.swing.policy import LAW_PLACEMENTS_M, SwingPolicy
+from gait_nodes.swing.policy import LAW_PLACEMENTS_M, SwingPolicy, law_placements
 from gait_nodes.swing.time_law import fastest_times
 from gait_nodes.swing.timing import joint_path_time_s, smooth_trajectory
 
@@ -81,16 +81,17 @@ def policy():
     return SwingPolicy(table, robot())
 
 
+@pytest.mark.parametrize('gait', ['static_crawl', 'crawl'])
 @pytest.mark.parametrize('foot, step', [('front_right', 0.2), ('rear_left', -0.2),
                                         ('front_left', 0.1)])
-def test_a_table_swing_in_the_fastest_law_keeps_its_joints_within_the_limits(foot, step):
+def test_a_table_swing_in_the_fastest_law_keeps_its_joints_within_the_limits(foot, step, gait):
     # At every placement the law is computed for, played at its own times and sampled 5 ms
     # apart (as the swing-leg policy sends it), the limb's joints stay within the velocity
     # limit (to the 1 % the law's grid allows, which the planner's tracking margin covers) and
     # the acceleration limit; and it is faster than the smoothed swing stretched uniformly
     # until its fastest joint reaches the limit (what the policy sent before).
     swing_policy = policy()
-    path, _ = swing_policy.fastest_swing(np.array([step, 0.0]), 0.0, foot)
+    path, _ = swing_policy.fastest_swing(np.array([step, 0.0]), 0.0, foot, gait)
     centre = np.asarray(swing_policy.law_centre(foot))
     model = robot()
     reference = next(f for f in model.description.feet if f.name == 'front_right')
@@ -102,8 +103,9 @@ def test_a_table_swing_in_the_fastest_law_keeps_its_joints_within_the_limits(foo
     played = np.arange(0.0, path.duration_s, 0.005)
     states = np.column_stack([np.interp(played, path.times_s, path.states[:, i])
                               for i in range(4)])
-    between = 0.5 * (np.asarray(LAW_PLACEMENTS_M[1:]) + np.asarray(LAW_PLACEMENTS_M[:-1]))
-    for outwards in (*LAW_PLACEMENTS_M, *between):  # between them too
+    placements = law_placements(gait)  # the gait's own law
+    between = 0.5 * (np.asarray(placements[1:]) + np.asarray(placements[:-1]))
+    for outwards in (*placements, *between):  # between them too
         placed = states.copy()
         placed[:, :2] += centre + (outwards, 0.0) - 0.5 * (states[0, :2] + states[-1, :2])
         q, feasible = swing_policy.timing.joints(placed)
@@ -131,13 +133,15 @@ def test_places_out_of_the_limbs_reach_are_left_out_of_the_law(monkeypatch):
     from gait_nodes.swing import policy as policy_module
 
     step = np.array([0.2, 0.0])
-    reachable, _ = SwingPolicy(tiny_table()[0], robot()).fastest_swing(step, 0.0, 'front_right')
+    reachable, _ = SwingPolicy(tiny_table()[0], robot()).fastest_swing(
+        step, 0.0, 'front_right', 'static_crawl')
     monkeypatch.setattr(policy_module, 'LAW_PLACEMENTS_M', (*LAW_PLACEMENTS_M, 1.5))
-    with_far, _ = SwingPolicy(tiny_table()[0], robot()).fastest_swing(step, 0.0, 'front_right')
+    with_far, _ = SwingPolicy(tiny_table()[0], robot()).fastest_swing(
+        step, 0.0, 'front_right', 'static_crawl')
     assert with_far.duration_s == reachable.duration_s
     monkeypatch.setattr(policy_module, 'LAW_PLACEMENTS_M', (1.5,))
     swing_policy = SwingPolicy(tiny_table()[0], robot())
-    none_reached, _ = swing_policy.fastest_swing(step, 0.0, 'front_right')
+    none_reached, _ = swing_policy.fastest_swing(step, 0.0, 'front_right', 'static_crawl')
     table_path, _ = swing_policy.path_for_step(step)
     polyline = SwingTrajectory('x', 0, table_path.times_s, table_path.states[:, :3],
                                table_path.states[:, 3])

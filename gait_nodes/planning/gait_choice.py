@@ -185,8 +185,12 @@ def compare_gaits(robot_model, gaits=None, **settings) -> GaitChoice:
     started = time.perf_counter()
     robot = robot_model.description
     settings = {**COMPARED_WITH, **settings}
-    timing, source = swing_timing(robot_model, settings['swing'], settings['step_height_m'])
-    planned = [plan_gait(robot, gait, timing, **settings) for gait in (gaits or robot.gaits)]
+    planned = []
+    for gait in gaits or robot.gaits:
+        # Each gait with its own swings' time law (gait_nodes.swing.policy.law_placements).
+        timing, source = swing_timing(robot_model, settings['swing'], settings['step_height_m'],
+                                      gait)
+        planned.append(plan_gait(robot, gait, timing, **settings))
     planned.sort(key=lambda c: (not c.feasible, -c.speed_m_s))
     chosen = planned[0].gait if planned[0].feasible else (gaits or robot.gaits)[0]
     words = (f'{settings["swing"]} swing, {settings["step_height_m"]:g} m lift, timing '

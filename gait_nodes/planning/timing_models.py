@@ -63,15 +63,19 @@ class TimingModels:
         if params.timing != 'joint_limit' or self.robot.extra.get('limb_ik') is None:
             return None, ('fixed timing' if params.timing == 'fixed' else
                           f'{self.robot.name} has no closed-form limb IK: fixed timing'), True
-        key = (params.swing, params.step_height_m)
+        from gait_nodes.swing.policy import law_placements
+        from gait_nodes.swing.timing import TableSwingTiming, swing_timing
+
+        # The value table's swings are timed in the law of the gait they are walked in.
+        gait = params.resolved_gait(self.robot)
+        key = (params.swing, params.step_height_m, law_placements(gait))
         known = self._known.get(key)
         if known is not None and known[2]:
             return known
-        from gait_nodes.swing.timing import TableSwingTiming, swing_timing
-
         if known is not None and not self._table_file(params).is_file():
             return known  # still the stand-in: looked for again in a second
-        model, reason = swing_timing(self.robot_model(), params.swing, params.step_height_m)
+        model, reason = swing_timing(self.robot_model(), params.swing, params.step_height_m,
+                                     gait)
         final = params.swing != 'value_table' or isinstance(model, TableSwingTiming)
         if known is not None and not final:
             return known  # still the stand-in: keep the same one
@@ -103,7 +107,9 @@ class TimingModels:
     def probe(self, params: GaitParameters):
         """The joint-speed probe of ``params``' swings (None: no robot model)."""
         if self.robot.extra.get('limb_ik') is not None:
-            return self.timing(params.replace(timing='joint_limit'))[0]
+            # The gait it walks (auto resolved with its own timing), timed at the limit.
+            return self.timing(params.replace(gait=params.resolved_gait(self.robot),
+                                              timing='joint_limit'))[0]
         key = ('probe', params.step_height_m)
         if key not in self._known:
             from gait_nodes.swing.timing import PolynomialSwingTiming

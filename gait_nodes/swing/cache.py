@@ -192,10 +192,12 @@ def node_times_path(timing, kind: str) -> Path | None:
     (:class:`gait_nodes.swing.still_body.StillBody`), ``'timing'`` for the model's own
     (:class:`gait_nodes.swing.timing.SwingTiming`: the swings and body moves of the gaits whose
     body compensates the swinging limb). Named by what the times follow from: the package's
-    code, the time law's solver, the robot's files and limits, the model and its table.
+    code, the time law's solver, the robot's files and limits, the model, its table and the
+    time law of the gait it is for.
     """
     from importlib.metadata import version
 
+    from gait_nodes.swing.policy import law_placements
     from gait_nodes.swing.still_body import GAIT
     from gait_nodes.swing.timing import PolynomialSwingTiming, TableSwingTiming
 
@@ -219,6 +221,7 @@ def node_times_path(timing, kind: str) -> Path | None:
                             table.ground_z_m, table.goal.tolist())).encode())
         digest.update(np.ascontiguousarray(table.values_s).tobytes())
         digest.update(np.ascontiguousarray(table.grid.points()).tobytes())
+        digest.update(repr(law_placements(timing.gait)).encode())  # the swings' time law
     elif isinstance(timing, PolynomialSwingTiming):
         digest.update(repr(timing.step_height_m).encode())
     else:

@@ -42,8 +42,16 @@ MAX_STEPS = 500
 #: keep the joints within their limits at the places between them too (test_time_law); a
 #: swing walked outside them (the first steps, 0.3 m to catch up with the path) is stretched
 #: by the planner's probe as far as it needs. Spread from 2 cm inwards to 6 cm outwards (as
-#: until session 22), the steady swings took 3 % longer.
+#: until session 22), the steady swings took 3 % longer. The static crawl's law
+#: (:func:`law_placements`).
 LAW_PLACEMENTS_M = (0.0, 0.02, 0.04)
+#: The law's places for the gaits whose body moves under a swing (the ZMP crawl, the trot):
+#: their swings happen inwards of the static crawl's stance as well as outwards (the ZMP
+#: crawl's stance puts RoboSimian's front feet 4 cm inside it, its rear feet 6 cm outside, and
+#: the body moves on under every swing). Timed with the static crawl's law, the planner's probe
+#: stretched their swings: the ZMP crawl under commands (robosimian_commands) walked
+#: 0.0086/0.0085/0.0091 m/s where it walks 0.0088/0.0100/0.0105 with these.
+MOVING_BODY_LAW_PLACEMENTS_M = (-0.02, 0.02, 0.06)
 #: Spacing of the smoothed path's samples in the table's timing, which the fastest time law
 #: re-times (:meth:`SwingPolicy.fastest_swing`) [s]: ~250 on a swing, 5 ms apart as the
 #: swing-leg policy sends them.
@@ -59,6 +67,17 @@ LAW_DENSITY = 4
 #: (through a spline of samples 30 ms apart) read up to 5 % higher on RoboSimian's swings
 #: sampled 5 ms apart with 0.9.
 LAW_ACCELERATION_SHARE = 0.85
+
+
+def law_placements(gait: str) -> tuple[float, ...]:
+    """Where a swing walked in ``gait`` is timed, outwards of its place in the stance [m].
+
+    :data:`LAW_PLACEMENTS_M` for the static crawl (the body still under every swing),
+    :data:`MOVING_BODY_LAW_PLACEMENTS_M` for the other gaits.
+    """
+    from gait_nodes.swing.still_body import GAIT
+
+    return LAW_PLACEMENTS_M if gait == GAIT else MOVING_BODY_LAW_PLACEMENTS_M
 
 
 def _wrap(angle):
@@ -237,16 +256,16 @@ class SwingPolicy:
         return self.timed_path(self.descend(start))
 
     def fastest_swing(self, step_in_base: np.ndarray, step_yaw_rad: float,
-                      foot: str) -> tuple[SwingPath, float]:
+                      foot: str, gait: str) -> tuple[SwingPath, float]:
         """The swing of :meth:`path_for_step`, smoothed and moved along in the fastest time law.
 
         The path is smoothed (:func:`gait_nodes.swing.timing.smooth_trajectory`) and timed by
         :func:`gait_nodes.swing.time_law.fastest_times` for ``foot``'s limb swinging around its
         place in the static crawl's stance (:meth:`law_centre`), moved by each of
-        :data:`LAW_PLACEMENTS_M`: the limb's speed depends on where it swings, and the
-        swing-leg policy, which does not know where the body will be, and the footstep planner,
-        which probes the swing where it happens and stretches it as far as that needs, time it
-        alike. Cached.
+        :func:`law_placements` of the ``gait`` it is walked in: the limb's speed depends on
+        where it swings, and the swing-leg policy, which does not know where the body will be,
+        and the footstep planner, which probes the swing where it happens and stretches it as
+        far as that needs, time it alike. Cached.
 
         Returns:
             ``(path, clamped_m)``: the smoothed path in front-right coordinates, sampled
@@ -259,8 +278,9 @@ class SwingPolicy:
         from gait_nodes.swing.timing import smooth_trajectory
 
         centre = self.law_centre(foot)
+        placements = law_placements(gait)
         key = (round(float(step_in_base[0]), 6), round(float(step_in_base[1]), 6),
-               round(float(step_yaw_rad), 6), *centre)
+               round(float(step_yaw_rad), 6), *centre, placements)
         known = self._fastest.get(key)
         if known is not None:
             return known
@@ -271,14 +291,14 @@ class SwingPolicy:
         states = np.column_stack([smoothed.positions_in_world, np.unwrap(smoothed.yaws_rad)])
         solved = np.unique(np.r_[np.arange(0, len(states), LAW_JOINT_STRIDE), len(states) - 1])
         offsets = np.asarray(centre) - 0.5 * (states[0, :2] + states[-1, :2])
-        placed = np.repeat(states[solved][None], len(LAW_PLACEMENTS_M), axis=0)
+        placed = np.repeat(states[solved][None], len(placements), axis=0)
         placed[..., :2] += offsets
-        placed[..., 0] += np.asarray(LAW_PLACEMENTS_M)[:, None]
+        placed[..., 0] += np.asarray(placements)[:, None]
         q, feasible = self.timing.joints(placed.reshape(-1, 4))
         # The places the limb reaches all along (a long step far out may not be reachable at
         # all of them); at none, the smoothed path keeps the table's timing, which the planner's
         # probe stretches as far as it needs.
-        reached = feasible.reshape(len(LAW_PLACEMENTS_M), -1).all(axis=1)
+        reached = feasible.reshape(len(placements), -1).all(axis=1)
         u = smoothed.times_s
         if not reached.any():
             timed = SwingPath(states, u - u[0], path.lift_s, path.lower_s, path.predicted_s, 0,
@@ -286,7 +306,7 @@ class SwingPolicy:
             self._remember(key, (timed, clamped))
             return timed, clamped
         # Each place's joints side by side: the law keeps every one within the limits.
-        q = q.reshape(len(LAW_PLACEMENTS_M), len(solved), -1)[reached].transpose(1, 0, 2)
+        q = q.reshape(len(placements), len(solved), -1)[reached].transpose(1, 0, 2)
         dense = np.linspace(u[0], u[-1], LAW_DENSITY * len(u))
         dense_times = fastest_times(u[solved], q.reshape(len(solved), -1),
                                     self.table.joint_velocity_limit_rad_s,

@@ -474,13 +474,16 @@ class TableSwingTiming(SwingTiming):
     Args:
         policy: A :class:`gait_nodes.swing.policy.SwingPolicy`.
         robot: Its RobotModel.
+        gait: The gait the swings are walked in: their time law is that gait's
+            (:func:`gait_nodes.swing.policy.law_placements`), as swing_leg_policy times them.
     """
 
-    def __init__(self, policy, robot):
+    def __init__(self, policy, robot, gait: str):
         table = policy.table
         super().__init__(robot, table.family, table.joint_velocity_limit_rad_s,
                          'the swing value table')
         self.policy = policy
+        self.gait = gait
 
     def shape(self, step_in_base, turn_rad, fine=False, foot=None):
         """The table's greedy path for the step, smoothed, in the fastest time law.
@@ -492,7 +495,7 @@ class TableSwingTiming(SwingTiming):
         position, where a steady walk makes it: the limbs' speed depends on where they are.
         """
         foot = foot or self.robot.description.feet[self._reference].name
-        path, _ = self.policy.fastest_swing(step_in_base, turn_rad, foot)
+        path, _ = self.policy.fastest_swing(step_in_base, turn_rad, foot, self.gait)
         resampled = evenly_resampled(
             SwingTrajectory('probe', 0, path.times_s, path.states[:, :3], path.states[:, 3]),
             needed_probe_period(path, fine))
@@ -509,7 +512,7 @@ class TableSwingTiming(SwingTiming):
         ik = self.timing.ik
         mirror = ik.mirrors[ik.foot_index[swing.foot]]
         step, turn = limb_step(swing, mirror, body_yaw_rad)
-        path, _ = self.policy.fastest_swing(step, turn, swing.foot)
+        path, _ = self.policy.fastest_swing(step, turn, swing.foot, self.gait)
         polyline, _ = place_swing(path, swing, 0, mirror, body_yaw_rad,
                                   self.policy.table.ground_z_m)
         placed = evenly_resampled(polyline, needed_probe_period(path, fine))
@@ -634,7 +637,7 @@ class PolynomialSwingTiming(SwingTiming):
         return trajectory.times_s / trajectory.duration_s, states
 
 
-def swing_timing(robot, method: str, step_height_m: float,
+def swing_timing(robot, method: str, step_height_m: float, gait: str,
                  log: Callable[[str], None] | None = None) -> tuple[SwingTiming | None, str]:
     """The timing model of ``method`` for ``robot`` and why it is (or is not) that one.
 
@@ -647,6 +650,8 @@ def swing_timing(robot, method: str, step_height_m: float,
         robot: The RobotModel.
         method: 'value_table' or 'polynomial'.
         step_height_m: Swing height [m].
+        gait: The gait walked (a value-table swing is timed in its law:
+            :class:`TableSwingTiming`).
         log: Called with a message when the table is not there yet.
     """
     from gait_nodes.errors import GaitNodesError
@@ -658,14 +663,14 @@ def swing_timing(robot, method: str, step_height_m: float,
     limit = robot.description.joint_velocity_limit_rad_s
     if method == 'value_table':
         from gait_nodes.swing.cache import default_table_path
-        from gait_nodes.swing.policy import SwingPolicy
+        from gait_nodes.swing.policy import SwingPolicy, law_placements
         from gait_nodes.swing.table import load_table
 
         path = default_table_path(robot, family, step_height_m, limit)
         if path.is_file():
             stat = path.stat()
             key = (id(robot), method, float(step_height_m), str(path), stat.st_mtime_ns,
-                   stat.st_size)
+                   stat.st_size, law_placements(gait))
             known = _known_model(robot, key)
             if known is not None:
                 return known
@@ -673,7 +678,7 @@ def swing_timing(robot, method: str, step_height_m: float,
                 table = load_table(path, robot, limit, family)
                 if math.isclose(table.step_height_m, step_height_m, abs_tol=1e-9):
                     return _remember(robot, key, (
-                        TableSwingTiming(SwingPolicy(table, robot), robot),
+                        TableSwingTiming(SwingPolicy(table, robot), robot, gait),
                         f'swing times from the value table {path}'))
             except GaitNodesError as exc:
                 if log is not None:
