@@ -228,7 +228,8 @@ class SwingLegPolicy(GuardedNode):
         table = self._policy.table
         return (f'{self.robot.name}: value-table swings from {self._table_path} (family '
                 f'{table.family}, {table.joint_velocity_limit_rad_s:g} rad/s, step height '
-                f'{table.step_height_m:g} m, {table.grid.size} states)')
+                f'{table.step_height_m:g} m, {table.grid.size} states), timed in the '
+                f'{self._gait} time law')
 
     def _on_set_parameters(self, parameters) -> SetParametersResult:
         values = dict(self._values)
