@@ -347,3 +347,28 @@ def test_the_biped_walks_in_physics_as_planned(tmp_path):
     margins = [signed_distance(np.array([cop]), physics['polygons'][stamp])[0]
                for stamp, cop in physics['cop'].items() if stamp in physics['polygons']]
     assert len(margins) > 2000 and min(margins) > -1e-6
+
+
+def test_a_rolling_foot_does_not_slip_and_a_sliding_one_does():
+    """Slip is the contact material's motion, not the foot frame's (a sphere foot rolls)."""
+    from gait_nodes.sim.physics import material_displacement
+
+    radius, turn = 0.022, math.radians(20.0)
+    steps = 200
+    # A sphere rolling along x: its centre moves radius * angle, it turns about y.
+    slip = np.zeros(3)
+    material = (np.array([0.0, 0.0, -radius]), np.array([0.0, 0.0, 0.0]))
+    for k in range(1, steps + 1):
+        angle = turn * k / steps
+        centre = np.array([radius * angle, 0.0, radius])
+        rotation = np.array([[math.cos(angle), 0.0, math.sin(angle)], [0.0, 1.0, 0.0],
+                             [-math.sin(angle), 0.0, math.cos(angle)]])
+        slip += material_displacement(centre, rotation, material)
+        contact = centre - np.array([0.0, 0.0, radius])  # the point under the sphere now
+        material = (rotation.T @ (contact - centre), contact)
+    assert radius * turn == pytest.approx(0.00768, abs=1e-5)  # how far its frame moved
+    assert math.hypot(*slip[:2]) < 1e-5
+    # The same foot sliding 5 mm without turning: all of it is slip.
+    material = (np.array([0.0, 0.0, -radius]), np.array([0.0, 0.0, 0.0]))
+    moved = material_displacement(np.array([0.005, 0.0, radius]), np.eye(3), material)
+    assert moved[:2] == pytest.approx([0.005, 0.0])
