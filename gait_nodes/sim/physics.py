@@ -348,17 +348,20 @@ class PhysicsSimulation:
                 force_on_foot)
 
     def _follow_material(self, contacts) -> None:
-        """Add each foot's slip over the physics step just taken (see the module docstring)."""
+        """Add each foot's slip over the physics step just taken (see the module docstring).
+
+        A foot without contact in this physics step keeps its last contact's material: a foot
+        in stance that skips along the ground (its contact lost for a step or two) counts the
+        way that material went meanwhile.
+        """
+        if contacts is None:
+            return
+        foot, points, forces = contacts
         positions = self.data.xpos[self._foot_bodies]
         rotations = self.data.xmat[self._foot_bodies].reshape(-1, 3, 3)
         for k in range(len(self._material)):
-            if contacts is None:
-                self._material[k] = None
-                continue
-            foot, points, forces = contacts
             normal = forces[foot == k, 2]
             if not normal.sum() > 0.0:
-                self._material[k] = None
                 continue
             point = (points[foot == k] * normal[:, None]).sum(0) / normal.sum()
             if self._material[k] is not None:
@@ -434,6 +437,8 @@ class PhysicsSimulation:
                 self._slip[k] = 0.0  # in the air, or touching down: its slip starts here
                 if contacts_now[k]:
                     touched.append(self.robot.foot_names[k])
+                else:
+                    self._material[k] = None
         self.contacts = contacts_now
 
         # Each foot's wrench about its frame's origin, in its frame.
