@@ -21,8 +21,8 @@ one process per run; the figures come from its bag and its summary:
   time its plan has it in stance (3-D, so a foot that lands late counts the rest of its way
   down), from the joint states and the base with the full model (inspect's physics
   consistency); and the stance feet's **slip** as the physics simulator measures it (its
-  /diagnostics 'contacts' status: how far a foot frame moved horizontally since it touched down,
-  while the ground pushes on it);
+  /diagnostics 'contacts' status: how far the foot's material at its contact moved horizontally
+  since it touched down, while the ground pushes on it; :mod:`gait_nodes.sim.physics`);
 - **torques**: the drives' largest |effort| (/joint_states) over the URDF's effort limit, and the
   share of samples with a drive at its limit;
 - **speed**: the inproc real-time factor (simulated over wall time of the walk) and the CPU
