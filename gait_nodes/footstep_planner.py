@@ -81,7 +81,6 @@ from gait_nodes.planning.footsteps import GaitPlanner, Twist2D
 from gait_nodes.planning.gait_params import (
     NUMERIC_RANGES,
     GaitParameters,
-    auto_gait,
     command_id_of,
     parameters_from_mapping,
     parse_gait_command,
@@ -508,13 +507,9 @@ class FootstepPlanner(GuardedNode):
         status = {'id': answer.command_id, 'state': answer.state,
                   'accepted': answer.accepted, 'reason': reason, 'params': answer.params,
                   'command': command}
-        gait = answer.params.get('gait')
-        if isinstance(gait, str):
-            # What 'auto' walks (chosen once per robot and process: planning.gait_choice), for
-            # swing_leg_policy's time law.
-            status['resolved_gait'] = auto_gait(
-                self.robot, answer.params.get('timing', 'joint_limit')) if gait == 'auto' \
-                else gait
+        # The gait they walk ('auto' chosen once per robot and process: planning.gait_choice),
+        # for swing_leg_policy's time law.
+        status['resolved_gait'] = GaitParameters(**answer.params).resolved_gait(self.robot)
         if answer.takes_effect_ns is not None:
             status['takes_effect_ns'] = answer.takes_effect_ns
             status['takes_effect_in_s'] = round((answer.takes_effect_ns - now_ns) * 1e-9, 6)
