@@ -65,12 +65,19 @@ def polygon_edges(hull: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]
 def signed_distance(points: np.ndarray, hull: np.ndarray,
                     edges: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
                     ) -> np.ndarray:
-    """Stability margin of planar points (N, 2) against a convex polygon (M, 2), CCW.
+    """Stability margin of planar points (N, 2) against a polygon (M, 2).
 
     Positive inside (distance to the nearest edge), negative outside (minus the distance to the
     polygon), zero on the boundary. A one- or two-vertex hull (a point or a segment) has no
     inside: every point gets minus its distance to it. ``edges``: :func:`polygon_edges` of
     ``hull``, if known.
+
+    Inside is decided by the edges a ray from the point towards +x crosses (an odd count is
+    inside), not by the point's side of every edge: a convex hull of contact points published
+    as float32 can have micrometre edges whose direction the rounding turns by tens of degrees,
+    and the half-plane of such an edge cuts far into the polygon, while the crossings change
+    only for points within micrometres of it. For a convex polygon, either test gives the same
+    sign.
 
     Returns:
         (N,) margins [m].
@@ -84,7 +91,13 @@ def signed_distance(points: np.ndarray, hull: np.ndarray,
     if len(starts) < 3:
         return -distance
     cross = edges[None, :, 0] * relative[..., 1] - edges[None, :, 1] * relative[..., 0]
-    inside = np.all(cross >= 0.0, axis=1)
+    # An edge crosses the ray when its ends are on either side of the point's y (half-open,
+    # so a ray through a vertex counts it once) and the point is on its left going up, or on
+    # its right going down (the crossing's x minus the point's x is cross / dy).
+    above_start = points[:, None, 1] < starts[None, :, 1]
+    above_end = np.roll(above_start, -1, axis=1)
+    crossed = (above_start != above_end) & (cross * edges[None, :, 1] > 0.0)
+    inside = crossed.sum(axis=1) % 2 == 1
     return np.where(inside, distance, -distance)
 
 
@@ -109,8 +122,8 @@ def point_signed_distance(x: float, y: float,
     polygon.
     """
     nearest_sq = math.inf
-    inside = True
-    for start_x, start_y, edge_x, edge_y, length_sq in edge_list:
+    inside = False
+    for index, (start_x, start_y, edge_x, edge_y, length_sq) in enumerate(edge_list):
         relative_x, relative_y = x - start_x, y - start_y
         t = (relative_x * edge_x + relative_y * edge_y) / length_sq
         t = 0.0 if t < 0.0 else 1.0 if t > 1.0 else t
@@ -118,8 +131,10 @@ def point_signed_distance(x: float, y: float,
         distance_sq = dx * dx + dy * dy
         if distance_sq < nearest_sq:  # min() without the call
             nearest_sq = distance_sq
-        if not edge_x * relative_y - edge_y * relative_x >= 0.0:
-            inside = False
+        end_y = edge_list[(index + 1) % len(edge_list)][1]
+        if (y < start_y) != (y < end_y) \
+                and (edge_x * relative_y - edge_y * relative_x) * edge_y > 0.0:
+            inside = not inside
     distance = math.sqrt(nearest_sq)
     return distance if inside and len(edge_list) >= 3 else -distance
 

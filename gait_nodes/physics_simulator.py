@@ -15,8 +15,8 @@ by :mod:`gait_nodes.sim.mujoco_model`), and what it publishes is measured there:
 - /tf (odom -> base_link): the simulated base pose, not the plan's;
 - /gait/zmp, /gait/com: the full-model monitor on the simulated configurations (central
   differences, one tick behind, as the kinematic simulator's);
-- /gait/support_polygon: the actual contact polygon, the convex hull of the contact points that
-  carried force during the tick (no disc is drawn around them: the feet's shapes are in the
+- /gait/support_polygon: the actual contact polygon, the convex hull of the contact points the
+  ground pushed on during the tick (no disc is drawn around them: the feet's shapes are in the
   model); the monitor's stability margin is the ZMP's in that polygon;
 - /gait/cop (geometry_msgs/PointStamped, odom): the centre of pressure of the contact forces,
   mean over the tick, on the plane of the lowest contact;

@@ -91,3 +91,22 @@ def test_one_point_margin_is_the_array_margin_bit_for_bit(centres, points, discs
     edge_list = polygon_edge_list(hull)
     scalar = [point_signed_distance(x, y, edge_list) for x, y in points.tolist()]
     assert scalar == signed_distance(points, hull).tolist()
+
+
+def test_micrometre_edges_do_not_turn_the_inside_out():
+    """A hull rounded to float32 can be non-convex by a micrometre edge; its inside stays.
+
+    The edge from (0.5, 1) to (0.5 - 1e-7, 1 + 1e-7) points down-left of the top edge: the
+    half-plane on its left excludes everything with x + y > 1.5, most of the square's upper
+    right. The margin of (0.9, 0.9) is its distance to the right and top edges either way.
+    """
+    polygon = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.5, 1.0],
+                        [0.5 - 1e-7, 1.0 + 1e-7], [0.0, 1.0]])
+    points = np.array([[0.9, 0.9], [0.1, 0.1], [0.5, 1.5], [1.2, 0.5], [0.5, 0.5]])
+    expected = [0.1, 0.1, -0.5 + 1e-7, -0.2, 0.5]
+    np.testing.assert_allclose(signed_distance(points, polygon), expected, atol=1e-9)
+    edge_list = polygon_edge_list(polygon)
+    assert [point_signed_distance(x, y, edge_list) for x, y in points.tolist()] \
+        == signed_distance(points, polygon).tolist()
+    # Orientation does not matter to the crossings: the same margins clockwise.
+    np.testing.assert_allclose(signed_distance(points, polygon[::-1]), expected, atol=1e-9)

@@ -25,9 +25,11 @@ at the control rate). From them:
   contact points weighted by their normal forces);
 - each foot's **contact wrench**: the ground's force on the foot and its moment about the foot
   frame's origin, in the foot frame (what a force-torque sensor at the sole reports);
-- the **contact points**: every contact point that carried at least
-  :attr:`PhysicsSettings.contact_force_threshold_n` of normal force during the step; their
-  convex hull is the actual contact polygon;
+- the **contact points**: every contact point the ground pushed on during the step (a normal
+  force above zero at one of its physics steps); their convex hull is the actual contact
+  polygon. Every force the centre of pressure counts is at one of them, so on flat ground the
+  centre of pressure is in that polygon (a threshold on the points, 1 N until session 24, left
+  the CoP up to 0.2 mm outside the hull of the points that passed it);
 - a foot is **in contact** when its normal force exceeds that threshold; its **slip** is how
   far (horizontally) the foot's material at its contact moved since it touched down: at every
   physics step, the point of the foot that was under its contacts (their centre, weighted by
@@ -55,8 +57,8 @@ class PhysicsSettings:
     """Settings of :class:`PhysicsSimulation`.
 
     Attributes:
-        contact_force_threshold_n: A foot (or a contact point) carrying at least this normal
-            force is in contact [N].
+        contact_force_threshold_n: A foot carrying at least this normal force (its mean over
+            the step) is in contact [N]: it touches down, and its slip counts.
     """
 
     contact_force_threshold_n: float = 1.0
@@ -120,7 +122,7 @@ class PhysicsStep:
         q: Pinocchio configuration after the step (the simulated base pose and joints).
         actuators: The joints (:class:`JointStep`).
         contacts: (F,) booleans: feet in contact (normal force over the threshold).
-        contact_points_in_world: (C, 3) contact points that carried force during the step, those
+        contact_points_in_world: (C, 3) contact points the ground pushed on during the step, those
             on the convex hull of their horizontal projections [m].
         foot_forces_in_world: (F, 3) ground force on each foot, mean over the step [N].
         foot_moments_in_world: (F, 3) its moment about the world origin [N m].
@@ -191,33 +193,22 @@ def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.stack([ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx], 1)
 
 
-#: Contact points closer than this (horizontally) are one vertex of the contact polygon [m]:
-#: a resting foot's contacts move by micrometres between physics steps, and a polygon with
-#: edges that short makes every distance to it ill-conditioned.
-SAME_POINT_M = 1e-4
-
-
 def _hull_points(points: np.ndarray) -> np.ndarray:
     """The points (N, 3) whose horizontal projections are the vertices of their convex hull.
 
-    Counter-clockwise, read-only, no two within :data:`SAME_POINT_M` of each other; the hull
-    of the result is that of ``points`` to that tolerance, with a few points instead of every
-    contact of every physics step.
+    Counter-clockwise, read-only: a few points instead of every contact of every physics step.
+    Fewer than three distinct points, or collinear ones (two point feet on a diagonal), are kept
+    as they are, in their order: their hull is a segment, which
+    :func:`gait_nodes.geometry.signed_distance` measures against without any order. Vertices
+    micrometres apart (a resting foot's contacts move that much between physics steps) are kept:
+    the margin's inside test counts crossings, which such short edges do not upset.
     """
     if len(points) > 3:
         try:
             points = points[ConvexHull(points[:, :2]).vertices]
         except QhullError:
             pass  # fewer than three distinct points, or collinear: keep them all
-    kept = []
-    for point in points:
-        if not kept or math.hypot(point[0] - kept[-1][0], point[1] - kept[-1][1]) \
-                >= SAME_POINT_M:
-            kept.append(point)
-    if len(kept) > 1 and math.hypot(kept[0][0] - kept[-1][0],
-                                    kept[0][1] - kept[-1][1]) < SAME_POINT_M:
-        kept.pop()
-    points = np.array(kept).reshape(-1, 3)
+    points = np.array(points, dtype=float).reshape(-1, 3)
     points.flags.writeable = False
     return points
 
@@ -323,6 +314,10 @@ class PhysicsSimulation:
         ``(C,)`` foot indices, ``(C, 3)`` points [m] and ``(C, 3)`` forces of the ground on the
         foot in the world frame [N]; None without any. Read from the constraint solver's forces
         (elliptic cones: a contact's rows are its normal and tangential forces in its frame).
+        A contact's point is on the ground's surface (the floor's, a stair's), where a rigid
+        ground takes the force, not MuJoCo's midpoint of the soft contact's penetration: feet
+        sunk by different depths would put the forces of one flat floor at different heights,
+        and their friction would move the centre of pressure off the hull of the contacts.
         """
         data = self.data
         n = data.ncon
@@ -344,8 +339,11 @@ class PhysicsSimulation:
         foot_2 = foot_2[active]
         on_second = foot_2 >= 0
         force_on_foot = np.where(on_second[:, None], on_geom_2, -on_geom_2)
-        return (np.where(on_second, foot_2, foot_1[active]), contact.pos[:n][active],
-                force_on_foot)
+        # The midpoint is half the (negative) distance from each surface along the normal.
+        half_depth = 0.5 * contact.dist[:n][active]
+        towards_ground = np.where(on_second, -1.0, 1.0)[:, None] * frames[:, 0]
+        on_ground = contact.pos[:n][active] + half_depth[:, None] * towards_ground
+        return np.where(on_second, foot_2, foot_1[active]), on_ground, force_on_foot
 
     def _follow_material(self, contacts) -> None:
         """Add each foot's slip over the physics step just taken (see the module docstring).
@@ -422,7 +420,7 @@ class PhysicsSimulation:
         else:
             points, on_foot = np.zeros((0, 3)), np.zeros((0, 3))
         threshold = self.settings.contact_force_threshold_n
-        carrying = _hull_points(points[on_foot[:, 2] >= max(threshold, 1e-9)])
+        carrying = _hull_points(points[on_foot[:, 2] > 0.0])
         self._points = carrying
         contacts_now = forces[:, 2] >= max(threshold, 1e-9)
         contacts_now.flags.writeable = False
