@@ -3,7 +3,9 @@
 
 ``python bench/physics.py [--scenario NAME ...] [--duration S] [--keep DIR] [--video DIR]``
 
-Without ``--scenario``, every scenario of :data:`SCENARIOS` (the default static crawl first).
+Without ``--scenario``, every scenario of :data:`SCENARIOS` (the default static crawl first),
+each for its own duration or :data:`LEAST_SECONDS` if that is longer (issue 27's 30 s: go2_trot's
+20 s become 30 of trotting, biped_walk's 21 s become 30, the last 20 standing after its stop).
 Each run is ``python -m gait_nodes run --fast --scenario S --simulator K --record BAG --json``,
 one process per run; the figures come from its bag and its summary:
 
@@ -68,6 +70,9 @@ FALL_DROP_M = 0.15
 COP_TOLERANCE_M = 1e-6
 #: Issue 27's bounds.
 BOUND_HEIGHT_M, BOUND_TILT_DEG, BOUND_DISTANCE, BOUND_SLIP_M = 0.03, 3.0, 0.05, 0.005
+#: Issue 27: every scenario walks in physics for at least this long [s] (a shorter scenario's
+#: own duration is stretched to it).
+LEAST_SECONDS = 30.0
 
 
 def _rpy(qx, qy, qz, qw):
@@ -233,7 +238,8 @@ def main() -> int:
                         help=f'a scenario (repeatable; default all: {", ".join(SCENARIOS)})')
     parser.add_argument('--all', action='store_true', help='every scenario (the default)')
     parser.add_argument('--duration', type=float, default=None,
-                        help="seconds walked (default: each scenario's)")
+                        help="seconds walked (default: each scenario's, at least "
+                             f"{LEAST_SECONDS:g})")
     parser.add_argument('--keep', default=None, help='keep the bags in this directory')
     parser.add_argument('--json', default=None, metavar='FILE',
                         help='also write the figures as JSON to FILE')
@@ -247,7 +253,8 @@ def main() -> int:
         runs = {}
         for simulator in ('kinematic', 'physics'):
             bag = folder / f'{scenario}_{simulator}'
-            summary, cpu = run(scenario, simulator, options.duration, bag)
+            seconds = options.duration or max(get_scenario(scenario).duration_s, LEAST_SECONDS)
+            summary, cpu = run(scenario, simulator, seconds, bag)
             runs[simulator] = (summary, cpu, read(bag))
         row = compare(scenario, runs)
         rows.append(row)

@@ -351,7 +351,7 @@ def _walk(tmp_path, scenario: str, simulator: str) -> dict:
 
 
 def test_the_biped_walks_in_physics_as_planned(tmp_path):
-    """biped_walk's 21 s, open loop at kp 3000 / kd 100: upright, on the plan, CoP inside."""
+    """biped_walk's 21 s, open loop at the YAML's gains: upright, on the plan, CoP inside."""
     kinematic = _walk(tmp_path, 'biped_walk', 'kinematic')['base']
     physics = _walk(tmp_path, 'biped_walk', 'physics')
     base = physics['base']

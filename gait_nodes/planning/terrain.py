@@ -44,9 +44,9 @@ from gait_nodes.errors import TerrainError
 EDGE_MARGIN_M = 0.01
 #: Height [m] a swing's foot keeps above a stair's edge as it passes it. With none (the foot
 #: exactly one stair high as its toe reaches the riser) the biped's toe caught the stair's
-#: nosing in physics; with 0.02 m it still scrapes two of six (its position drives hold the
-#: foot 2.4 cm under its setpoint there), and 0.04 m leaves 0.3 m treads footholds it fell from
-#: (docs/physics.md).
+#: nosing in physics; with 0.02 m it still scraped two of six at kp 3000 (its position drives
+#: held the foot 2.4 cm under its setpoint there; at the YAML's kp 10000 it clears them), and
+#: 0.04 m leaves 0.3 m treads footholds it fell from (docs/physics.md).
 STAIR_CLEARANCE_M = 0.02
 #: Samples of a swing checked against the stairs (:func:`swing_clearance_m`).
 CLEARANCE_SAMPLES = 401
