@@ -76,6 +76,11 @@ SWING_METHODS = ('value_table', 'polynomial')
 NS_PER_S = 1_000_000_000
 #: A lift-off place further than this off the table's grid is reported [m].
 CLAMP_REPORT_M = 0.01
+#: A value-table swing (built for flat ground) takes footholds this far apart in height [m]:
+#: a robot's measured feet are a fraction of a millimetre off the ground they stand on (the
+#: physics simulator's discs sink and tilt), and a plan made from where they stand keeps that.
+#: The path is placed on the line between the two (``place_swing``); stairs are refused.
+FLAT_TOLERANCE_M = 0.005
 #: A swing under way for longer than this with no trajectory sent is left to the IK [s].
 LATE_SWING_S = 0.05
 
@@ -412,7 +417,7 @@ class SwingLegPolicy(GuardedNode):
     def _value_table_swing(self, policy, plan, swing, lift_ns: int,
                            gait: str) -> contract.SwingTrajectory:
         climb = float(swing.end_in_world[2] - swing.start_in_world[2])
-        if abs(climb) > 1e-9:  # the footstep planner refuses stairs with this swing
+        if abs(climb) > FLAT_TOLERANCE_M:  # the footstep planner refuses stairs with it
             raise SwingPolicyError(f'the value-table swing is built for flat ground; this '
                                    f'swing climbs {climb:+.4g} m (stairs need swing: '
                                    f'polynomial)')

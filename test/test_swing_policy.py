@@ -356,6 +356,42 @@ def test_node_lowers_a_foot_left_in_the_air_with_the_polynomial_swing(start, tmp
     assert 'lands from 0.08 m above its foothold' in swing_reports[0].message
 
 
+def test_node_takes_feet_measured_a_fraction_of_a_millimetre_off_the_ground(start, tmp_path):
+    """A plan from a physics robot's measured feet: value-table swings, no fallback.
+
+    The physics simulator's discs stand 0.65 mm in the ground (its contacts are soft); a plan
+    made from where they stand lifts them from there and lands them on the ground, 0.65 mm
+    up. Until session 24 the node took that for a stair and sent polynomial swings with an
+    ERROR.
+    """
+    from gait_nodes.planning.footsteps import GaitPlanner, MeasuredStart, place
+    from gait_nodes.robot.description import load_robot_description
+
+    table, _ = tiny_table()
+    start('-p', f'table:={table.save(tmp_path / "tiny.npz")}', '-p',
+          'joint_velocity_limit_rad_s:=1.0')
+    description = load_robot_description('robosimian')
+    params = GaitParameters.for_robot(description, gait='crawl', step_length_m=0.2,
+                                      step_period_s=2.0)
+    planner = GaitPlanner(description, params)
+    feet = np.column_stack([place(np.zeros(3), planner.layout.offsets(params.step_width_m)),
+                            np.full(4, -0.00065)])
+    zmp = feet[:, :2].mean(axis=0)
+    planner = GaitPlanner(description, params, start=MeasuredStart(feet, np.zeros(4), zmp))
+    planner.set_velocity(Twist2D(0.1, 0.0, 0.0), 0.0)
+    planner.advance(8.0)
+    plan = planner.footstep_plan(0.0)
+    first = plan.swings()[0]
+    assert first.start_in_world[2] == pytest.approx(-0.00065)
+    assert first.end_in_world[2] == 0.0
+    _, harness = run_node(plan, first.touch_down_s + 0.5)
+    assert not [s for s in harness.statuses if level_value(s.level) >= 2], 'no fallback swing'
+    _, trajectory = harness.received[0]
+    assert np.allclose(trajectory.positions_in_world[0], first.start_in_world, atol=1e-9)
+    assert np.allclose(trajectory.positions_in_world[-1], first.end_in_world, atol=1e-9)
+    assert trajectory.positions_in_world[:, 2].max() >= 0.099  # the table's lift, not 0.1 m's
+
+
 def test_node_reports_a_plan_faster_than_the_table(start, tmp_path):
     table, _ = tiny_table()
     path = table.save(tmp_path / 'tiny.npz')
