@@ -41,7 +41,7 @@ def tiny_crossover(tmp_path_factory):
 #: computer.
 BETWEEN_PROCESSES = {
     'test_bags', 'test_command_cli', 'test_faults_dds', 'test_main_job_dds',
-    'test_namespaces_dds', 'test_node_parameters', 'test_online_commands_dds',
+    'test_namespaces_dds', 'test_node_parameters', 'test_online_commands_dds', 'test_physics_dds',
     'test_rclpy_runtime', 'test_robot_state_publisher', 'test_runtime_dds', 'test_view',
 }
 #: Modules that share a session fixture (``tiny_crossover``): one worker computes it once.

@@ -32,11 +32,14 @@ at the control rate). From them:
   the CoP up to 0.2 mm outside the hull of the points that passed it);
 - a foot is **in contact** when its normal force exceeds that threshold; its **slip** is how
   far (horizontally) the foot's material at its contact moved since it touched down: at every
-  physics step, the point of the foot that was under its contacts (their centre, weighted by
-  their normal forces) one step before, where the foot has taken it since
-  (:func:`material_displacement`), summed. A foot that rolls on the ground (go2's spheres, as
-  the lower leg turns) does not slip, though its frame moves: the frame's own displacement
-  counted a sphere of 22 mm turning by 20 degrees as 7.7 mm of slip.
+  step (a control tick), the point of the foot that was under its contacts (their centre,
+  weighted by their normal forces) at the last physics step of the step before, where the foot
+  has taken it since (:func:`material_displacement`), summed. A foot that rolls on the ground
+  (go2's spheres, as the lower leg turns) does not slip, though its frame moves: the frame's
+  own displacement counted a sphere of 22 mm turning by 20 degrees as 7.7 mm of slip, while
+  the material of a sphere of radius r rolling by an angle a moves r (a - sin a) horizontally
+  (nanometres over a 10 ms tick). Until session 24 this was done at every physics step, at ten
+  times the cost and the same figures to the micrometre.
 """
 
 from __future__ import annotations
@@ -174,16 +177,16 @@ def material_displacement(frame_position: np.ndarray, frame_rotation: np.ndarray
     """(3,) how far a foot took the point of it that was under its contact a step before [m].
 
     Args:
-        frame_position: (3,) the foot frame's position now [m].
-        frame_rotation: (3, 3) its rotation now (frame to world).
+        frame_position: (3,) the foot frame's position now [m] (or (F, 3), one per foot).
+        frame_rotation: (3, 3) its rotation now (frame to world) (or (F, 3, 3)).
         material: ``(in_frame, in_world)``: that point in the foot frame and in the world,
-            then.
+            then ((3,) each, or (F, 3)).
 
     A foot rolling without slipping leaves its contact material where it was (zero, to first
     order in the step); a sliding one carries it along.
     """
     in_frame, in_world = material
-    return frame_position + frame_rotation @ in_frame - in_world
+    return frame_position + np.einsum('...ij,...j->...i', frame_rotation, in_frame) - in_world
 
 
 def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -191,6 +194,26 @@ def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     ax, ay, az = a[:, 0], a[:, 1], a[:, 2]
     bx, by, bz = b[:, 0], b[:, 1], b[:, 2]
     return np.stack([ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx], 1)
+
+
+def _world_contacts(read: list[tuple]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Foot indices (C,), points (C, 3) and forces on the feet (C, 3) of contacts as read.
+
+    ``read``: :meth:`PhysicsSimulation._foot_contacts` of some physics steps. A contact's point
+    is on the ground's surface (the floor's, a stair's), where a rigid ground takes the force,
+    not MuJoCo's midpoint of the soft contact's penetration: feet sunk by different depths
+    would put the forces of one flat floor at different heights, and their friction would move
+    the centre of pressure off the hull of the contacts. World frame [m], [N].
+    """
+    foot, second, position, half_depth, frame, local = (
+        np.concatenate(column) for column in zip(*read, strict=True))
+    frame = frame.reshape(-1, 3, 3)
+    # The force on geom 2 (the normal points from geom 1 to geom 2), then on the foot; the
+    # midpoint is half the distance from each surface along the normal.
+    sign = np.where(second, 1.0, -1.0)[:, None]
+    force_on_foot = sign * np.einsum('ci,cij->cj', local, frame)
+    on_ground = position - (half_depth[:, None] * sign) * frame[:, 0]
+    return foot, on_ground, force_on_foot
 
 
 def _hull_points(points: np.ndarray) -> np.ndarray:
@@ -258,7 +281,11 @@ class PhysicsSimulation:
         # Each foot's slip since its touch-down [m] (x, y), and the material under its contact
         # at the last physics step (see material_displacement), None when it had none.
         self._slip = np.zeros((feet, 2))
-        self._material: list[tuple[np.ndarray, np.ndarray] | None] = [None] * feet
+        # Each foot's contact material (module docstring): the point in the foot frame and
+        # in the world, and whether the foot has one (not since it left the ground).
+        self._material_in_frame = np.zeros((feet, 3))
+        self._material_in_world = np.zeros((feet, 3))
+        self._has_material = np.zeros(feet, dtype=bool)
         self._three = np.arange(3)
 
         self.set_configuration(q_initial)
@@ -308,16 +335,16 @@ class PhysicsSimulation:
 
     # -- stepping ------------------------------------------------------------------------------
 
-    def _foot_contacts(self) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
-        """The feet's contacts of the current physics step: foot index, point, force on foot.
+    def _foot_contacts(self) -> tuple | None:
+        """The feet's contacts of the current physics step, as the solver has them.
 
-        ``(C,)`` foot indices, ``(C, 3)`` points [m] and ``(C, 3)`` forces of the ground on the
-        foot in the world frame [N]; None without any. Read from the constraint solver's forces
-        (elliptic cones: a contact's rows are its normal and tangential forces in its frame).
-        A contact's point is on the ground's surface (the floor's, a stair's), where a rigid
-        ground takes the force, not MuJoCo's midpoint of the soft contact's penetration: feet
-        sunk by different depths would put the forces of one flat floor at different heights,
-        and their friction would move the centre of pressure off the hull of the contacts.
+        ``(foot, foot_is_second, position, half_depth, frame, local_force)``: ``(C,)`` foot
+        indices and whether the foot is the contact's second geom, ``(C, 3)`` MuJoCo's contact
+        points [m], ``(C,)`` half their (negative) distances [m], ``(C, 9)`` contact frames
+        (rows: normal, tangent 1, tangent 2) and ``(C, 3)`` the constraint solver's forces in
+        them (elliptic cones: normal and tangential rows) [N]; None without any. Copied, and
+        turned into world forces and points by :func:`_world_contacts` once per step (several
+        physics steps at once).
         """
         data = self.data
         n = data.ncon
@@ -329,43 +356,49 @@ class PhysicsSimulation:
         foot_1 = self._foot_of_geom[geoms[:, 0]]
         foot_2 = self._foot_of_geom[geoms[:, 1]]
         active = (address >= 0) & ((foot_1 >= 0) | (foot_2 >= 0))
-        if not active.any():
-            return None
-        address = address[active]
-        local = data.efc_force[address[:, None] + self._three]  # normal, tangent 1, tangent 2
-        frames = contact.frame[:n][active].reshape(-1, 3, 3)  # rows: normal, tangent 1, 2
-        # The force on geom 2 (the normal points from geom 1 to geom 2), then on the foot.
-        on_geom_2 = np.einsum('ci,cij->cj', local, frames)
-        foot_2 = foot_2[active]
-        on_second = foot_2 >= 0
-        force_on_foot = np.where(on_second[:, None], on_geom_2, -on_geom_2)
-        # The midpoint is half the (negative) distance from each surface along the normal.
-        half_depth = 0.5 * contact.dist[:n][active]
-        towards_ground = np.where(on_second, -1.0, 1.0)[:, None] * frames[:, 0]
-        on_ground = contact.pos[:n][active] + half_depth[:, None] * towards_ground
-        return np.where(on_second, foot_2, foot_1[active]), on_ground, force_on_foot
+        if not active.all():
+            if not active.any():
+                return None
+            address, foot_1, foot_2 = address[active], foot_1[active], foot_2[active]
+        second = foot_2 >= 0
+        return (np.where(second, foot_2, foot_1), second, contact.pos[:n][active],
+                0.5 * contact.dist[:n][active], contact.frame[:n][active],
+                data.efc_force[address[:, None] + self._three])
 
     def _follow_material(self, contacts) -> None:
-        """Add each foot's slip over the physics step just taken (see the module docstring).
+        """Add each foot's slip over the step just taken (see the module docstring).
 
-        A foot without contact in this physics step keeps its last contact's material: a foot
+        ``contacts``: :func:`_world_contacts` of the step's last physics step, or None. A foot
+        without contact in that physics step keeps its last contact's material: a foot
         in stance that skips along the ground (its contact lost for a step or two) counts the
         way that material went meanwhile.
         """
         if contacts is None:
             return
         foot, points, forces = contacts
-        positions = self.data.xpos[self._foot_bodies]
-        rotations = self.data.xmat[self._foot_bodies].reshape(-1, 3, 3)
-        for k in range(len(self._material)):
-            normal = forces[foot == k, 2]
-            if not normal.sum() > 0.0:
-                continue
-            point = (points[foot == k] * normal[:, None]).sum(0) / normal.sum()
-            if self._material[k] is not None:
-                self._slip[k] += material_displacement(positions[k], rotations[k],
-                                                       self._material[k])[:2]
-            self._material[k] = (rotations[k].T @ (point - positions[k]), point)
+        feet = len(self._has_material)
+        normal = forces[:, 2]
+        load = np.bincount(foot, weights=normal, minlength=feet)
+        loaded = load > 0.0
+        if not loaded.any():
+            return
+        # Each loaded foot's contacts' centre, weighted by their normal forces.
+        weighted = points * normal[:, None]
+        centre = np.stack([np.bincount(foot, weights=weighted[:, i], minlength=feet)
+                           for i in range(3)], 1)[loaded] / load[loaded, None]
+        positions = self.data.xpos[self._foot_bodies][loaded]
+        rotations = self.data.xmat[self._foot_bodies].reshape(-1, 3, 3)[loaded]
+        followed = self._has_material[loaded]
+        if followed.any():
+            index = np.flatnonzero(loaded)[followed]
+            moved = material_displacement(positions[followed], rotations[followed],
+                                          (self._material_in_frame[index],
+                                           self._material_in_world[index]))
+            self._slip[index] += moved[:, :2]
+        self._material_in_frame[loaded] = np.einsum('fji,fj->fi', rotations,
+                                                    centre - positions)
+        self._material_in_world[loaded] = centre
+        self._has_material[loaded] = True
 
     def step(self, commanded_joints: np.ndarray, dt_s: float,
              contacts: np.ndarray | None = None,
@@ -403,18 +436,18 @@ class PhysicsSimulation:
                 + self._kp * self._kd_over_kp * (v_ref - data.qvel[self._dof])
             np.maximum(peak, np.abs(unclamped) / limits, out=peak)
             contacts_read = self._foot_contacts()
-            self._follow_material(contacts_read)
             if contacts_read is not None:
                 read.append(contacts_read)
+        # The contact material, from the last physics step's contacts (module docstring).
+        self._follow_material(None if contacts_read is None
+                              else _world_contacts([contacts_read]))
         self._setpoint = (end_q.copy(), end_v.copy())
 
         # Sums over the step's contacts, divided by its physics steps: the mean per foot.
         forces = np.zeros((feet, 3))
         moments = np.zeros((feet, 3))
         if read:
-            foot = np.concatenate([r[0] for r in read])
-            points = np.concatenate([r[1] for r in read])
-            on_foot = np.concatenate([r[2] for r in read])
+            foot, points, on_foot = _world_contacts(read)
             np.add.at(forces, foot, on_foot / steps)
             np.add.at(moments, foot, _cross(points, on_foot) / steps)
         else:
@@ -436,7 +469,7 @@ class PhysicsSimulation:
                 if contacts_now[k]:
                     touched.append(self.robot.foot_names[k])
                 else:
-                    self._material[k] = None
+                    self._has_material[k] = False
         self.contacts = contacts_now
 
         # Each foot's wrench about its frame's origin, in its frame.

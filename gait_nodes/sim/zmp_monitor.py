@@ -249,8 +249,9 @@ class ZmpMonitor:
                 centres_hull = polygon = np.zeros((0, 2))
             else:
                 centres_hull = convex_hull(points[:, :2])
-                polygon = foot_discs_polygon(points[:, :2], self.foot_radius_m,
-                                             POLYGON_SEGMENTS_PER_FOOT)
+                # Point contacts (the physics simulator's): the polygon is that hull.
+                polygon = centres_hull if self.foot_radius_m <= 0.0 else foot_discs_polygon(
+                    points[:, :2], self.foot_radius_m, POLYGON_SEGMENTS_PER_FOOT)
             points = points.copy()
             points.flags.writeable = False
             self._support = Support(points, self.plane_height_m(points), polygon, centres_hull,
