@@ -175,7 +175,7 @@ class PhysicsSimulator(KinematicSimulator):
         for points, support in self._supports:
             if points is contact_points:
                 return support
-        support = self.monitor.support(contact_points)
+        support = self.monitor.support(contact_points, hull=True)
         self._supports = [self._supports[-1], (contact_points, support)]
         return support
 

@@ -240,15 +240,19 @@ class ZmpMonitor:
             return com, None, fz
         return com, [-tau_y / fz, tau_x / fz, plane], fz
 
-    def support(self, contact_points_in_world: np.ndarray) -> Support:
-        """The :class:`Support` of these contact points (C, 3) [m], kept while they stay."""
+    def support(self, contact_points_in_world: np.ndarray, hull: bool = False) -> Support:
+        """The :class:`Support` of these contact points (C, 3) [m], kept while they stay.
+
+        ``hull``: the points are already the vertices of their hull, in order (the physics
+        simulation's contact points): it is not computed again.
+        """
         points = np.asarray(contact_points_in_world, dtype=float).reshape(-1, 3)
         key = (points.tobytes(), self.ground_height_m)
         if key != self._support_key:
             if len(points) == 0:
                 centres_hull = polygon = np.zeros((0, 2))
             else:
-                centres_hull = convex_hull(points[:, :2])
+                centres_hull = points[:, :2].copy() if hull else convex_hull(points[:, :2])
                 # Point contacts (the physics simulator's): the polygon is that hull.
                 polygon = centres_hull if self.foot_radius_m <= 0.0 else foot_discs_polygon(
                     points[:, :2], self.foot_radius_m, POLYGON_SEGMENTS_PER_FOOT)
