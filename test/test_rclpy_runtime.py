@@ -300,7 +300,11 @@ def test_rclpy_and_dds_nodes_share_one_graph(ros, started):
         node.destroy_publisher(command)
 
 
-def test_the_launch_file_starts_the_graph_and_stops_it_cleanly(tmp_path):
+def _launch(tmp_path, *arguments: str, nodes=NODES) -> Path:
+    """``ros2 launch gait_nodes gait.launch.py`` recording, walked, stopped with Ctrl-C: its bag.
+
+    Every node and the recorder started and finished cleanly.
+    """
     from ament_index_python.packages import PackageNotFoundError, get_package_share_directory
 
     try:
@@ -316,7 +320,8 @@ def test_the_launch_file_starts_the_graph_and_stops_it_cleanly(tmp_path):
     log_path = tmp_path / 'launch.log'
     with log_path.open('w') as log_file:
         launch = subprocess.Popen(['ros2', 'launch', 'gait_nodes', 'gait.launch.py',
-                                   f'record:={bag}', 'robot:=robosimian', 'gait:=crawl'],
+                                   f'record:={bag}', 'robot:=robosimian', 'gait:=crawl',
+                                   *arguments],
                                   env=ros_env(), cwd=tmp_path, stdout=log_file,
                                   stderr=subprocess.STDOUT, text=True, start_new_session=True)
     try:
@@ -336,7 +341,32 @@ def test_the_launch_file_starts_the_graph_and_stops_it_cleanly(tmp_path):
         launch.wait()
     log = log_path.read_text()
     assert launch.returncode == 0, log[-3000:]
-    for name in (*NODES, 'recorder'):
+    for name in (*nodes, 'recorder'):
         assert f'[{name}-' in log and 'process has died' not in log, log[-3000:]
-    assert log.count('process has finished cleanly') == len(NODES) + 1, log[-3000:]
+    assert log.count('process has finished cleanly') == len(nodes) + 1, log[-3000:]
     assert (bag / 'metadata.yaml').exists()
+    return bag
+
+
+def test_the_launch_file_starts_the_graph_and_stops_it_cleanly(tmp_path):
+    _launch(tmp_path)
+
+
+def test_the_launch_file_walks_the_robot_in_physics(tmp_path):
+    """``simulator:=physics``: MuJoCo's robot in the graph, on its own /clock (sim time)."""
+    pytest.importorskip('mujoco', reason='the physics simulator needs MuJoCo')
+    nodes = tuple('physics_simulator' if n == 'kinematic_simulator' else n for n in NODES)
+    bag = _launch(tmp_path, 'simulator:=physics', nodes=nodes)
+    report = json.loads(subprocess.run(
+        [sys.executable, '-m', 'gait_nodes.inspect', str(bag), '--json'], env=ros_env(),
+        capture_output=True, text=True, timeout=300, check=True).stdout)
+    counts = {topic['topic']: topic['count'] for topic in report['topics']}
+    # What physics measures, recorded: the CoP and each foot's contact wrench, every tick of
+    # the simulator's own clock (10 ms of it, however long a tick took on the wall).
+    assert counts['/clock'] > 2000
+    for topic in ('/gait/cop', '/gait/contact_wrench/front_left', '/joint_states'):
+        assert counts.get(topic, 0) >= 0.95 * counts['/clock'], (topic, counts)
+    gait = report['gait']
+    assert gait['zmp_margin']['samples_outside'] <= 10, gait['zmp_margin']
+    assert gait['base']['displacement_m'] > 0.01  # the first steps, 10 s after the command
+    assert gait['consistency']['footholds']['max_m'] < 0.03
