@@ -287,6 +287,23 @@ def walk_plan(step_period_s=2.0):
     return planner.footstep_plan(0.0)
 
 
+def planner_from_measured_feet(heights_m, standing=slice(None)):
+    """RoboSimian's crawl planned from feet measured at the stance's places, at ``heights_m``.
+
+    The ZMP starts at the mean of the ``standing`` feet.
+    """
+    from gait_nodes.planning.footsteps import GaitPlanner, MeasuredStart, place
+    from gait_nodes.robot.description import load_robot_description
+
+    description = load_robot_description('robosimian')
+    params = GaitParameters.for_robot(description, gait='crawl', step_length_m=0.2,
+                                      step_period_s=2.0)
+    offsets = GaitPlanner(description, params).layout.offsets(params.step_width_m)
+    feet = np.column_stack([place(np.zeros(3), offsets), heights_m])
+    zmp = feet[standing, :2].mean(axis=0)
+    return GaitPlanner(description, params, start=MeasuredStart(feet, np.zeros(4), zmp))
+
+
 def run_node(plan, seconds):
     from gait_nodes.swing_leg_policy import SwingLegPolicy
 
@@ -327,21 +344,10 @@ def test_node_lowers_a_foot_left_in_the_air_with_the_polynomial_swing(start, tmp
     # A planner restarted (or resumed) with a foot in the air puts it down first: a swing that
     # descends onto flat ground, which the value table (footholds on the ground) does not
     # hold. The polynomial swing lowers it, reported as a WARN, not a failure.
-    from gait_nodes.planning.footsteps import GaitPlanner, MeasuredStart, place
-    from gait_nodes.robot.description import load_robot_description
-
     table, _ = tiny_table()
     start('-p', f'table:={table.save(tmp_path / "tiny.npz")}', '-p',
           'joint_velocity_limit_rad_s:=1.0')
-    description = load_robot_description('robosimian')
-    params = GaitParameters.for_robot(description, gait='crawl', step_length_m=0.2,
-                                      step_period_s=2.0)
-    planner = GaitPlanner(description, params)
-    feet = np.column_stack([place(np.zeros(3), planner.layout.offsets(params.step_width_m)),
-                            np.zeros(4)])
-    feet[0, 2] = 0.08
-    zmp = feet[1:, :2].mean(axis=0)
-    planner = GaitPlanner(description, params, start=MeasuredStart(feet, np.zeros(4), zmp))
+    planner = planner_from_measured_feet([0.08, 0.0, 0.0, 0.0], standing=slice(1, None))
     planner.advance(5.0)
     plan = planner.footstep_plan(0.0)
     landing = plan.swings()[0]
@@ -364,20 +370,10 @@ def test_node_takes_feet_measured_a_fraction_of_a_millimetre_off_the_ground(star
     up. Until session 24 the node took that for a stair and sent polynomial swings with an
     ERROR.
     """
-    from gait_nodes.planning.footsteps import GaitPlanner, MeasuredStart, place
-    from gait_nodes.robot.description import load_robot_description
-
     table, _ = tiny_table()
     start('-p', f'table:={table.save(tmp_path / "tiny.npz")}', '-p',
           'joint_velocity_limit_rad_s:=1.0')
-    description = load_robot_description('robosimian')
-    params = GaitParameters.for_robot(description, gait='crawl', step_length_m=0.2,
-                                      step_period_s=2.0)
-    planner = GaitPlanner(description, params)
-    feet = np.column_stack([place(np.zeros(3), planner.layout.offsets(params.step_width_m)),
-                            np.full(4, -0.00065)])
-    zmp = feet[:, :2].mean(axis=0)
-    planner = GaitPlanner(description, params, start=MeasuredStart(feet, np.zeros(4), zmp))
+    planner = planner_from_measured_feet(np.full(4, -0.00065))
     planner.set_velocity(Twist2D(0.1, 0.0, 0.0), 0.0)
     planner.advance(8.0)
     plan = planner.footstep_plan(0.0)
