@@ -276,11 +276,11 @@ def _recorded_robot(options) -> str | None:
     return options.robot or get_scenario(options.scenario).robot
 
 
-def _record_args(options) -> list[str]:
-    namespace = options.namespace_args
+def _record_args(options, ros_parameters: list[str] = ()) -> list[str]:
+    ros = [*options.namespace_args, *ros_parameters]
     robot = _recorded_robot(options)
     return ['-o', options.record, *(['--robot', robot] if robot else []),
-            *(['--ros-args', *namespace] if namespace else [])]
+            *(['--ros-args', *ros] if ros else [])]
 
 
 def _monitor(options, runtime):
@@ -391,11 +391,18 @@ def run_processes(options, names: list[str], ros: list[str], runtime_name: str) 
     """One process per node; this process counts the traffic and stops them cleanly."""
     from gait_nodes import runtime
 
+    # The physics simulator may step slower than the wall clock (rclpy's cost per message, on
+    # 2 cores): it owns time, as under the launch file, and the graph follows its /clock, so
+    # that a slow tick slows the graph instead of being made up in coarse steps.
+    sim_time = ['-p', 'use_sim_time:=true'] if options.simulator == 'physics' else []
     commands = {name: [sys.executable, '-m', f'gait_nodes.{name}', '--runtime', runtime_name,
-                       *ros] for name in names}
+                       *ros, *(sim_time if name != 'physics_simulator' else [])]
+                for name in names}
+    if sim_time and 'physics_simulator' in commands:
+        commands['physics_simulator'] += ['-p', 'publish_clock:=true']
     if options.record:
         commands['recorder'] = [sys.executable, '-m', 'gait_nodes.recorder', '--runtime',
-                                runtime_name, *_record_args(options)]
+                                runtime_name, *_record_args(options, sim_time)]
     if options.view:
         commands['view'] = _view_command(options, runtime_name)
     runtime.init(args=[PROG], runtime=runtime_name)

@@ -127,9 +127,25 @@ class SingleThreadedExecutor:
         else:
             self._dds_step(timeout_sec)
 
+    def _soonest_timer(self):
+        """The timer whose next call comes soonest, each on its own clock, or None.
+
+        Between processes timers may run on different clocks (a simulator that owns time
+        paces itself on the steady clock, while its other timers follow the time it makes):
+        their next calls are compared as time left, not as instants of different clocks.
+        """
+        best, best_ns = None, 0
+        for timer in self._all_timers():
+            if timer._canceled:
+                continue
+            until_ns = timer.time_until_next_call()
+            if best is None or until_ns < best_ns:
+                best, best_ns = timer, until_ns
+        return best
+
     def _dds_step(self, timeout_sec: float | None) -> bool:
         transport = self.context.transport
-        timer = self._next_timer()
+        timer = self._soonest_timer()
         called = timer is not None and timer.is_ready()
         if called:
             timer.call()
@@ -139,8 +155,12 @@ class SingleThreadedExecutor:
             ready = transport.wait(0)
         else:
             wait_ns = None if timeout_sec is None else int(timeout_sec * NS_PER_S)
-            if timer is not None and not timer.clock.ros_time_is_active:
-                until = max(timer.time_until_next_call(), 0)
+            # Until the next call on a wall or steady clock; a timer on simulated time waits
+            # for the /clock message that advances it.
+            untils = [t.time_until_next_call() for t in self._all_timers()
+                      if not t._canceled and not t.clock.ros_time_is_active]
+            if untils:
+                until = max(min(untils), 0)
                 wait_ns = until if wait_ns is None else min(wait_ns, until)
             ready = transport.wait(wait_ns if wait_ns is not None else 10 * NS_PER_S)
         for subscription, msg in ready:
