@@ -632,3 +632,37 @@ def test_a_guarded_node_starts_on_sim_time_given_at_start(monkeypatch):
         assert node.get_clock().ros_time_is_active
     finally:
         runtime.shutdown()
+
+
+def test_a_node_owning_time_ticks_on_the_steady_clock(monkeypatch):
+    """A simulator that owns time: its timer on the steady clock runs, its others follow it.
+
+    Until session 24 the executor compared the timers' next calls as instants: a timer one
+    period ahead on the node's own simulated clock (near 0) always came before the steady
+    one (the machine's uptime), never became due, and the node never ticked.
+    """
+    monkeypatch.delenv('CYCLONEDDS_URI', raising=False)
+    monkeypatch.setenv('GAIT_NODES_DDS_LOCALHOST', '1')
+    runtime.init(args=['test'], runtime='dds', domain_id=DOMAIN, signal_handlers=False)
+    try:
+        node = runtime.Node('owns_time')
+        simulated = [0]
+        node.get_clock().set_source(lambda: simulated[0])
+        ticks, followers = [], []
+
+        def tick():
+            simulated[0] += 10_000_000  # 10 ms of simulated time a tick
+            ticks.append(time.monotonic())
+
+        node.create_timer(0.01, tick, clock=runtime.Clock(
+            clock_type=runtime.ClockType.STEADY_TIME))
+        node.create_timer(0.1, lambda: followers.append(simulated[0]))  # on simulated time
+        executor = runtime.SingleThreadedExecutor()
+        executor.add_node(node)
+        start = time.monotonic()
+        while time.monotonic() - start < 2.0:
+            executor.spin_once(timeout_sec=0.1)
+        assert len(ticks) >= 150  # 100 Hz over the two seconds, give or take the machine
+        assert len(followers) >= 15  # every 0.1 s of the time the ticks made
+    finally:
+        runtime.shutdown()
