@@ -23,8 +23,9 @@ accelerations or efforts. A consumer follows it by its stamps on its own clock, 
 is no jump: the previous one still covers ``horizon_s`` ahead.
 
 * Before the first COM reference and footstep plan have arrived, the current posture is held
-  (a one-point trajectory at the present instant, at rest): the robot's /joint_states (and /tf
-  base pose) once heard, the nominal stance until then. A node started into a running graph
+  (a one-point trajectory at the present instant, at rest): the robot's first /joint_states
+  (and /tf base pose) once heard, taken once as a joint_trajectory_controller holds its
+  position on activation, the nominal stance until then. A node started into a running graph
   (dds, rclpy) waits up to ``stale_timeout_s`` for /joint_states before it commands anything,
   so that a restarted IK picks up the robot where it stands instead of pulling it back to the
   nominal stance, and seeds its solver there.
@@ -245,6 +246,7 @@ class WholeBodyIk(GuardedNode):
                                     self._start_ns, holding='holding the last joint command')
         # Under inproc every node starts together; elsewhere the IK may join a running graph.
         self._joined = self.context.runtime == 'inproc'
+        self._posture_measured = False  # the first /joint_states taken (_on_joint_states)
         self._base_pose = None
         self.add_on_set_parameters_callback(self._on_set_parameters)
 
@@ -387,8 +389,14 @@ class WholeBodyIk(GuardedNode):
                 self._base_pose = pose
 
     def _on_joint_states(self, msg) -> None:
-        """Until motion is commanded, hold the measured posture (rejoin a running graph)."""
-        if self._moving:
+        """Until motion is commanded, hold the posture first measured (rejoin a running graph).
+
+        Measured once, as a joint_trajectory_controller holds its position on activation: a
+        robot whose drives give under load (the physics simulator's) stands a little below its
+        command, and a command that followed every measurement lowered it step by step (until
+        session 24: RoboSimian's body 2-3.5 cm in the first 2 s over DDS and rclpy).
+        """
+        if self._moving or self._posture_measured:
             return
         try:
             names = list(msg.name)
@@ -407,6 +415,7 @@ class WholeBodyIk(GuardedNode):
             self._q_solution[:7] = self._q_command[:7] = self._base_pose
         self._joints_command = self.robot.joint_positions(self._q_command)
         self._joined = True
+        self._posture_measured = True
 
     # -- tick ----------------------------------------------------------------------------------
 

@@ -1166,3 +1166,41 @@ def test_a_step_is_kept_within_a_share_of_the_limits_and_saturates_only_above_th
     assert not saturation.scaled and np.array_equal(q, q1)
     with pytest.raises(ValueError, match='share'):
         limit_joint_velocity(robot, q0, q1, dt, share=1.5)
+
+
+def test_node_holds_the_posture_first_measured_not_each_measurement(inproc):
+    """A robot that gives under load stands below its command: the IK holds what it first saw.
+
+    The robot here sinks 0.01 rad below every command it gets (a position drive under load).
+    Following each measurement, the held posture went down with it, 0.01 rad a message (until
+    session 24: RoboSimian's body 2-3.5 cm in the physics simulator's first 2 s).
+    """
+    from gait_nodes.whole_body_ik import WholeBodyIk
+
+    node = WholeBodyIk()
+    collector = Collector()
+    robot = node.robot
+    nominal = robot.joint_positions(node.q_nominal)
+    state = runtime.Node('sinking_robot')
+    publisher = state.create_publisher(get_message('sensor_msgs/msg/JointState'),
+                                       '/joint_states', 10)
+    commanded = [nominal.copy()]
+
+    def measure():
+        msg = get_message('sensor_msgs/msg/JointState')()
+        msg.name = list(robot.joint_names)
+        msg.position = (commanded[-1] - 0.01).tolist()
+        publisher.publish(msg)
+
+    state.create_timer(0.05, measure)
+    executor = runtime.SingleThreadedExecutor()
+    for each in (node, collector, state):
+        executor.add_node(each)
+    for _ in range(20):
+        executor.spin_for(0.05)
+        if collector.commands:
+            commanded.append(np.array(collector.commands[-1].points[0].positions))
+    held = [np.array(m.points[0].positions) for m in collector.commands[-10:]]
+    first = nominal - 0.01
+    for positions in held:
+        np.testing.assert_allclose(positions, first, atol=1e-9)
