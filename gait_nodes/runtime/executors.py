@@ -106,14 +106,21 @@ class SingleThreadedExecutor:
             self._timers_key = key
         return self._timers
 
-    def _next_timer(self):
-        """The first of the timers due soonest (creation order breaks ties), or None."""
+    def _next_timer(self, by_time_left: bool = False):
+        """The first of the timers due soonest (creation order breaks ties), or None.
+
+        ``by_time_left``: compare the time left to each next call, each on its own clock.
+        Between processes timers may run on different clocks (a simulator that owns time
+        paces itself on the steady clock, while its other timers follow the time it makes),
+        whose instants cannot be compared; under inproc every timer is on the executor's.
+        """
         best, best_ns = None, 0
         for timer in self._all_timers():
             if timer._canceled:
                 continue
-            if best is None or timer.next_call_ns < best_ns:
-                best, best_ns = timer, timer.next_call_ns
+            due_ns = timer.time_until_next_call() if by_time_left else timer.next_call_ns
+            if best is None or due_ns < best_ns:
+                best, best_ns = timer, due_ns
         return best
 
     # --- one unit of work -----------------------------------------------------------------
@@ -127,25 +134,9 @@ class SingleThreadedExecutor:
         else:
             self._dds_step(timeout_sec)
 
-    def _soonest_timer(self):
-        """The timer whose next call comes soonest, each on its own clock, or None.
-
-        Between processes timers may run on different clocks (a simulator that owns time
-        paces itself on the steady clock, while its other timers follow the time it makes):
-        their next calls are compared as time left, not as instants of different clocks.
-        """
-        best, best_ns = None, 0
-        for timer in self._all_timers():
-            if timer._canceled:
-                continue
-            until_ns = timer.time_until_next_call()
-            if best is None or until_ns < best_ns:
-                best, best_ns = timer, until_ns
-        return best
-
     def _dds_step(self, timeout_sec: float | None) -> bool:
         transport = self.context.transport
-        timer = self._soonest_timer()
+        timer = self._next_timer(by_time_left=True)
         called = timer is not None and timer.is_ready()
         if called:
             timer.call()
