@@ -291,6 +291,12 @@ def test_the_static_crawl_holds_the_body_still_under_every_swing_and_outwalks_th
     controller moves the COM ahead of the crawl's first ZMP move (up to 0.5 s early), and the
     body drifts up to 8 mm at its end. (The scenario robosimian_static_crawl walks the thesis'
     0.06 m lift; its table would cost the suite a build: bench/results.py walks it.)
+
+    Still means within 0.6 mm and under 5 mm/s: the body's motion adds to the swinging limb's
+    joint speeds, which the planner times at the limit less TRACKING_MARGIN. With the ZMP
+    reference sampled every 0.05 s (its cart-table ZMP from coarse second differences) the body
+    moved up to 1.4 mm at 7.7 mm/s under these swings, and at a 0.5 rad/s limit the whole-body
+    IK had to slow the swings down.
     """
     _, inspection = bags('robosimian_gait_switch')
     applied = {s['id']: s['takes_effect_ns'] for s in inspection.series.statuses
@@ -308,7 +314,8 @@ def test_the_static_crawl_holds_the_body_still_under_every_swing_and_outwalks_th
         inside = (t > swing['lift_off_ns'] * 1e-9 + 0.02) & (t < swing['touch_down_ns'] * 1e-9
                                                               - 0.02)
         drift = np.hypot(*(base[inside, 1:3] - base[inside][0, 1:3]).T)
-        assert drift.max() < 0.003, swing  # still: within 3 mm of where it was at lift-off
+        assert drift.max() < 0.0006, swing  # still: near where it was at lift-off
+        assert speed[inside].max() < 0.005, swing
         assert np.ptp(base[inside, 3]) < 0.001, swing  # at one height: within 1 mm
         swinging |= inside
     assert speed[~swinging].max() > 0.1  # the body does move, with every foot down
