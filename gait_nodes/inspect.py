@@ -130,7 +130,11 @@ def _consistency_lines(checks: dict | None) -> list[str]:
                      f'({feet["samples"]} landings)')
     slip = checks.get('stance_slip')
     if slip:
-        lines.append(f'    stance feet slip: {_stat(slip)}')
+        # The foot frames' drift over their planned stance, read from /tf: not the physics
+        # simulator's contact slip (the ground's material under a rolling foot stays put while
+        # its frame moves), which its 'contacts' status on /diagnostics reports.
+        lines.append(f'    stance feet drift (foot frames, over each planned stance): '
+                     f'{_stat(slip)}')
     return lines
 
 
