@@ -239,7 +239,7 @@ class CommandDriver:
         self._pending = sorted(commands, key=lambda c: c.at_s)
         self._velocity: tuple[float, float, float] | None = None
         self._repeat_ns = int(repeat_period_s * 1e9)
-        self._last_vel_ns = 0
+        self._last_vel_ns: int | None = None  # when /cmd_vel was last sent
         self._start_ns: int | None = None
         self.statuses: list[dict] = []
         node.create_subscription(self._string, 'gait/command_status', self._on_status, 1000)
@@ -271,9 +271,10 @@ class CommandDriver:
                     command.command, f'scenario-{self._sent}')))
             if command.velocity is not None:
                 self._velocity = command.velocity
-                self._last_vel_ns = 0
+                self._last_vel_ns = None  # sent at once
             self._pending.pop(0)
-        if self._velocity is not None and now_ns - self._last_vel_ns >= self._repeat_ns:
+        if self._velocity is not None and (self._last_vel_ns is None
+                                           or now_ns - self._last_vel_ns >= self._repeat_ns):
             twist = self._twist()
             twist.linear.x, twist.linear.y, twist.angular.z = (float(v) for v in self._velocity)
             self._vel_publisher.publish(twist)
