@@ -923,7 +923,7 @@ class GaitPlanner:
             rest = state.rest_pose
             group_index = ((0 if _leads_left(twist) else 1) if starting
                            else state.next_group % len(groups))
-            extra = self._start_shift_s(params) if state.mode == 'standing' else 0.0
+            extra = self._start_shift_s(params, gait) if state.mode == 'standing' else 0.0
             first_touch_down = t0 + params.transfer_s(gait) + extra + swing
 
             def first_cycle(g):
@@ -966,7 +966,7 @@ class GaitPlanner:
                 return footholds[foot]
         chosen: dict[int, tuple] = {}
         swing = params.swing_s
-        extra = self._start_shift_s(params) if state.mode == 'standing' else 0.0
+        extra = self._start_shift_s(params, gait) if state.mode == 'standing' else 0.0
         t1 = t0 + params.transfer_s(gait) + extra
         positions, foot_yaws = state.positions.copy(), state.yaws.copy()
         slots, last_anchor = [], state.last_anchor
@@ -1484,9 +1484,15 @@ class GaitPlanner:
                     self._settings)
 
     @staticmethod
-    def _start_shift_s(params: GaitParameters) -> float:
-        """Weight shift added before the first step from standstill [s]."""
-        return min(params.step_period_s, START_SHIFT_S)
+    def _start_shift_s(params: GaitParameters, gait: str) -> float:
+        """Weight shift added before the first step from standstill [s].
+
+        None in the static crawl: its first step's body move, with every foot down and rest to
+        rest, is its weight shift, and its ZMP reference is the cart-table ZMP of the COM it
+        walks (the body still before the move), which the COM controller gives back without a
+        counter-move ahead of it.
+        """
+        return 0.0 if gait == 'static_crawl' else min(params.step_period_s, START_SHIFT_S)
 
     def _stand_step(self, state: _State, gait: str, rest: np.ndarray,
                     duration_s: float | None = None) -> Step:
