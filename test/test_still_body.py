@@ -454,6 +454,28 @@ def test_the_first_static_step_from_standstill_takes_what_it_needs(still):
     assert second.end_s - second.start_s > rhythm.step_period_s  # catching up: longer steps
 
 
+def test_the_static_crawl_starts_with_its_body_move_and_no_weight_shift(still):
+    # The first body move is its weight shift: the ZMP reference starts moving at the step's
+    # start (no hold), and the first foot lifts off when the move has had what it needs.
+    planner, _ = static_walk(still, 10.0)
+    first = next(step for step in planner.steps if step.slots)
+    assert first.zmp_times_s[0] == pytest.approx(first.start_s)
+    moving = np.linalg.norm(first.zmp_points - first.zmp_points[0], axis=1) > 1e-6
+    assert first.zmp_times_s[np.argmax(moving)] - first.start_s < 0.02  # the next sample
+    move_s = first.slots[0].lift_off_s - first.start_s
+    assert 0.0 < move_s < 0.5  # 2.6 cm at the joint limit, not a second's shift
+    # The ZMP crawl from standstill keeps its weight shift (its COM's counter-move).
+    from gait_nodes.planning.footsteps import START_HOLD_FRACTION, START_SHIFT_S
+
+    crawl = GaitPlanner(robot().description, planner.params.replace(gait='crawl'),
+                        swing_timing=still.source)
+    crawl.set_velocity(Twist2D(0.1), 0.0)
+    crawl.advance(10.0)
+    step = next(step for step in crawl.steps if step.slots)
+    assert step.zmp_times_s[1] - step.start_s == pytest.approx(
+        START_HOLD_FRACTION * START_SHIFT_S)
+
+
 def test_the_rhythm_times_the_steady_walk_where_it_puts_the_feet(still):
     # The steady steps walk the rhythm's period and the path's speed: the rhythm times each
     # swing off its stance place by the path's advance between the slots (the fore foot lands
