@@ -1,5 +1,6 @@
 """ROS parameters and ``--ros-args`` under the inproc runtime, checked against rclpy's ways."""
 
+import math
 import textwrap
 
 import pytest
@@ -88,6 +89,32 @@ def test_values_are_read_as_rcl_reads_them(start, tmp_path):
     assert node.declare_parameter('text', 'x').value == '7'
     assert node.declare_parameter('quoted', 'x').value == '42'
     assert node.declare_parameter('empty', 'x').value == ''
+
+
+def test_numbers_and_bools_are_typed_as_rcl_types_them(start, tmp_path):
+    # rcl_yaml_param_parser: rcl's bool words, then C's strtol (base 0), then strtod, else a
+    # string; YAML 1.1 would read 1e-8 as a string (its floats need a dot) and 1_000 as 1000.
+    path = write(tmp_path, """\
+        talker:
+          ros__parameters:
+            weight: 1e-8
+            enabled: y
+        """)
+    start('--params-file', str(path), '-p', 'gain:=1.0e8', '-p', 'tiny:=-2E-3',
+          '-p', 'mask:=0x1f', '-p', 'mode:=017', '-p', 'grouped:=1_000', '-p', 'clock:=1:30',
+          '-p', 'limit:=.inf', '-p', 'verbose:=off', '-p', 'huge:=1e999')
+    node = runtime.Node('talker')
+    assert node.declare_parameter('weight', 1.0).value == 1e-8
+    assert node.declare_parameter('enabled', False).value is True
+    assert node.declare_parameter('gain', 1.0).value == 1e8
+    assert node.declare_parameter('tiny', 1.0).value == -2e-3
+    assert node.declare_parameter('mask', 0).value == 31
+    assert node.declare_parameter('mode', 0).value == 15  # octal, as strtol reads 017
+    assert node.declare_parameter('grouped', 'x').value == '1_000'
+    assert node.declare_parameter('clock', 'x').value == '1:30'
+    assert node.declare_parameter('limit', 1.0).value == math.inf
+    assert node.declare_parameter('verbose', True).value is False
+    assert node.declare_parameter('huge', 'x').value == '1e999'  # strtod's ERANGE: a string
 
 
 def test_node_targeted_override_reaches_only_that_node(start):

@@ -27,13 +27,71 @@ _TOPIC_NAME = re.compile(rf'(/|~/)?{_TOKEN}(/{_TOKEN})*|~')
 
 
 class _RclYamlLoader(yaml.SafeLoader):
-    """YAML as rcl reads parameter values: no timestamps (``2024-01-01`` stays a string)."""
+    """YAML as rcl reads parameter values (``rcl_yaml_param_parser``'s ``get_value``).
+
+    An unquoted scalar is a bool if it is one of rcl's words (``y``, ``yes``, ``true``, ``on``
+    and their capitalized forms, and their negatives), else an integer if C's ``strtol`` (base
+    0: ``0x1f``, ``017``) reads all of it without overflow, else a double if ``strtod`` does
+    (``1e-8``, ``1.``, ``inf``, ``nan``, ``0x1p3``, and YAML's ``.inf``/``.nan``), else a string:
+    no timestamps (``2024-01-01`` stays a string), no YAML 1.1 floats that need a dot
+    (``1e-8`` is a double, as under rclpy), no ``1_000`` or ``1:30`` numbers.
+    """
 
 
+_RCL_TRUE = ('Y', 'y', 'yes', 'Yes', 'YES', 'true', 'True', 'TRUE', 'on', 'On', 'ON')
+_RCL_FALSE = ('N', 'n', 'no', 'No', 'NO', 'false', 'False', 'FALSE', 'off', 'Off', 'OFF')
+_RCL_INT = re.compile(r'[-+]?(?:0[xX][0-9a-fA-F]+|0[0-7]*|[1-9][0-9]*)\Z')
+_RCL_FLOAT = re.compile(
+    r'[-+]?(?:(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][-+]?[0-9]+)?'
+    r'|0[xX](?:[0-9a-fA-F]+\.?[0-9a-fA-F]*|\.[0-9a-fA-F]+)(?:[pP][-+]?[0-9]+)?'
+    r'|(?i:inf|infinity|nan))\Z'
+    r'|\.(?:nan|NaN|NAN)\Z|[-+]?\.(?:inf|Inf|INF)\Z')
+_RCL_TYPED = {'tag:yaml.org,2002:bool', 'tag:yaml.org,2002:int', 'tag:yaml.org,2002:float',
+              'tag:yaml.org,2002:timestamp'}
 _RclYamlLoader.yaml_implicit_resolvers = {
-    first: [(tag, regex) for tag, regex in resolvers if tag != 'tag:yaml.org,2002:timestamp']
+    first: [(tag, regex) for tag, regex in resolvers if tag not in _RCL_TYPED]
     for first, resolvers in yaml.SafeLoader.yaml_implicit_resolvers.items()
 }
+_RclYamlLoader.add_implicit_resolver(
+    'tag:yaml.org,2002:bool', re.compile('|'.join(f'{w}\\Z' for w in _RCL_TRUE + _RCL_FALSE)),
+    list('YyNnTtFfOo'))
+_RclYamlLoader.add_implicit_resolver('tag:yaml.org,2002:int', _RCL_INT, list('-+0123456789'))
+_RclYamlLoader.add_implicit_resolver('tag:yaml.org,2002:float', _RCL_FLOAT,
+                                     list('-+.0123456789iInN'))
+
+
+def _rcl_bool(loader, node) -> bool:
+    return loader.construct_scalar(node) in _RCL_TRUE
+
+
+def _rcl_int(loader, node) -> int | float:
+    """The value C's strtol reads; out of int64's range it fails, and strtod reads it."""
+    text = loader.construct_scalar(node)
+    digits = text.lstrip('+-')
+    value = int(digits, 8) if len(digits) > 1 and digits[0] == '0' and digits[1] in '01234567' \
+        else int(digits, 0)
+    value = -value if text.startswith('-') else value
+    return value if -2**63 <= value < 2**63 else float(value)
+
+
+def _rcl_float(loader, node) -> float | str:
+    """The value C's strtod reads; a literal beyond a double's range (ERANGE) stays a string."""
+    text = loader.construct_scalar(node)
+    bare = text.lstrip('+-')
+    if bare.startswith('.') and bare[1:].lower() in ('inf', 'nan'):
+        value = float(bare[1:])
+    elif bare[:2] in ('0x', '0X'):
+        value = float.fromhex(bare)
+    else:
+        value = float(bare)
+    if math.isinf(value) and 'inf' not in bare.lower():
+        return text
+    return -value if text.startswith('-') else value
+
+
+_RclYamlLoader.add_constructor('tag:yaml.org,2002:bool', _rcl_bool)
+_RclYamlLoader.add_constructor('tag:yaml.org,2002:int', _rcl_int)
+_RclYamlLoader.add_constructor('tag:yaml.org,2002:float', _rcl_float)
 
 
 def _yaml_problem(exc: yaml.YAMLError) -> str:
